@@ -1,0 +1,31 @@
+# Set-up and main entry points. `make demo` and `make test` both work on a fresh clone.
+PYTHON ?= python3
+VENV := .venv
+BIN := $(VENV)/bin
+STAMP := $(VENV)/.installed
+
+.PHONY: demo test lint bench clean venv
+
+$(STAMP): pyproject.toml
+	$(PYTHON) -m venv $(VENV)
+	$(BIN)/pip install --quiet --upgrade pip
+	$(BIN)/pip install --quiet -e '.[dev]'
+	touch $(STAMP)
+
+venv: $(STAMP)
+
+demo: $(STAMP)
+	$(BIN)/irreflect reproduce --out out
+
+test: $(STAMP)
+	$(BIN)/python -m pytest -q -n 2 --dist loadfile
+
+lint: $(STAMP)
+	$(BIN)/ruff check src tests experiments
+
+bench: $(STAMP)
+	$(BIN)/python experiments/bench_fit.py
+	$(BIN)/python experiments/bench_select.py
+
+clean:
+	rm -rf $(VENV) out build src/*.egg-info .pytest_cache

@@ -1,0 +1,195 @@
+"""Command-line interface: ``irreflect <command> ...``.
+
+Commands live with their capability: each module in :data:`COMMAND_MODULES` exposes
+``register(subparsers)``, which adds its parser(s) with ``set_defaults(handler=...)``; a
+handler takes the parsed arguments and returns the exit code. User errors
+(:class:`~irreflect.errors.IrreflectError`) are printed as one line on stderr with exit
+code 2, failed fits with exit code 1; nothing is written half-way.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import importlib.util
+import json
+import sys
+import warnings
+
+from . import __version__
+from .errors import FitError, IrreflectError
+
+#: Modules that add subcommands (the ones not yet in the package are skipped).
+COMMAND_MODULES = (
+    "irreflect.cli",
+    "irreflect.selection.cli",
+    "irreflect.protocol",
+    "irreflect.compare",
+    "irreflect.diagnose",
+    "irreflect.report",
+)
+
+
+# ----------------------------------------------------------------------------- shared helpers
+def add_data_argument(parser: argparse.ArgumentParser) -> None:
+    """The DATA positional and the options every command that reads a table shares."""
+    parser.add_argument("data", metavar="DATA",
+                        help="measurement table (CSV or Parquet: gamma_deg, theta_deg, power"
+                             "[, sigma, material])")
+    parser.add_argument("--average-duplicates", action="store_true",
+                        help="average the power of duplicated (gamma, theta) rows instead of refusing them")
+
+
+def add_model_argument(parser: argparse.ArgumentParser, default: str = "two-lobe") -> None:
+    parser.add_argument("--model", default=default,
+                        help=f"reflection model (default {default}; see 'irreflect models')")
+
+
+def load_data(args):
+    from .data import read_measurements
+
+    return read_measurements(args.data, average_duplicates=args.average_duplicates)
+
+
+def print_json(obj) -> None:
+    json.dump(obj, sys.stdout, indent=2, default=_json_default)
+    sys.stdout.write("\n")
+
+
+def _json_default(o):
+    import numpy as np
+
+    if isinstance(o, np.generic):
+        return o.item()
+    if isinstance(o, np.ndarray):
+        return o.tolist()
+    raise TypeError(f"not JSON serialisable: {type(o).__name__}")
+
+
+# ----------------------------------------------------------------------------- core commands
+def _cmd_fit(args) -> int:
+    from .fitting import fit
+    from .model import get_model
+
+    meas = load_data(args)
+    result = fit(meas, get_model(args.model), seed=args.seed)
+    if args.json:
+        d = result.to_dict()
+        print_json({k: d[k] for k in ("model", "params", "stderr", "r2", "rmse", "mse",
+                                      "n_points", "fit_ms")}
+                   | {"polar_error_pct": result.polar_errors()})
+    else:
+        print(f"{meas.name}: {meas.n_points} points, angles of incidence "
+              f"{', '.join(f'{g:g}' for g in meas.gammas)} deg")
+        print(result.report())
+    return 0
+
+
+def _cmd_plot(args) -> int:
+    from .fitting import fit
+    from .plots import plot_polar, save_figure
+
+    meas = load_data(args)
+    if not str(args.out).lower().endswith((".png", ".svg", ".pdf")):
+        raise IrreflectError(f"--out must end in .png, .svg or .pdf; found '{args.out}'")
+    predict, title = None, meas.name
+    if args.fit:
+        result = fit(meas, args.model, seed=args.seed)
+        predict = result.predict
+        title = f"{meas.name}: {result.model} fit, R^2 = {result.r2:.4f}"
+    ax = plot_polar(meas, predict, title=title)
+    save_figure(ax.figure, args.out)
+    print(f"wrote {args.out}")
+    return 0
+
+
+def _cmd_models(args) -> int:
+    from .model import get_model, model_names
+
+    for name in model_names():
+        m = get_model(name)
+        print(f"{name:<18} {m.n_params:>2} parameters  {m.formula}")
+    return 0
+
+
+def register(sub) -> None:
+    p = sub.add_parser("fit", help="fit a reflection model to a measurement table",
+                       description="Fit a reflection model and print coefficients with standard "
+                                   "errors, R^2, RMSE, MSE and the per-gamma polar-area error.")
+    add_data_argument(p)
+    add_model_argument(p)
+    p.add_argument("--seed", type=int, default=0, help="seed of the random extra starts")
+    p.add_argument("--json", action="store_true", help="one JSON object on stdout")
+    p.set_defaults(handler=_cmd_fit)
+
+    p = sub.add_parser("plot", help="polar diagram per angle of incidence (Figs. 15-17)")
+    add_data_argument(p)
+    add_model_argument(p)
+    p.add_argument("--fit", action="store_true", help="draw the fitted model over the markers")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--out", required=True, metavar="FILE.png")
+    p.set_defaults(handler=_cmd_plot)
+
+    p = sub.add_parser("models", help="list the reflection models")
+    p.set_defaults(handler=_cmd_models)
+
+
+# ----------------------------------------------------------------------------- entry point
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="irreflect",
+        description="Reflection models for infrared / visible-light indoor multipath.",
+    )
+    parser.add_argument("--version", action="version", version=f"irreflect {__version__}")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND")
+    for name in COMMAND_MODULES:
+        if name == __name__:
+            register(sub)
+            continue
+        if importlib.util.find_spec(name.rsplit(".", 1)[0]) is None:
+            continue
+        if importlib.util.find_spec(name) is None:
+            continue
+        module = importlib.import_module(name)
+        if hasattr(module, "register"):
+            module.register(sub)
+    return parser
+
+
+def main(argv=None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    if not getattr(args, "handler", None):
+        parser.print_help(sys.stderr)
+        return 2
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        try:
+            code = args.handler(args)
+        except IrreflectError as exc:
+            _print_notes(caught)
+            print(f"irreflect: error: {exc}", file=sys.stderr)
+            return 2
+        except FitError as exc:
+            _print_notes(caught)
+            print(f"irreflect: fit failed: {exc}", file=sys.stderr)
+            return 1
+        except KeyboardInterrupt:
+            print("irreflect: interrupted", file=sys.stderr)
+            return 130
+    _print_notes(caught)
+    return int(code or 0)
+
+
+def _print_notes(caught) -> None:
+    from .data import DataNotice
+
+    seen = set()
+    for w in caught:
+        if issubclass(w.category, DataNotice) and str(w.message) not in seen:
+            seen.add(str(w.message))
+            print(f"irreflect: note: {w.message}", file=sys.stderr)
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,36 @@
+"""Exceptions raised by irreflect.
+
+User errors (bad files, bad arguments, unknown names) derive from :class:`IrreflectError`,
+a ``ValueError``: the CLI prints their message as one line and exits non-zero without a
+traceback. A fit that cannot be completed raises :class:`FitError`.
+"""
+
+from __future__ import annotations
+
+
+class IrreflectError(ValueError):
+    """A user error: the message says what was expected, what was found and how to fix it."""
+
+
+class DataError(IrreflectError):
+    """A measurement table that cannot be used as it is."""
+
+
+class UnknownNameError(IrreflectError):
+    """A model, selector, extension or other registry name that does not exist."""
+
+
+class FitError(RuntimeError):
+    """A fit that did not reach a usable optimum; the message says why."""
+
+
+def unknown_name(kind: str, name: str, valid) -> UnknownNameError:
+    """Build the one-line error for a registry look-up that failed."""
+    import difflib
+
+    valid = sorted(valid)
+    close = difflib.get_close_matches(name, valid, n=1)
+    hint = f" Did you mean '{close[0]}'?" if close else ""
+    return UnknownNameError(
+        f"unknown {kind} '{name}': expected one of {', '.join(valid)}.{hint}"
+    )

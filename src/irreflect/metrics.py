@@ -1,0 +1,111 @@
+"""Goodness-of-fit measures: R^2, RMSE, MSE, residuals and the polar-area error (section 5.3).
+
+All functions are plain vectorised numpy: the last axis runs over measurement points, so a
+batch of predictions ``(B, n)`` against one measured vector ``(n,)`` gives ``B`` values.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+
+def r2(measured, predicted) -> float | np.ndarray:
+    """Coefficient of determination ``1 - SS_res / SS_tot`` along the last axis."""
+    measured = np.asarray(measured, float)
+    predicted = np.asarray(predicted, float)
+    ss_res = np.sum((measured - predicted) ** 2, axis=-1)
+    ss_tot = np.sum((measured - measured.mean(axis=-1, keepdims=True)) ** 2, axis=-1)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        out = 1.0 - ss_res / ss_tot
+    return float(out) if np.ndim(out) == 0 else out
+
+
+def mse(measured, predicted) -> float | np.ndarray:
+    """Mean squared error along the last axis."""
+    out = np.mean((np.asarray(measured, float) - np.asarray(predicted, float)) ** 2, axis=-1)
+    return float(out) if np.ndim(out) == 0 else out
+
+
+def rmse(measured, predicted) -> float | np.ndarray:
+    """Root mean squared error along the last axis."""
+    out = np.sqrt(mse(measured, predicted))
+    return float(out) if np.ndim(out) == 0 else out
+
+
+def normalized_residuals(measured, predicted, sigma=None) -> np.ndarray:
+    """Residuals ``measured - predicted`` divided by ``sigma`` (or, without sigma, by the
+    measured value: the paper's relative residuals of Figs. 22-23)."""
+    measured = np.asarray(measured, float)
+    resid = measured - np.asarray(predicted, float)
+    scale = measured if sigma is None else np.asarray(sigma, float)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return resid / scale
+
+
+def polar_area_error(theta_deg, measured, model_fn, step_deg: float = 0.1) -> float:
+    """Relative polar-area error of one angle of incidence, in percent (section 5.3, Fig. 24).
+
+    In polar coordinates (angle theta, radius power) the area swept by a curve r(theta) is
+    ``1/2 integral r^2 dtheta``; the area between the measured and model curves is
+    ``1/2 integral |r_m^2 - r_model^2| dtheta``. The error is their ratio, integrated over
+    the measured theta range only.
+
+    Interpolation: the measured curve is joined by straight segments in (theta, power)
+    between measured points (linear interpolation in theta); the model is evaluated
+    exactly; both are sampled every ``step_deg`` degrees and integrated with the
+    trapezoidal rule.
+
+    Parameters
+    ----------
+    theta_deg : array-like, degrees
+        Receiver angles of the measured points of one angle of incidence.
+    measured : array-like
+        Measured power at those angles.
+    model_fn : callable
+        ``model_fn(theta_deg_grid) -> power`` of the model at that angle of incidence.
+    """
+    theta_deg = np.asarray(theta_deg, float)
+    measured = np.asarray(measured, float)
+    order = np.argsort(theta_deg)
+    theta_deg, measured = theta_deg[order], measured[order]
+    if theta_deg.size < 2 or theta_deg[-1] <= theta_deg[0]:
+        return float("nan")
+    n_steps = max(int(np.ceil((theta_deg[-1] - theta_deg[0]) / step_deg)), 2)
+    grid = np.linspace(theta_deg[0], theta_deg[-1], n_steps + 1)
+    r_meas = np.interp(grid, theta_deg, measured)
+    r_model = np.asarray(model_fn(grid), float)
+    x = np.radians(grid)
+    between = np.trapezoid(np.abs(r_meas**2 - r_model**2), x)
+    under = np.trapezoid(r_meas**2, x)
+    return float(100.0 * between / under) if under > 0 else float("nan")
+
+
+def polar_area_errors(gamma_deg, theta_deg, measured, predict_deg, step_deg: float = 0.1):
+    """Polar-area error (percent) for each angle of incidence.
+
+    ``predict_deg(gamma_deg_array, theta_deg_array) -> power``. Returns ``{|gamma|: error}``
+    ordered by increasing magnitude, as in the paper's Table 6.
+    """
+    gamma_deg = np.asarray(gamma_deg, float)
+    theta_deg = np.asarray(theta_deg, float)
+    measured = np.asarray(measured, float)
+    out = {}
+    for g in sorted(np.unique(gamma_deg), key=abs):
+        sel = gamma_deg == g
+        if sel.sum() < 2:
+            continue
+        out[float(abs(g))] = polar_area_error(
+            theta_deg[sel], measured[sel],
+            lambda grid, g=g: predict_deg(np.full_like(grid, g), grid), step_deg,
+        )
+    return out
+
+
+def aic(cost_rss: float, n_points: int, n_params: int) -> float:
+    """Akaike information criterion for Gaussian errors from the residual sum of squares."""
+    return float(n_points * np.log(max(cost_rss, 1e-300) / n_points) + 2 * n_params)
+
+
+def bic(cost_rss: float, n_points: int, n_params: int) -> float:
+    """Bayesian information criterion for Gaussian errors from the residual sum of squares."""
+    return float(n_points * np.log(max(cost_rss, 1e-300) / n_points) + n_params * np.log(n_points))

@@ -1,0 +1,93 @@
+"""Figures. Every ``plot_*`` draws on the axes or figure it is given (or makes one) and
+returns it: no ``plt.show()``, no hidden file writes. Angles in degrees on every axis.
+
+Polar diagrams follow the paper's Figs. 15-17: the surface normal points up, positive
+receiver angles (the mirror side) to the right.
+"""
+
+from __future__ import annotations
+
+import matplotlib
+
+matplotlib.use("Agg")  # irreflect only ever draws to files
+
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+
+from ._atomic import atomic_path  # noqa: E402
+
+
+def _polar_axes(ax=None, fig=None):
+    if ax is None:
+        fig = fig or plt.figure(figsize=(6.4, 4.6))
+        ax = fig.add_subplot(projection="polar")
+    ax.set_theta_zero_location("N")
+    ax.set_theta_direction(-1)
+    ax.set_thetamin(-90)
+    ax.set_thetamax(90)
+    return ax
+
+
+def plot_polar(measurements, predict=None, ax=None, *, label="fit", title=None):
+    """Measured power per angle of incidence in polar form, with fitted curves.
+
+    Parameters
+    ----------
+    measurements : Measurements
+    predict : callable, optional
+        ``predict(gamma_deg, theta_deg) -> power`` (e.g. ``FitResult.predict``) drawn as a
+        line over the measured markers of each angle of incidence.
+    ax : polar Axes, optional
+    """
+    ax = _polar_axes(ax)
+    colours = plt.cm.viridis(np.linspace(0, 0.9, len(measurements.gammas)))
+    for colour, g in zip(colours, measurements.gammas, strict=True):
+        sel = measurements.gamma_deg == g
+        th = measurements.theta_deg[sel]
+        ax.plot(np.radians(th), measurements.power[sel], "o", ms=3.5, color=colour,
+                label=f"gamma = {g:g} deg")
+        if predict is not None:
+            grid = np.linspace(th.min(), th.max(), 301)
+            ax.plot(np.radians(grid), predict(np.full_like(grid, g), grid), "-", lw=1.2,
+                    color=colour)
+    ax.set_xlabel("receiver angle theta (deg); radius: power")
+    if title:
+        ax.set_title(title, fontsize=10)
+    ax.legend(loc="lower left", bbox_to_anchor=(-0.12, -0.18), fontsize=7, ncol=3, frameon=False)
+    return ax
+
+
+def plot_polar_per_gamma(measurements, curves: dict, fig=None, *, title=None, styles=None):
+    """One polar panel per angle of incidence: measured markers and one line per model
+    (``curves``: label -> ``predict(gamma_deg, theta_deg)``), as in the paper's Fig. 25."""
+    gammas = measurements.gammas
+    ncols = min(3, len(gammas))
+    nrows = int(np.ceil(len(gammas) / ncols))
+    fig = fig or plt.figure(figsize=(4.0 * ncols, 3.2 * nrows))
+    styles = styles or {}
+    for i, g in enumerate(gammas):
+        ax = _polar_axes(fig.add_subplot(nrows, ncols, i + 1, projection="polar"))
+        sel = measurements.gamma_deg == g
+        th = measurements.theta_deg[sel]
+        ax.plot(np.radians(th), measurements.power[sel], "o", ms=3, color="k", label="measured")
+        grid = np.linspace(th.min(), th.max(), 301)
+        for label, predict in curves.items():
+            ax.plot(np.radians(grid), predict(np.full_like(grid, g), grid),
+                    styles.get(label, "-"), lw=1.2, label=label)
+        ax.set_title(f"gamma = {g:g} deg", fontsize=9)
+        if i == 0:
+            ax.legend(loc="lower left", bbox_to_anchor=(-0.2, -0.25), fontsize=7, frameon=False)
+    if title:
+        fig.suptitle(title, fontsize=11)
+    fig.tight_layout()
+    return fig
+
+
+def save_figure(fig_or_ax, path, dpi: int = 110):
+    """Write a figure atomically and close it."""
+    fig = fig_or_ax.figure if hasattr(fig_or_ax, "figure") and not hasattr(fig_or_ax, "savefig") \
+        else fig_or_ax
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, dpi=dpi, bbox_inches="tight", format=str(path).rsplit(".", 1)[-1])
+    plt.close(fig)
+    return path

@@ -1,0 +1,63 @@
+"""Shared fixtures: seeded synthetic tables, the bundled datasets and the real data."""
+
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from irreflect.data import BUNDLED, Measurements, load_bundled, real_data_dir
+from irreflect.model import two_lobe_power
+
+#: Table 3 of the paper (u_as, v_as, u_nd, v_nd, u_ns, v_ns, K)
+TABLE3 = {
+    "terrazzo": (0.01713, -2.379, 1.021, 0.4283, 34.55, -0.3772, 0.4142),
+    "plasterboard": (0.001284, -4.911, 1.083, 0.4636, 33.41, 1.382, 0.5215),
+    "foam_board": (0.01742, -3.103, 1.457, 1.005, 102.0, 0.731, 0.3879),
+}
+
+
+def paper_grid(dense: bool = True):
+    """The paper's sampling plan (same as experiments/make_datasets.py)."""
+    gammas, thetas = [], []
+    for mag in range(10, 70, 10):
+        near = [-15, -7, -5, -2, 2, 5, 7] if dense else [-5, 5]
+        th = sorted({*range(-70, 71, 10)} | {mag + d for d in near})
+        th = [t for t in th if -70 <= t <= 70]
+        gammas += [-mag] * len(th)
+        thetas += th
+    return np.array(gammas, float), np.array(thetas, float)
+
+
+def synthetic(params=TABLE3["terrazzo"], noise=0.0, seed=0, dense=True, sigma_column=False,
+              name="synthetic") -> Measurements:
+    """A two-lobe table on the paper's grid with optional seeded Gaussian noise."""
+    g, t = paper_grid(dense)
+    clean = two_lobe_power(np.radians(g), np.radians(t), *params)
+    rng = np.random.default_rng(seed)
+    power = clean + (rng.normal(0, noise, clean.size) if noise else 0.0)
+    sigma = np.full(clean.size, noise) if (sigma_column and noise) else None
+    return Measurements(gamma_deg=g, theta_deg=t, power=power, sigma=sigma, name=name)
+
+
+@pytest.fixture
+def make_synthetic():
+    return synthetic
+
+
+@pytest.fixture(params=BUNDLED)
+def bundled(request) -> Measurements:
+    return load_bundled(request.param)
+
+
+@pytest.fixture
+def real_dir():
+    root = real_data_dir()
+    if root is None:
+        pytest.skip("real data not found: ../shared/datasets/real is absent "
+                    "(set IRREFLECT_REAL_DATA to its path)")
+    return root
+
+
+def as_frame(meas: Measurements) -> pd.DataFrame:
+    return meas.to_frame()
