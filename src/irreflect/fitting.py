@@ -18,6 +18,7 @@ import time
 from dataclasses import dataclass, field
 
 import numpy as np
+from scipy.stats import qmc
 
 from . import metrics
 from .errors import FitError, IrreflectError
@@ -293,38 +294,63 @@ def _covariance(model, z, alpha, gamma, theta, weights, absolute_sigma, cost, n_
     info = jfull.T @ jfull
     dof = max(n_points - model.n_params, 1)
     s2 = 1.0 if absolute_sigma else 2.0 * cost / dof
-    cov_internal = np.linalg.pinv(info, rcond=1e-13, hermitian=True) * s2
-    # chain rule to natural parameters, by central differences of the smooth map
+    # inverse through the symmetric eigen-decomposition; directions the data do not
+    # determine keep a huge (floored) variance, so their standard errors show it
+    evals, evecs = np.linalg.eigh(info)
+    evals = np.maximum(evals, 1e-14 * max(evals.max(), 1e-300))
+    cov_internal = (evecs / evals) @ evecs.T * s2
+    # chain rule to natural parameters, by central differences of the smooth map (one batch)
     x0 = np.concatenate([z, alpha])
     p_dim = z.size
-
-    def natural(x):
-        return model.to_natural(x[None, :p_dim], x[None, p_dim:])[0]
-
-    base = natural(x0)
-    grad = np.empty((base.size, x0.size))
-    for j in range(x0.size):
-        h = 1e-6 * max(abs(x0[j]), 1e-3)
-        xp, xm = x0.copy(), x0.copy()
-        xp[j] += h
-        xm[j] -= h
-        grad[:, j] = (natural(xp) - natural(xm)) / (2 * h)
+    steps = 1e-6 * np.maximum(np.abs(x0), 1e-3)
+    pert = np.concatenate([x0 + np.diag(steps), x0 - np.diag(steps)])
+    nat = model.to_natural(pert[:, :p_dim], pert[:, p_dim:])
+    grad = ((nat[: x0.size] - nat[x0.size:]) / (2 * steps[:, None])).T
     return grad @ cov_internal @ grad.T
 
 
-def _prepare(model, gamma_rad, theta_rad, power, weights, seed, n_random):
+_SCREEN_CACHE: dict = {}
+
+
+def screen_samples(model, n: int, seed: int) -> np.ndarray:
+    """``n`` scrambled-Sobol points in the model's screening box (deterministic per seed)."""
+    key = (model.name, model.n_nonlinear, n, seed)
+    if key not in _SCREEN_CACHE:
+        lo, hi = model.screen_box()
+        sobol = qmc.Sobol(d=lo.size, scramble=True, seed=seed)
+        _SCREEN_CACHE[key] = lo + sobol.random(n) * (hi - lo)
+    return _SCREEN_CACHE[key]
+
+
+def _screen_costs(model, geom, z, sw, yw):
+    """Variable-projection cost of every candidate ``z`` (no derivatives): a cheap global look."""
+    with np.errstate(over="ignore", under="ignore", invalid="ignore", divide="ignore"):
+        basis, _ = model.basis(geom, z, False)
+        bw = basis * sw[:, :, None]
+        alpha, _, _ = _solve_linear(bw, yw, model.alpha_nonneg)
+        resid = yw - (bw @ alpha[:, :, None])[:, :, 0]
+        cost = 0.5 * np.sum(resid * resid, axis=1)
+    cost[~np.isfinite(cost)] = np.inf
+    return cost
+
+
+def _candidates(model, gamma_rad, theta_rad, power, seed, n_random, n_screen):
+    """Data-driven starts, seeded random perturbations of the first, and screening samples."""
     starts = np.asarray(model.starts(gamma_rad, theta_rad, power), float)
+    parts = [starts]
     if n_random:
         rng = np.random.default_rng(seed)
         width = model.z_upper - model.z_lower
-        centre = starts[0]
         jitter = rng.normal(0.0, 0.15, (n_random, starts.shape[1])) * np.minimum(width, 10.0)
-        starts = np.vstack([starts, centre + jitter])
-    return np.clip(starts, model.z_lower, model.z_upper)
+        parts.append(starts[0] + jitter)
+    if n_screen:
+        parts.append(screen_samples(model, n_screen, seed))
+    return np.clip(np.vstack(parts), model.z_lower, model.z_upper)
 
 
 def fit(measurements, model="two-lobe", *, seed: int = 0, n_random_starts: int = 2,
-        use_sigma: bool = True, max_iter: int = 200) -> FitResult:
+        n_screen: int = 64, n_keep: int = 3, use_sigma: bool = True,
+        max_iter: int = 200) -> FitResult:
     """Fit a reflection model to a measurement table by global least squares.
 
     Parameters
@@ -337,6 +363,10 @@ def fit(measurements, model="two-lobe", *, seed: int = 0, n_random_starts: int =
         Seeds the random extra starts; the same seed gives the same result.
     n_random_starts : int
         Random starts added to the data-driven ones.
+    n_screen, n_keep : int
+        Global screening: the projected cost is evaluated at the data-driven starts, the
+        random ones and ``n_screen`` scrambled-Sobol points of the model's plausible box
+        (one batched evaluation); Levenberg-Marquardt then runs from the ``n_keep`` best.
     use_sigma : bool
         Weight by ``1 / sigma^2`` when the table has ``sigma``.
 
@@ -367,18 +397,24 @@ def fit(measurements, model="two-lobe", *, seed: int = 0, n_random_starts: int =
             "drop the column or fit with use_sigma=False"
         )
     weights = np.ones_like(power) if sigma is None else 1.0 / sigma**2
-    starts = _prepare(model_obj, gamma, theta, power, weights, seed, n_random_starts)
+    geom = plane_geometry(gamma[None], theta[None])
+    candidates = _candidates(model_obj, gamma, theta, power, seed, n_random_starts, n_screen)
+    sw1 = np.sqrt(weights)[None]
+    screen = _screen_costs(model_obj, geom, candidates, sw1,
+                           np.broadcast_to(sw1 * power, (len(candidates), power.size)))
+    order = np.argsort(screen, kind="stable")
+    starts = candidates[order[: max(1, min(n_keep, len(order)))]]
     s = starts.shape[0]
-    sw = np.broadcast_to(np.sqrt(weights), (s, power.size)).copy()
+    sw = np.broadcast_to(sw1, (s, power.size)).copy()
     yw = sw * power
-    z, state, nfev, _ = _levenberg_marquardt(
-        model_obj, plane_geometry(gamma[None], theta[None]), starts, sw, yw, max_iter=max_iter
-    )
+    z, state, nfev, _ = _levenberg_marquardt(model_obj, geom, starts, sw, yw, max_iter=max_iter)
+    nfev = nfev.sum() + len(candidates)
     cost = state["cost"]
     if not np.any(np.isfinite(cost)):
         raise FitError(
             f"fit of '{model_obj.name}' failed: no start reached a finite cost "
-            f"({s} starts tried); check the data for extreme values"
+            f"({len(candidates)} candidates screened, {s} starts tried); check the data for "
+            "extreme values"
         )
     best = int(np.argmin(cost))
     zb, ab = z[best], state["alpha"][best]
@@ -409,7 +445,7 @@ def fit(measurements, model="two-lobe", *, seed: int = 0, n_random_starts: int =
         sigma=None if sigma is None else sigma.copy(),
         n_points=meas.n_points,
         n_params=model_obj.n_params,
-        nfev=int(nfev.sum()),
+        nfev=int(nfev),
         n_starts=s,
         fit_ms=elapsed,
         seed=seed,

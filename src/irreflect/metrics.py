@@ -42,7 +42,8 @@ def normalized_residuals(measured, predicted, sigma=None) -> np.ndarray:
         return resid / scale
 
 
-def polar_area_error(theta_deg, measured, model_fn, step_deg: float = 0.1) -> float:
+def polar_area_error(theta_deg, measured, model_fn, step_deg: float = 0.1,
+                     model_sampling: str = "measured") -> float:
     """Relative polar-area error of one angle of incidence, in percent (section 5.3, Fig. 24).
 
     In polar coordinates (angle theta, radius power) the area swept by a curve r(theta) is
@@ -51,9 +52,12 @@ def polar_area_error(theta_deg, measured, model_fn, step_deg: float = 0.1) -> fl
     the measured theta range only.
 
     Interpolation: the measured curve is joined by straight segments in (theta, power)
-    between measured points (linear interpolation in theta); the model is evaluated
-    exactly; both are sampled every ``step_deg`` degrees and integrated with the
-    trapezoidal rule.
+    between measured points (linear interpolation in theta). With
+    ``model_sampling="measured"`` (default) the model curve is drawn the same way through
+    its values at the measured angles, so identical curves give exactly 0 and the error
+    only counts what the measurements can see; with ``"continuous"`` the model is
+    evaluated exactly on the integration grid. Both curves are sampled every ``step_deg``
+    degrees and integrated with the trapezoidal rule.
 
     Parameters
     ----------
@@ -62,7 +66,7 @@ def polar_area_error(theta_deg, measured, model_fn, step_deg: float = 0.1) -> fl
     measured : array-like
         Measured power at those angles.
     model_fn : callable
-        ``model_fn(theta_deg_grid) -> power`` of the model at that angle of incidence.
+        ``model_fn(theta_deg_array) -> power`` of the model at that angle of incidence.
     """
     theta_deg = np.asarray(theta_deg, float)
     measured = np.asarray(measured, float)
@@ -70,17 +74,24 @@ def polar_area_error(theta_deg, measured, model_fn, step_deg: float = 0.1) -> fl
     theta_deg, measured = theta_deg[order], measured[order]
     if theta_deg.size < 2 or theta_deg[-1] <= theta_deg[0]:
         return float("nan")
+    if model_sampling not in ("measured", "continuous"):
+        raise ValueError(f"model_sampling must be 'measured' or 'continuous', got {model_sampling!r}")
     n_steps = max(int(np.ceil((theta_deg[-1] - theta_deg[0]) / step_deg)), 2)
-    grid = np.linspace(theta_deg[0], theta_deg[-1], n_steps + 1)
+    grid = np.unique(np.concatenate([np.linspace(theta_deg[0], theta_deg[-1], n_steps + 1),
+                                     theta_deg]))
     r_meas = np.interp(grid, theta_deg, measured)
-    r_model = np.asarray(model_fn(grid), float)
+    if model_sampling == "measured":
+        r_model = np.interp(grid, theta_deg, np.asarray(model_fn(theta_deg), float))
+    else:
+        r_model = np.asarray(model_fn(grid), float)
     x = np.radians(grid)
     between = np.trapezoid(np.abs(r_meas**2 - r_model**2), x)
     under = np.trapezoid(r_meas**2, x)
     return float(100.0 * between / under) if under > 0 else float("nan")
 
 
-def polar_area_errors(gamma_deg, theta_deg, measured, predict_deg, step_deg: float = 0.1):
+def polar_area_errors(gamma_deg, theta_deg, measured, predict_deg, step_deg: float = 0.1,
+                      model_sampling: str = "measured"):
     """Polar-area error (percent) for each angle of incidence.
 
     ``predict_deg(gamma_deg_array, theta_deg_array) -> power``. Returns ``{|gamma|: error}``
@@ -97,6 +108,7 @@ def polar_area_errors(gamma_deg, theta_deg, measured, predict_deg, step_deg: flo
         out[float(abs(g))] = polar_area_error(
             theta_deg[sel], measured[sel],
             lambda grid, g=g: predict_deg(np.full_like(grid, g), grid), step_deg,
+            model_sampling,
         )
     return out
 

@@ -258,6 +258,15 @@ class ReflectionModel:
     formula: str = ""
     reference: str = ""
     options: dict = field(default_factory=dict)
+    #: Box of plausible ``z`` sampled by the fitter's global screening (default: the
+    #: bounds, clipped to [-6, 6] on each coordinate).
+    screen_lower: np.ndarray | None = None
+    screen_upper: np.ndarray | None = None
+
+    def screen_box(self) -> tuple[np.ndarray, np.ndarray]:
+        lo = self.screen_lower if self.screen_lower is not None else np.maximum(self.z_lower, -6.0)
+        hi = self.screen_upper if self.screen_upper is not None else np.minimum(self.z_upper, 6.0)
+        return np.asarray(lo, float), np.asarray(hi, float)
 
     @property
     def param_names(self) -> tuple[str, ...]:
@@ -337,7 +346,8 @@ def estimate_specular_index(gamma, theta, power) -> float:
             continue
         peak = np.max(pw[near])
         excess = pw - base
-        if peak - base <= 0 or peak <= 1.5 * np.median(pw):
+        middle = pw.size // 2
+        if peak - base <= 0 or peak <= 1.5 * np.partition(pw, middle)[middle]:
             continue
         half = (peak - base) / 2
         wide = phi[excess < half]
@@ -434,6 +444,8 @@ def make_two_lobe() -> ReflectionModel:
         formula="K [(1-a_s) (n_d+1)/2pi cos^n_d(theta) + a_s (n_s+1)/2pi cos^n_s(phi)], "
         "z = u_z cos^v_z(gamma)",
         reference="the paper, Eqs. 19-22",
+        screen_lower=np.array([-6.0, np.log(0.3), -3.0, np.log(1.0), -3.0]),
+        screen_upper=np.array([2.0, np.log(20.0), 6.0, np.log(3000.0), 3.0]),
     )
 
 
@@ -650,11 +662,15 @@ def _build_model(model) -> ReflectionModel:
         raise unknown_name("model", model, MODELS)
     if arg:
         try:
-            return MODELS[base](int(arg))
-        except (TypeError, ValueError) as exc:
+            count = int(arg)
+        except ValueError as exc:
             raise IrreflectError(
                 f"model '{model}': expected '{base}:<integer>', found '{arg}'"
             ) from exc
+        try:
+            return MODELS[base](count)
+        except TypeError as exc:
+            raise IrreflectError(f"model '{base}' takes no ':{arg}' option") from exc
     return MODELS[base]()
 
 

@@ -12,6 +12,7 @@ import matplotlib
 matplotlib.use("Agg")  # irreflect only ever draws to files
 
 import matplotlib.pyplot as plt  # noqa: E402
+import matplotlib.ticker  # noqa: E402
 import numpy as np  # noqa: E402
 
 from ._atomic import atomic_path  # noqa: E402
@@ -25,6 +26,8 @@ def _polar_axes(ax=None, fig=None):
     ax.set_theta_direction(-1)
     ax.set_thetamin(-90)
     ax.set_thetamax(90)
+    ax.yaxis.set_major_locator(matplotlib.ticker.MaxNLocator(4))
+    ax.tick_params(axis="y", labelsize=7)
     return ax
 
 
@@ -91,3 +94,67 @@ def save_figure(fig_or_ax, path, dpi: int = 110):
         fig.savefig(tmp, dpi=dpi, bbox_inches="tight", format=str(path).rsplit(".", 1)[-1])
     plt.close(fig)
     return path
+
+
+def plot_surface(measurements, predict, ax=None, *, highlight=None, title=None):
+    """3D P(gamma, theta) surface of the model with the measured points (the paper's Fig. 20).
+
+    ``highlight``: optional bool mask of points drawn as green circles (e.g. the points
+    the model was fitted on); the others are red crosses.
+    """
+    if ax is None:
+        fig = plt.figure(figsize=(6.4, 4.8))
+        ax = fig.add_subplot(projection="3d")
+    g = np.linspace(measurements.gamma_deg.min(), measurements.gamma_deg.max(), 40)
+    t = np.linspace(measurements.theta_deg.min(), measurements.theta_deg.max(), 81)
+    gg, tt = np.meshgrid(g, t)
+    ax.plot_surface(gg, tt, predict(gg, tt), cmap="viridis", alpha=0.55, linewidth=0)
+    mask = np.zeros(measurements.n_points, bool) if highlight is None else np.asarray(highlight)
+    ax.scatter(measurements.gamma_deg[~mask], measurements.theta_deg[~mask],
+               measurements.power[~mask], marker="x", color="tab:red", s=12, label="measured")
+    if mask.any():
+        ax.scatter(measurements.gamma_deg[mask], measurements.theta_deg[mask],
+                   measurements.power[mask], marker="o", color="tab:green", s=30,
+                   label="fitted points")
+    ax.set_xlabel("gamma (deg)")
+    ax.set_ylabel("theta (deg)")
+    ax.set_zlabel("power")
+    ax.legend(fontsize=7)
+    if title:
+        ax.set_title(title, fontsize=10)
+    return ax
+
+
+def plot_residual_map(measurements, values, ax=None, *, title=None, label="residual",
+                      symmetric=True):
+    """Residuals (or normalised residuals) over the (gamma, theta) plane (Figs. 21-22)."""
+    if ax is None:
+        ax = plt.figure(figsize=(6.4, 3.6)).add_subplot()
+    values = np.asarray(values, float)
+    vmax = np.nanmax(np.abs(values)) if symmetric else None
+    sc = ax.scatter(measurements.theta_deg, measurements.gamma_deg, c=values, cmap="coolwarm",
+                    vmin=-vmax if symmetric else None, vmax=vmax, s=28, edgecolor="k",
+                    linewidth=0.3)
+    mirror = np.unique(measurements.gamma_deg)
+    ax.plot(-mirror, mirror, ":", color="0.4", lw=1, label="mirror direction theta = -gamma")
+    ax.figure.colorbar(sc, ax=ax, label=label)
+    ax.set_xlabel("receiver angle theta (deg)")
+    ax.set_ylabel("angle of incidence gamma (deg)")
+    ax.legend(fontsize=7, loc="lower left")
+    if title:
+        ax.set_title(title, fontsize=10)
+    return ax
+
+
+def plot_residual_histogram(values, ax=None, *, title=None, label="relative residual (%)"):
+    """Histogram of (normalised) residuals (the paper's Fig. 23)."""
+    if ax is None:
+        ax = plt.figure(figsize=(5.0, 3.2)).add_subplot()
+    values = np.asarray(values, float)
+    values = values[np.isfinite(values)]
+    ax.hist(values, bins=min(30, max(8, values.size // 5)), color="tab:blue", edgecolor="white")
+    ax.set_xlabel(label)
+    ax.set_ylabel("number of points")
+    if title:
+        ax.set_title(title, fontsize=10)
+    return ax

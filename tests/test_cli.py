@@ -1,0 +1,67 @@
+"""The core commands: fit and plot, their outputs and their one-line errors."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+
+import pytest
+
+from irreflect.cli import main
+from irreflect.data import bundled_dir
+
+
+def test_fit_json_has_the_documented_keys(capsys):
+    assert main(["fit", str(bundled_dir() / "terrazzo.csv"), "--json"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert {"model", "params", "stderr", "r2", "rmse", "mse", "n_points", "fit_ms"} <= set(out)
+    assert out["model"] == "two-lobe" and out["n_points"] == 132
+    assert set(out["params"]) == {"u_as", "v_as", "u_nd", "v_nd", "u_ns", "v_ns", "K"}
+    assert 0.98 < out["r2"] < 1.0
+
+
+def test_fit_report_is_readable(capsys):
+    assert main(["fit", str(bundled_dir() / "plasterboard.csv"), "--model", "phong"]) == 0
+    out = capsys.readouterr().out
+    assert "model phong" in out and "k_s" in out and "polar-area error" in out
+
+
+def test_plot_writes_a_png(tmp_path):
+    out = tmp_path / "polar.png"
+    assert main(["plot", str(bundled_dir() / "foam_board.csv"), "--fit", "--out", str(out)]) == 0
+    assert out.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+@pytest.mark.parametrize(
+    "args, message",
+    [
+        (["fit", "missing.csv"], "no such file"),
+        (["fit", "{data}", "--model", "phong2"], "unknown model 'phong2'"),
+        (["plot", "{data}", "--out", "{tmp}/x.txt"], "--out must end in"),
+    ],
+)
+def test_user_errors_exit_2_with_one_line_and_no_file(tmp_path, capsys, args, message):
+    args = [a.format(data=bundled_dir() / "terrazzo.csv", tmp=tmp_path) for a in args]
+    assert main(args) == 2
+    err = capsys.readouterr().err.strip()
+    assert message in err and len(err.splitlines()) == 1
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_console_script_prints_no_traceback(tmp_path):
+    bad = tmp_path / "bad.csv"
+    bad.write_text("gamma_deg,theta_deg,power\n-10,0,1\n-10,5,x\n")
+    proc = subprocess.run([sys.executable, "-m", "irreflect.cli", "fit", str(bad)],
+                          capture_output=True, text=True)
+    assert proc.returncode == 2
+    assert "Traceback" not in proc.stderr
+    assert "'power' must be numeric; found 'x' in data row 2" in proc.stderr
+
+
+def test_too_few_points_for_the_model(tmp_path, capsys):
+    small = tmp_path / "small.csv"
+    small.write_text("gamma_deg,theta_deg,power\n" + "".join(
+        f"-20,{t},{0.1 + t / 1000}\n" for t in range(-30, 30, 10)))
+    assert main(["fit", str(small)]) == 2
+    assert "found 6 points while at least 7 are needed" in capsys.readouterr().err

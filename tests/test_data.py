@@ -1,0 +1,107 @@
+"""Measurement tables: reading, writing and every validation error."""
+
+from __future__ import annotations
+
+import warnings
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from irreflect.data import DataNotice, read_measurements, validate_table, write_measurements
+from irreflect.errors import DataError
+from tests.conftest import synthetic
+
+
+def _csv(tmp_path, text, name="t.csv"):
+    path = tmp_path / name
+    path.write_text(text)
+    return path
+
+
+GOOD = "gamma_deg,theta_deg,power\n-10,0,0.5\n-10,10,0.9\n-20,5,0.4\n"
+
+
+def test_reads_a_good_table(tmp_path):
+    m = read_measurements(_csv(tmp_path, GOOD))
+    assert m.n_points == 3 and m.sigma is None
+    np.testing.assert_array_equal(m.gamma_deg, [-10, -10, -20])
+    assert list(m.gammas) == [-10, -20]
+
+
+@pytest.mark.parametrize("suffix", [".csv", ".parquet"])
+def test_write_then_read_is_lossless(tmp_path, suffix):
+    meas = synthetic(noise=0.01, seed=3, sigma_column=True)
+    meas = type(meas)(meas.gamma_deg, meas.theta_deg, meas.power * np.pi, meas.sigma,
+                      material="foam board", name="x")
+    path = write_measurements(meas, tmp_path / f"m{suffix}")
+    back = read_measurements(path)
+    np.testing.assert_array_equal(back.power, meas.power)
+    np.testing.assert_array_equal(back.sigma, meas.sigma)
+    np.testing.assert_array_equal(back.theta_deg, meas.theta_deg)
+    assert back.material == "foam board"
+
+
+@pytest.mark.parametrize(
+    "text, pattern",
+    [
+        ("gamma,theta_deg,power\n-10,0,1\n", r"missing column 'gamma_deg'.*found 'gamma': rename"),
+        ("Gamma_Deg,theta_deg,power\n-10,0,1\n", r"found 'Gamma_Deg': rename it to 'gamma_deg'"),
+        ("gamma_deg,theta_deg,pwr\n-10,0,1\n", r"missing column 'power'.*found 'pwr'"),
+        ("gamma_deg,theta_deg,power\n-10,0,1\n-10,5,abc\n", r"'power' must be numeric; found 'abc' in data row 2"),
+        ("gamma_deg,theta_deg,power\n-10,0,1\n-10,5,\n", r"'power' has 1 empty, NaN or infinite.*data row 2"),
+        ("gamma_deg,theta_deg,power\n-10,0,1\n-10,5,inf\n", r"infinite"),
+        ("gamma_deg,theta_deg,power\n-10,90,1\n", r"theta_deg must lie strictly between -90 and 90.*found 90"),
+        ("gamma_deg,theta_deg,power\n-95,10,1\n", r"gamma_deg must lie strictly between"),
+        ("gamma_deg,theta_deg,power,sigma\n-10,0,1,-0.1\n", r"sigma .* must be >= 0; found -0.1"),
+        ("gamma_deg,theta_deg,power\n-10,0,1\n-10,0,2\n", r"duplicated \(gamma_deg, theta_deg\).*--average-duplicates"),
+        ("gamma_deg,theta_deg,power\n-10,0,1\n10,0,2\n", r"mixes positive and negative.*ambiguous"),
+        ("gamma_deg,theta_deg,power\n-10,0,1\n-10,5,-0.5\n", r"power must be >= 0 up to noise; found -0.5"),
+        ("gamma_deg,theta_deg,power\n", r"no rows"),
+    ],
+)
+def test_validation_errors_are_one_line_and_say_how_to_fix(tmp_path, text, pattern):
+    with pytest.raises(DataError, match=pattern) as info:
+        read_measurements(_csv(tmp_path, text))
+    assert "\n" not in str(info.value)
+
+
+def test_missing_file_and_unknown_type(tmp_path):
+    with pytest.raises(DataError, match="no such file"):
+        read_measurements(tmp_path / "absent.csv")
+    with pytest.raises(DataError, match=r"unknown file type '.xlsx'"):
+        read_measurements(_csv(tmp_path, GOOD, "t.xlsx"))
+
+
+def test_duplicates_averaged_on_request(tmp_path):
+    text = "gamma_deg,theta_deg,power,sigma\n-10,0,1,0.3\n-10,0,2,0.4\n-10,5,3,0.1\n"
+    m = read_measurements(_csv(tmp_path, text), average_duplicates=True)
+    assert m.n_points == 2
+    assert m.power[m.theta_deg == 0][0] == pytest.approx(1.5)
+    assert m.sigma[m.theta_deg == 0][0] == pytest.approx(0.25)  # sqrt(0.09+0.16)/2
+    assert any("averaged 1 duplicated" in n for n in m.notes)
+
+
+def test_positive_gammas_read_as_magnitudes_and_said_once(tmp_path):
+    text = "gamma_deg,theta_deg,power\n10,0,1\n10,10,2\n20,5,3\n"
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        m = read_measurements(_csv(tmp_path, text))
+    notices = [w for w in caught if issubclass(w.category, DataNotice)]
+    assert len(notices) == 1 and "magnitudes" in str(notices[0].message)
+    np.testing.assert_array_equal(m.gamma_deg, [-10, -10, -20])
+    np.testing.assert_array_equal(m.theta_deg, [0, 10, 5])  # mirror stays on +theta
+
+
+def test_small_negative_power_is_kept_and_reported():
+    df = pd.DataFrame({"gamma_deg": [-10, -10, -10], "theta_deg": [0, 10, 20],
+                       "power": [1.0, 0.5, -0.01]})
+    m = validate_table(df)
+    assert m.power[2] == -0.01
+    assert any("slightly negative" in n for n in m.notes)
+
+
+def test_extra_columns_are_ignored(tmp_path):
+    text = "gamma_deg,theta_deg,purpose,power\n-10,0,mirror,1\n-10,10,diffuse,2\n"
+    m = read_measurements(_csv(tmp_path, text))
+    assert m.power.tolist() == [1.0, 2.0]

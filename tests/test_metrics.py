@@ -1,0 +1,60 @@
+"""Metrics: R^2, RMSE, MSE and the polar-area error of section 5.3."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from irreflect import metrics
+
+
+def test_r2_rmse_mse_by_hand():
+    y = np.array([1.0, 2.0, 3.0, 4.0])
+    p = np.array([1.1, 1.9, 3.2, 3.8])
+    ss_res = 0.01 + 0.01 + 0.04 + 0.04
+    assert metrics.r2(y, p) == pytest.approx(1 - ss_res / 5.0)
+    assert metrics.mse(y, p) == pytest.approx(ss_res / 4)
+    assert metrics.rmse(y, p) == pytest.approx(np.sqrt(ss_res / 4))
+    batch = metrics.r2(y, np.vstack([p, y]))
+    assert batch.shape == (2,) and batch[1] == 1.0
+
+
+def test_polar_area_error_zero_for_identical_curves():
+    theta = np.linspace(-70, 70, 15)
+    meas = np.cos(np.radians(theta))
+    assert metrics.polar_area_error(theta, meas, lambda t: np.cos(np.radians(t))) == 0.0
+    # drawn continuously, the model differs from the straight segments by a little
+    cont = metrics.polar_area_error(theta, meas, lambda t: np.cos(np.radians(t)),
+                                    model_sampling="continuous")
+    assert 0.0 < cont < 1.0
+
+
+def test_polar_area_error_hand_computed_circle():
+    # measured: a circle arc of radius 1 over [-60, 60]; model: radius 1.1.
+    # area between = 1/2 (1.21 - 1) * span, area under = 1/2 * span -> 21 %
+    theta = np.linspace(-60, 60, 7)
+    err = metrics.polar_area_error(theta, np.ones(7), lambda t: np.full_like(t, 1.1))
+    assert err == pytest.approx(21.0, rel=1e-9)
+    # half the range too big by 10 %, half right: 10.5 %
+    err_half = metrics.polar_area_error(
+        theta, np.ones(7), lambda t: np.where(t > 0, 1.1, 1.0), step_deg=0.001,
+        model_sampling="continuous")
+    assert err_half == pytest.approx(10.5, rel=1e-3)
+
+
+def test_polar_area_errors_per_gamma():
+    g = np.repeat([-10.0, -20.0], 5)
+    t = np.tile(np.linspace(-40, 40, 5), 2)
+    y = np.ones(10)
+    errs = metrics.polar_area_errors(g, t, y, lambda gg, tt: np.where(gg == -20, 1.1, 1.0))
+    assert list(errs) == [10.0, 20.0]
+    assert errs[10.0] == pytest.approx(0.0) and errs[20.0] == pytest.approx(21.0)
+
+
+def test_normalized_residuals_and_information_criteria():
+    r = metrics.normalized_residuals([2.0, 4.0], [1.0, 5.0])
+    np.testing.assert_allclose(r, [0.5, -0.25])
+    r = metrics.normalized_residuals([2.0, 4.0], [1.0, 5.0], sigma=[0.5, 0.5])
+    np.testing.assert_allclose(r, [2.0, -2.0])
+    assert metrics.bic(1.0, 100, 7) - metrics.bic(1.0, 100, 6) == pytest.approx(np.log(100))
+    assert metrics.aic(1.0, 100, 7) - metrics.aic(1.0, 100, 6) == pytest.approx(2.0)
