@@ -467,14 +467,19 @@ class SubsetFits:
 
 
 def fit_subsets(gamma_deg, theta_deg, power, masks, model="two-lobe", *, sigma=None,
-                max_iter: int = 100, starts_per_fit: int | None = None) -> SubsetFits:
+                max_iter: int = 40, ftol: float = 1e-8, n_screen: int = 32, n_keep: int = 2,
+                data_starts: bool = False, seed: int = 0) -> SubsetFits:
     """Fit the model to every subset in ``masks`` (B, n) independently, in one batch.
 
-    Each subset fit sees only its own points: starts are the model's data-driven guesses
-    computed from the subset's points alone, never from the full set. Its R^2 is then
-    measured against all ``n`` points, as a technician who measured only that subset
-    would get. Subsets with fewer points than parameters, or whose fit fails, are
-    marked failed with R^2 = 0 (score 1 - R^2 = 1).
+    Each subset fit sees only its own points. Its starting points are chosen by the same
+    global screening as :func:`fit`: ``n_screen`` scrambled-Sobol candidates of the model's
+    plausible box (the same candidates for every subset; with ``data_starts`` also the
+    model's data-driven guesses from the subset's own points) are scored by the projected
+    cost **on the subset's points**, and Levenberg-Marquardt runs from the ``n_keep`` best.
+    Nothing from the points outside the subset is used. The fit's R^2 is then measured
+    against all ``n`` points, as a technician who measured only that subset would get.
+    Subsets with fewer points than parameters, or whose fit fails, are marked failed with
+    R^2 = 0 (score 1 - R^2 = 1).
     """
     model_obj = get_model(model)
     gamma = np.radians(np.asarray(gamma_deg, float))
@@ -485,42 +490,50 @@ def fit_subsets(gamma_deg, theta_deg, power, masks, model="two-lobe", *, sigma=N
     weights_all = np.ones(n) if sigma is None else 1.0 / np.asarray(sigma, float) ** 2
     counts = masks.sum(axis=1)
     ok = counts >= model_obj.n_params
-    n_max = int(counts.max()) if b else 0
+    n_max = max(int(counts.max()) if b else 0, 1)
     # gather every subset into a padded (B, n_max) problem with zero weight on padding
     order = np.argsort(~masks, axis=1, kind="stable")[:, :n_max]
     valid = np.take_along_axis(masks, order, axis=1)
-    g = gamma[order]
-    t = theta[order]
-    y = power[order]
-    w = np.where(valid, weights_all[order], 0.0)
-    # data-driven starts per subset, from that subset's points only
-    start_list = []
-    for i in range(b):
-        sel = valid[i]
-        s_i = np.asarray(model_obj.starts(g[i, sel], t[i, sel], y[i, sel]), float)
-        start_list.append(s_i)
-    s = min(len(x) for x in start_list) if starts_per_fit is None else starts_per_fit
-    starts = np.stack([x[:s] for x in start_list])  # (B, S, P)
-    rep = lambda a: np.repeat(a, s, axis=0)  # noqa: E731
-    sw = rep(np.sqrt(w))
-    yw = sw * rep(y)
+    g, t, y = gamma[order], theta[order], power[order]
+    sw = np.sqrt(np.where(valid, weights_all[order], 0.0))
+    geom = plane_geometry(g, t)
+    # global screening, per subset, on the subset's own points
+    cands = screen_samples(model_obj, n_screen, seed) if n_screen else np.empty((0, model_obj.n_nonlinear))
+    if data_starts:
+        per_subset = [np.asarray(model_obj.starts(g[i, valid[i]], t[i, valid[i]], y[i, valid[i]]))
+                      for i in range(b)]
+        k0 = min(len(x) for x in per_subset)
+        extra = np.stack([x[:k0] for x in per_subset])  # (B, k0, P)
+    else:
+        extra = np.empty((b, 0, model_obj.n_nonlinear))
+    all_cands = np.concatenate([np.broadcast_to(cands, (b,) + cands.shape), extra], axis=1)
+    all_cands = np.clip(all_cands, model_obj.z_lower, model_obj.z_upper)
+    c = all_cands.shape[1]
+    rep_c = lambda a: np.repeat(a, c, axis=0)  # noqa: E731
+    geom_c = {k: rep_c(v) for k, v in geom.items()}
+    screen = _screen_costs(model_obj, geom_c, all_cands.reshape(b * c, -1), rep_c(sw),
+                           rep_c(sw * y)).reshape(b, c)
+    keep = min(n_keep, c)
+    best_idx = np.argsort(screen, axis=1, kind="stable")[:, :keep]
+    starts = np.take_along_axis(all_cands, best_idx[:, :, None], axis=1)  # (B, keep, P)
+    rep = lambda a: np.repeat(a, keep, axis=0)  # noqa: E731
     z, state, nfev, _ = _levenberg_marquardt(
-        model_obj, plane_geometry(rep(g), rep(t)), starts.reshape(b * s, -1), sw, yw,
-        max_iter=max_iter,
+        model_obj, {k: rep(v) for k, v in geom.items()}, starts.reshape(b * keep, -1),
+        rep(sw), rep(sw * y), max_iter=max_iter, ftol=ftol,
     )
-    cost = state["cost"].reshape(b, s)
+    cost = state["cost"].reshape(b, keep)
     best = np.argmin(cost, axis=1)
-    flat = np.arange(b) * s + best
+    flat = np.arange(b) * keep + best
     params = model_obj.to_natural(z[flat], state["alpha"][flat])
     best_cost = cost[np.arange(b), best]
     failed = ~ok | ~np.isfinite(best_cost) | ~np.all(np.isfinite(params), axis=1)
-    pred = model_obj.predict(np.where(failed[:, None], model_obj_default(model_obj, params), params),
-                             gamma, theta)
+    safe = np.where(failed[:, None], model_obj_default(model_obj, params), params)
+    pred = model_obj.predict(safe, gamma, theta)
     r2_all = np.asarray(metrics.r2(power, pred), float).reshape(b)
     r2_all = np.where(failed | ~np.isfinite(r2_all), 0.0, r2_all)
     params = np.where(failed[:, None], np.nan, params)
     return SubsetFits(params=params, r2_all=r2_all, cost=np.where(failed, np.inf, best_cost),
-                      failed=failed, nfev=int(nfev.sum()))
+                      failed=failed, nfev=int(nfev.sum()) + b * c)
 
 
 def model_obj_default(model_obj, params):
