@@ -99,9 +99,13 @@ def test_subset_fit_uses_only_its_points():
     poisoned = meas.power.copy()
     poisoned[~mask] = 10.0  # garbage outside the subset must not matter
     subs = fit_subsets(meas.gamma_deg, meas.theta_deg, poisoned, mask[None])
+    clean = fit_subsets(meas.gamma_deg, meas.theta_deg, meas.power, mask[None])
+    np.testing.assert_array_equal(subs.params, clean.params)  # bit for bit
     direct = fit(meas.subset(mask))
-    pred = direct.predict(meas.gamma_deg, meas.theta_deg)
-    np.testing.assert_allclose(subs.params[0], direct.values, rtol=1e-5)
+    pred = model_predict = direct.predict(meas.gamma_deg, meas.theta_deg)
+    np.testing.assert_allclose(subs.params[0], direct.values, rtol=1e-3, atol=1e-4)
+    pred = get_model("two-lobe").predict_deg(subs.params[0], meas.gamma_deg, meas.theta_deg)
+    np.testing.assert_allclose(pred, model_predict, rtol=1e-5)
     r2_vs_poisoned = 1 - np.sum((poisoned - pred) ** 2) / np.sum((poisoned - poisoned.mean()) ** 2)
     assert subs.r2_all[0] == pytest.approx(r2_vs_poisoned, rel=1e-6)
 
