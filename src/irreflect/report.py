@@ -78,9 +78,14 @@ def format_table(df: pd.DataFrame) -> pd.DataFrame:
 
 def markdown_table(df: pd.DataFrame) -> str:
     text = format_table(df)
-    header = "| " + " | ".join(map(str, text.columns)) + " |"
+
+    def cell(value) -> str:
+        return str(value).replace("|", "\\|")
+
+    header = "| " + " | ".join(cell(c) for c in text.columns) + " |"
     rule = "|" + "|".join("---" for _ in text.columns) + "|"
-    rows = ["| " + " | ".join(row) + " |" for row in text.itertuples(index=False, name=None)]
+    rows = ["| " + " | ".join(cell(v) for v in row) + " |"
+            for row in text.itertuples(index=False, name=None)]
     return "\n".join([header, rule, *rows])
 
 
