@@ -325,38 +325,35 @@ def estimate_specular_index(gamma, theta, power) -> float:
 
     For every angle of incidence, the excess of power over the curve's minimum is looked
     at around the mirror direction; its half width at half maximum ``phi_half`` gives
-    ``n = -ln 2 / ln cos(phi_half)`` (Eq. 3). The median over angles of incidence is
-    returned; 20 if no peak is resolved.
+    ``n = -ln 2 / ln cos(phi_half)`` (Eq. 3). The median over angles of incidence with a
+    resolved peak (peak above 1.5 times the curve's mean) is returned; 20 if none.
+
+    gamma, theta : array-like, radians. power : array-like.
     """
-    gamma = np.asarray(gamma, float)
-    theta = np.asarray(theta, float)
-    power = np.asarray(power, float)
-    estimates = []
-    for g in np.unique(gamma):
-        sel = gamma == g
-        th, pw = theta[sel], power[sel]
-        if th.size < 4:
-            continue
-        order = np.argsort(th)
-        th, pw = th[order], pw[order]
-        phi = np.abs(-g - th)
-        base = np.min(pw)
-        near = phi <= np.radians(15)
-        if not near.any():
-            continue
-        peak = np.max(pw[near])
-        excess = pw - base
-        middle = pw.size // 2
-        if peak - base <= 0 or peak <= 1.5 * np.partition(pw, middle)[middle]:
-            continue
-        half = (peak - base) / 2
-        wide = phi[excess < half]
-        if wide.size == 0:
-            continue
-        phi_half = np.clip(np.min(wide), np.radians(1.0), np.radians(60))
-        estimates.append(-np.log(2) / np.log(np.cos(phi_half)))
-    if not estimates:
+    gamma = np.asarray(gamma, float).ravel()
+    theta = np.asarray(theta, float).ravel()
+    power = np.asarray(power, float).ravel()
+    if power.size < 4:
         return 20.0
+    order = np.lexsort((theta, gamma))
+    gamma, theta, power = gamma[order], theta[order], power[order]
+    starts = np.flatnonzero(np.r_[True, gamma[1:] != gamma[:-1]])
+    counts = np.diff(np.r_[starts, gamma.size])
+    group = np.repeat(np.arange(starts.size), counts)
+    phi = np.abs(-gamma - theta)
+    near = phi <= np.radians(15)
+    base = np.minimum.reduceat(power, starts)
+    peak = np.maximum.reduceat(np.where(near, power, -np.inf), starts)
+    mean = np.add.reduceat(power, starts) / counts
+    half = (peak - base) / 2
+    below = np.where(power - base[group] < half[group], phi, np.inf)
+    phi_half = np.minimum.reduceat(below, starts)
+    ok = (counts >= 4) & np.isfinite(peak) & (peak > base) & (peak > 1.5 * mean) \
+        & np.isfinite(phi_half)
+    if not ok.any():
+        return 20.0
+    phi_half = np.clip(phi_half[ok], np.radians(1.0), np.radians(60))
+    estimates = -np.log(2) / np.log(np.cos(phi_half))
     return float(np.clip(np.median(estimates), 2.0, 3000.0))
 
 
