@@ -1,0 +1,142 @@
+"""``irreflect protocol`` and ``irreflect evaluate-protocol``."""
+
+from __future__ import annotations
+
+import sys
+
+from ..errors import IrreflectError
+
+
+def _cmd_protocol(args) -> int:
+    from .core import paper_protocol
+    from .export import FORMATS, format_from_path, render, write_protocol
+
+    fmt = args.format or (format_from_path(args.out) if args.out else "csv")
+    if fmt not in FORMATS:
+        raise IrreflectError(f"--format must be one of {', '.join(FORMATS)}; found '{fmt}'")
+    if args.design_from:
+        from ..data import read_measurements
+        from .design import design_protocol
+
+        dense = read_measurements(args.design_from, average_duplicates=args.average_duplicates)
+        protocol = design_protocol(
+            dense, args.n, args.model, theta_min=args.theta_min, theta_max=args.theta_max,
+            n_gamma_settings=args.gamma_settings, selector=args.selector, seed=args.seed,
+            pop_size=args.pop_size, generations=args.generations, progress=True,
+        )
+    else:
+        if args.n is not None or args.gamma_settings is not None:
+            raise IrreflectError("--n and --gamma-settings apply to --design-from, not to --gammas")
+        protocol = paper_protocol(
+            args.gammas,
+            -70.0 if args.theta_min is None else args.theta_min,
+            70.0 if args.theta_max is None else args.theta_max,
+            mirror_offset=args.mirror_offset, wide_offset=args.wide_offset,
+            central_offset=args.central_offset, min_separation=args.min_separation,
+        )
+    for note in protocol.notes:
+        print(f"irreflect: note: {note}", file=sys.stderr)
+    if args.out:
+        write_protocol(protocol, args.out, fmt)
+        print(f"wrote {args.out} ({protocol.n_points} points, {len(protocol.gammas)} angles of "
+              f"incidence, {fmt})")
+    else:
+        sys.stdout.write(render(protocol, fmt))
+    return 0
+
+
+def _cmd_evaluate(args) -> int:
+    from ..cli import print_json
+    from ..data import read_measurements
+    from .evaluate import evaluate_protocol
+    from .export import read_protocol
+
+    protocol = read_protocol(args.protocol)
+    dense = read_measurements(args.dense, average_duplicates=args.average_duplicates)
+    ev = evaluate_protocol(protocol, dense, args.model, tolerance_deg=args.tolerance,
+                           method="snap" if args.snap else "interpolate", seed=args.seed)
+    rob = None
+    if args.monte_carlo:
+        from .robustness import protocol_robustness
+
+        rob = protocol_robustness(protocol, dense, model=args.model,
+                                  n_trials=args.monte_carlo, angle_error_deg=args.angle_error,
+                                  power_noise=args.power_noise, seed=args.seed,
+                                  progress=not args.json)
+    if args.json:
+        out = ev.to_dict()
+        if rob is not None:
+            out["robustness"] = rob.to_dict()
+        print_json(out)
+    else:
+        print(ev.summary())
+        if rob is not None:
+            print(rob.summary())
+    return 0
+
+
+def register(sub) -> None:
+    p = sub.add_parser(
+        "protocol", help="where to put emitter and detector: the paper's 12 points, or a design",
+        description="Write a measurement protocol: the paper's 12-point protocol (section 4.3) "
+                    "for your tool's receiver range (--gammas), or the points a subset optimiser "
+                    "picks from a pilot dense scan (--design-from). Angles in degrees; gamma "
+                    "negative on the source side (magnitudes also accepted).")
+    src = p.add_mutually_exclusive_group(required=True)
+    src.add_argument("--gammas", nargs="+", type=float, metavar="G",
+                     help="three angles of incidence in degrees, e.g. -20 -40 -60 (or 20 40 60)")
+    src.add_argument("--design-from", metavar="DENSE.csv",
+                     help="design from a pilot dense scan of the material (CSV or Parquet)")
+    p.add_argument("--theta-min", type=float, default=None,
+                   help="lowest receiver angle the tool can set (deg; default -70 for --gammas, "
+                        "no limit for --design-from)")
+    p.add_argument("--theta-max", type=float, default=None,
+                   help="highest receiver angle (deg; default 70 for --gammas)")
+    p.add_argument("--mirror-offset", type=float, default=10.0,
+                   help="lobe-width points around the mirror angle (deg, Eqs. 29-30; default 10)")
+    p.add_argument("--wide-offset", type=float, default=60.0,
+                   help="diffuse points from the mirror angle (deg, Eqs. 31-32; default 60)")
+    p.add_argument("--central-offset", type=float, default=20.0,
+                   help="offset of the central gamma's points (deg, Eqs. 33-34; default 20)")
+    p.add_argument("--min-separation", type=float, default=None,
+                   help="points of one gamma closer than this coincide (deg; default "
+                        "mirror-offset / 2)")
+    p.add_argument("--n", type=int, default=None,
+                   help="--design-from: number of points (default: the knee of the front)")
+    p.add_argument("--gamma-settings", type=int, default=None, metavar="K",
+                   help="--design-from: use only K angle-of-incidence settings")
+    p.add_argument("--model", default="two-lobe", help="--design-from: model (default two-lobe)")
+    p.add_argument("--selector", default="nsga2", help="--design-from: optimiser (default nsga2)")
+    p.add_argument("--pop-size", type=int, default=100)
+    p.add_argument("--generations", type=int, default=200)
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--average-duplicates", action="store_true",
+                   help="--design-from: average duplicated (gamma, theta) rows")
+    p.add_argument("--format", choices=("csv", "json", "md"), default=None,
+                   help="output format (default: from --out's extension, else csv)")
+    p.add_argument("--out", metavar="FILE", help="write here (atomically) instead of stdout")
+    p.set_defaults(handler=_cmd_protocol)
+
+    p = sub.add_parser(
+        "evaluate-protocol", help="fit on a protocol's points of a dense scan, judge on all",
+        description="Fit the model on the protocol's points of a dense dataset and print R^2, "
+                    "RMSE and the per-gamma polar-area error against all its points. Protocol "
+                    "angles missing from the dataset are interpolated along theta (or snapped) "
+                    "within --tolerance degrees, and listed.")
+    p.add_argument("protocol", metavar="PROTOCOL", help="protocol CSV or JSON")
+    p.add_argument("dense", metavar="DENSE", help="dense measurement table (CSV or Parquet)")
+    p.add_argument("--model", default="two-lobe")
+    p.add_argument("--tolerance", type=float, default=5.0,
+                   help="largest gap (deg) to the nearest measured theta that may be bridged")
+    p.add_argument("--snap", action="store_true",
+                   help="use the nearest measured angle instead of interpolating")
+    p.add_argument("--monte-carlo", type=int, default=0, metavar="TRIALS",
+                   help="also run a Monte Carlo of goniometer errors with this many trials")
+    p.add_argument("--angle-error", type=float, default=1.0,
+                   help="Monte Carlo: half-width of the uniform angle error (deg, default 1)")
+    p.add_argument("--power-noise", type=float, default=0.01,
+                   help="Monte Carlo: relative power noise, 1-sigma (default 0.01)")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--average-duplicates", action="store_true")
+    p.add_argument("--json", action="store_true", help="one JSON object on stdout")
+    p.set_defaults(handler=_cmd_evaluate)

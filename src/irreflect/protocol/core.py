@@ -1,0 +1,443 @@
+"""The :class:`Protocol` object and the paper's 12-point protocol (section 4.3, Eqs. 23-34).
+
+Conventions (the paper's): angles in degrees from the surface normal; the angle of
+incidence ``gamma`` is negative on the source side; the receiver angle ``theta`` is
+signed and the mirror (specular) direction is ``theta = -gamma``. Angles of incidence may
+be given as magnitudes (all >= 0), as :mod:`irreflect.data` also accepts them: they are
+then read as ``gamma = -|gamma|``. Mixing signs is refused as ambiguous.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+import pandas as pd
+
+from ..errors import IrreflectError
+
+#: What each point of a protocol is for.
+PURPOSES = ("mirror", "lobe_width", "diffuse", "central", "optimised", "custom")
+
+#: The rule of :func:`paper_protocol`, as written into exported protocols.
+PAPER_RULE = (
+    "paper section 4.3 (Eqs. 23-34): for the smallest and largest |gamma|, theta = -gamma "
+    "(mirror), -gamma -/+ mirror_offset (lobe_width), -gamma -/+ wide_offset (diffuse); for "
+    "the middle gamma, theta = gamma + central_offset and -gamma + central_offset (central). "
+    "A theta outside the tool's range is clamped to the nearest limit (as the paper says). "
+    "A clamped point closer than min_separation to an earlier point of the same gamma "
+    "coincides with it and is replaced by the reachable theta farthest from that gamma's "
+    "mirror direction that keeps min_separation from every other point of that gamma (ties: "
+    "the side opposite the requested one, then the smaller theta); for gamma = -60 and limits "
+    "+-70 this gives the paper's -70 for the requested +120. A lobe_width point clamped "
+    "closer than min_separation to the mirror point, or a mirror direction outside the "
+    "range, is refused: the tool cannot measure that lobe."
+)
+
+#: How :meth:`Protocol.in_measurement_order` orders points, as written into exports.
+ORDER_RULE = (
+    "measurement order: each angle of incidence is set once, by increasing |gamma| (changing "
+    "gamma is the slow step); within one gamma the receiver sweeps theta monotonically, in "
+    "the direction that starts nearest to where the previous sweep ended (the directions are "
+    "chosen together to minimise the total receiver travel; ties ascending). Assumes the "
+    "receiver angle is set independently of gamma (separate source and receiver arms)."
+)
+
+_EPS = 1e-9
+
+
+def _clean(x: float) -> float:
+    """Round away binary noise (e.g. 69.99999999) and turn -0.0 into 0.0."""
+    return float(np.round(float(x), 9)) + 0.0
+
+
+@dataclass(frozen=True)
+class Protocol:
+    """A list of (gamma, theta) settings to measure, with what each one is for.
+
+    Attributes
+    ----------
+    gamma_deg, theta_deg : ndarray, degrees
+        The settings (paper convention: gamma <= 0, mirror direction theta = -gamma).
+    purpose : tuple of str
+        One of :data:`PURPOSES` per point.
+    requested_theta_deg : ndarray, degrees
+        The angle the rule asked for before clamping or replacement (NaN if not applicable).
+    adjustment : tuple of str
+        ``""``, ``"clamped"`` or ``"replaced"`` per point.
+    theta_min, theta_max : float, degrees
+        The receiver range of the tool the protocol was made for (NaN if unknown).
+    kind : str
+        ``"paper"``, ``"optimised"`` or ``"file"``.
+    rule : str
+        How the points were chosen (exported with the protocol).
+    settings : dict
+        The parameters of the rule (offsets, model, seed, ...).
+    order : str
+        ``"paper"`` (the order of the paper's Eqs. 27-34 and Table 1) or ``"measurement"``.
+    notes : tuple of str
+        What the rule did that a user should know (clamps, replacements).
+    """
+
+    gamma_deg: np.ndarray
+    theta_deg: np.ndarray
+    purpose: tuple[str, ...]
+    requested_theta_deg: np.ndarray
+    adjustment: tuple[str, ...]
+    theta_min: float = float("nan")
+    theta_max: float = float("nan")
+    kind: str = "custom"
+    rule: str = ""
+    settings: dict = field(default_factory=dict)
+    order: str = "given"
+    notes: tuple[str, ...] = ()
+    name: str = "protocol"
+
+    @property
+    def n_points(self) -> int:
+        return int(self.gamma_deg.size)
+
+    @property
+    def gammas(self) -> np.ndarray:
+        """Distinct angles of incidence, by increasing magnitude."""
+        g = np.unique(self.gamma_deg)
+        return g[np.argsort(np.abs(g), kind="stable")]
+
+    def to_frame(self) -> pd.DataFrame:
+        return pd.DataFrame({
+            "gamma_deg": self.gamma_deg,
+            "theta_deg": self.theta_deg,
+            "purpose": list(self.purpose),
+            "requested_theta_deg": self.requested_theta_deg,
+            "adjustment": list(self.adjustment),
+        })
+
+    def take(self, index) -> Protocol:
+        """The points ``index`` (an integer array), in that order."""
+        index = np.asarray(index, int)
+        return replace(
+            self,
+            gamma_deg=self.gamma_deg[index],
+            theta_deg=self.theta_deg[index],
+            purpose=tuple(self.purpose[i] for i in index),
+            requested_theta_deg=self.requested_theta_deg[index],
+            adjustment=tuple(self.adjustment[i] for i in index),
+        )
+
+    def in_measurement_order(self) -> Protocol:
+        """The same points ordered to minimise arm moves (see :data:`ORDER_RULE`)."""
+        out = self.take(measurement_permutation(self.gamma_deg, self.theta_deg))
+        return replace(out, order="measurement")
+
+    def receiver_travel(self) -> float:
+        """Total receiver travel (degrees) when measured in the current order, counting
+        only moves within one gamma setting and between consecutive settings."""
+        return float(np.sum(np.abs(np.diff(self.theta_deg))))
+
+    def gamma_changes(self) -> int:
+        """How many times gamma changes when measured in the current order."""
+        return int(np.count_nonzero(np.diff(self.gamma_deg)))
+
+
+def measurement_permutation(gamma_deg, theta_deg) -> np.ndarray:
+    """Indices that put points in measurement order (see :data:`ORDER_RULE`)."""
+    gamma = np.asarray(gamma_deg, float)
+    theta = np.asarray(theta_deg, float)
+    if gamma.size == 0:
+        return np.zeros(0, int)
+    levels = sorted(np.unique(gamma), key=lambda g: (abs(g), g))
+    groups = []
+    for g in levels:
+        idx = np.nonzero(gamma == g)[0]
+        groups.append(idx[np.argsort(theta[idx], kind="stable")])
+    # dynamic programme over sweep directions: state = direction of the last sweep
+    # (0 ascending -> ends at the group's max, 1 descending -> ends at its min)
+    lo = [theta[g[0]] for g in groups]
+    hi = [theta[g[-1]] for g in groups]
+    cost = [0.0, 0.0]
+    back = []
+    for k in range(1, len(groups)):
+        ends = (hi[k - 1], lo[k - 1])
+        new, choice = [], []
+        for start in (lo[k], hi[k]):  # ascending starts at lo, descending at hi
+            options = [cost[d] + abs(ends[d] - start) for d in (0, 1)]
+            d = int(np.argmin(options))
+            new.append(options[d])
+            choice.append(d)
+        cost = new
+        back.append(choice)
+    last = int(np.argmin(cost))
+    dirs = [last]
+    for choice in reversed(back):
+        dirs.append(choice[dirs[-1]])
+    dirs.reverse()
+    return np.concatenate([g if d == 0 else g[::-1] for g, d in zip(groups, dirs, strict=True)])
+
+
+# ----------------------------------------------------------------------------- validation
+def normalise_gammas(gammas_deg, *, what: str = "angles of incidence") -> np.ndarray:
+    """Angles of incidence in the paper's convention (<= 0, degrees).
+
+    All >= 0: read as magnitudes (``gamma = -|gamma|``). All <= 0: kept. Mixed signs,
+    non-finite values or ``|gamma| >= 90`` raise :class:`IrreflectError`.
+    """
+    try:
+        arr = np.asarray(gammas_deg, float).ravel()
+    except (TypeError, ValueError) as exc:
+        raise IrreflectError(
+            f"{what} must be numbers in degrees; found {gammas_deg!r}"
+        ) from exc
+    if arr.size == 0:
+        raise IrreflectError(f"expected at least one of the {what} (degrees); found none")
+    if not np.all(np.isfinite(arr)):
+        raise IrreflectError(f"{what} must be finite numbers in degrees; found {arr.tolist()}")
+    if np.any(np.abs(arr) >= 90):
+        bad = arr[np.abs(arr) >= 90][0]
+        raise IrreflectError(
+            f"{what} must lie strictly between -90 and 90 degrees; found {bad:g}: angles are "
+            "measured from the surface normal"
+        )
+    if np.any(arr > 0) and np.any(arr < 0):
+        raise IrreflectError(
+            f"{what} {', '.join(f'{g:g}' for g in arr)} mix positive and negative values, which "
+            "is ambiguous: give all as magnitudes (>= 0) or all in the paper's convention (<= 0)"
+        )
+    return np.array([_clean(-abs(g)) for g in arr])
+
+
+def check_limits(theta_min: float, theta_max: float) -> tuple[float, float]:
+    """Validate a receiver range (degrees): finite, -90 < theta_min < theta_max < 90."""
+    try:
+        lo, hi = float(theta_min), float(theta_max)
+    except (TypeError, ValueError) as exc:
+        raise IrreflectError(
+            f"receiver limits must be numbers in degrees; found {theta_min!r}, {theta_max!r}"
+        ) from exc
+    if not (np.isfinite(lo) and np.isfinite(hi)):
+        raise IrreflectError(f"receiver limits must be finite; found {lo:g}, {hi:g}")
+    if not -90 < lo < hi < 90:
+        raise IrreflectError(
+            f"receiver limits must satisfy -90 < theta_min < theta_max < 90 degrees; found "
+            f"theta_min = {lo:g}, theta_max = {hi:g}: give the tool's real range, e.g. -70 70"
+        )
+    return lo, hi
+
+
+# ----------------------------------------------------------------------------- the paper's protocol
+def _coincides(value: float, taken: list[float], min_sep: float) -> bool:
+    return any(abs(value - p) < min_sep - _EPS for p in taken)
+
+
+def _replacement(mirror: float, requested: float, taken: list[float], lo: float, hi: float,
+                 min_sep: float) -> float | None:
+    """The reachable theta farthest from ``mirror`` keeping ``min_sep`` from ``taken``.
+
+    The optimum of |c - mirror| over the feasible set (the range minus open intervals of
+    half-width min_sep around taken points) lies at a range limit or at an interval edge,
+    so only those candidates are tried.
+    """
+    candidates = {lo, hi}
+    for p in taken:
+        candidates |= {p - min_sep, p + min_sep}
+    feasible = [c for c in candidates
+                if lo - _EPS <= c <= hi + _EPS and not _coincides(c, taken, min_sep)]
+    if not feasible:
+        return None
+    side = np.sign(requested - mirror)
+
+    def key(c):
+        opposite = np.sign(c - mirror) == -side
+        return (-round(abs(c - mirror), 9), 0 if opposite else 1, c)
+
+    return _clean(min(feasible, key=key))
+
+
+def paper_protocol(gammas_deg, theta_min: float = -70.0, theta_max: float = 70.0, *,
+                   mirror_offset: float = 10.0, wide_offset: float = 60.0,
+                   central_offset: float = 20.0, min_separation: float | None = None,
+                   name: str = "paper-12pt") -> Protocol:
+    """The paper's 12-point protocol for a tool with the given receiver range.
+
+    Section 4.3, Eqs. 23-34: three angles of incidence ``|gamma_1| < |gamma_2| < |gamma_3|``;
+    for the extreme ones the mirror angle ``-gamma`` (Eqs. 27-28), two points
+    ``+-mirror_offset`` around it (Eqs. 29-30, lobe width) and two ``+-wide_offset`` from it
+    (Eqs. 31-32, diffuse component); for the central one ``gamma_2 + central_offset`` and
+    ``-gamma_2 + central_offset`` (Eqs. 33-34). Clamping and the coincidence rule are
+    described in :data:`PAPER_RULE`. With gammas -20/-40/-60 and limits +-70 the result is
+    the paper's Table 1, in its order.
+
+    Parameters
+    ----------
+    gammas_deg : three numbers, degrees
+        Angles of incidence, in any order; all <= 0 (paper convention) or all >= 0
+        (magnitudes, read as ``-|gamma|``).
+    theta_min, theta_max : float, degrees
+        The receiver range the tool can set.
+    mirror_offset, wide_offset, central_offset : float, degrees
+        The paper's 10, 60 and 20 degrees.
+    min_separation : float, degrees, optional
+        Two points of one gamma closer than this coincide (default ``mirror_offset / 2``).
+
+    Returns
+    -------
+    Protocol
+        12 points in the paper's order (Table 1); see :meth:`Protocol.in_measurement_order`.
+
+    Raises
+    ------
+    IrreflectError
+        Fewer or more than three distinct angles of incidence, ``|angle| >= 90``, bad
+        offsets, a mirror direction outside the range, or a range too narrow for the
+        lobe-width points or for five separated points.
+    """
+    gammas = normalise_gammas(gammas_deg)
+    mags = np.abs(gammas)
+    if gammas.size != 3 or np.unique(mags).size != 3:
+        raise IrreflectError(
+            "the paper's protocol needs exactly three distinct angles of incidence (Eq. 23); "
+            f"found {', '.join(f'{g:g}' for g in np.asarray(gammas_deg, float).ravel())}: "
+            "give three, e.g. --gammas -20 -40 -60"
+        )
+    lo, hi = check_limits(theta_min, theta_max)
+    offsets = {"mirror_offset": mirror_offset, "wide_offset": wide_offset,
+               "central_offset": central_offset}
+    for key, value in offsets.items():
+        if not (np.isfinite(value) and 0 < value < 180):
+            raise IrreflectError(f"{key} must be between 0 and 180 degrees; found {value:g}")
+    if not mirror_offset < wide_offset:
+        raise IrreflectError(
+            f"mirror_offset ({mirror_offset:g}) must be smaller than wide_offset "
+            f"({wide_offset:g}): the lobe-width points lie inside the diffuse ones"
+        )
+    min_sep = mirror_offset / 2 if min_separation is None else float(min_separation)
+    if not 0 <= min_sep <= mirror_offset:
+        raise IrreflectError(
+            f"min_separation must be between 0 and mirror_offset ({mirror_offset:g}); "
+            f"found {min_sep:g}"
+        )
+    g1, g2, g3 = gammas[np.argsort(mags)]
+
+    gamma_out, theta_out, purpose, requested, adjustment, notes = [], [], [], [], [], []
+
+    def place(g, mirror, wanted, kind, taken, replaceable):
+        clamped = _clean(min(max(wanted, lo), hi))
+        adj = "clamped" if abs(clamped - wanted) > _EPS else ""
+        if adj:
+            limit = "theta_max" if wanted > hi else "theta_min"
+            notes.append(f"gamma {g:g}: {kind} theta {wanted:g} is outside the tool range, "
+                         f"clamped to {limit} = {clamped:g}")
+        value = clamped
+        if _coincides(clamped, taken, min_sep):
+            if not replaceable:
+                raise IrreflectError(
+                    f"gamma {g:g}: the lobe-width point theta = {wanted:g} is outside the tool "
+                    f"range [{lo:g}, {hi:g}] and clamping it leaves it within {min_sep:g} deg of "
+                    f"the mirror point {mirror:g}: no room to measure the lobe width; choose a "
+                    "smaller |gamma| or a tool with a wider range"
+                )
+            value = _replacement(mirror, wanted, taken, lo, hi, min_sep)
+            if value is None:
+                raise IrreflectError(
+                    f"gamma {g:g}: the tool range [{lo:g}, {hi:g}] is too narrow to place the "
+                    f"protocol's points at least {min_sep:g} deg apart: widen the range or "
+                    "lower min_separation"
+                )
+            adj = "replaced"
+            notes.append(f"gamma {g:g}: {kind} theta {wanted:g} clamped to {clamped:g} coincides "
+                         f"with another point of that gamma; replaced by {value:g}, the reachable "
+                         f"angle farthest from the mirror direction {mirror:g}")
+        taken.append(value)
+        gamma_out.append(g)
+        theta_out.append(value)
+        purpose.append(kind)
+        requested.append(_clean(wanted))
+        adjustment.append(adj)
+
+    for g in (g1, None, g3):
+        if g is None:  # central gamma (Eqs. 33-34)
+            taken: list[float] = []
+            mirror = _clean(-g2)
+            place(g2, mirror, _clean(g2 + central_offset), "central", taken, True)
+            place(g2, mirror, _clean(-g2 + central_offset), "central", taken, True)
+            continue
+        mirror = _clean(-g)
+        if not lo - _EPS <= mirror <= hi + _EPS:
+            raise IrreflectError(
+                f"gamma {g:g}: its mirror direction theta = {mirror:g} lies outside the tool's "
+                f"receiver range [{lo:g}, {hi:g}], so the specular peak cannot be measured: "
+                f"choose |gamma| within the range or widen it"
+            )
+        taken = []
+        place(g, mirror, mirror, "mirror", taken, False)
+        place(g, mirror, _clean(mirror - mirror_offset), "lobe_width", taken, False)
+        place(g, mirror, _clean(mirror + mirror_offset), "lobe_width", taken, False)
+        place(g, mirror, _clean(mirror - wide_offset), "diffuse", taken, True)
+        place(g, mirror, _clean(mirror + wide_offset), "diffuse", taken, True)
+
+    return Protocol(
+        gamma_deg=np.array(gamma_out, float),
+        theta_deg=np.array(theta_out, float),
+        purpose=tuple(purpose),
+        requested_theta_deg=np.array(requested, float),
+        adjustment=tuple(adjustment),
+        theta_min=lo,
+        theta_max=hi,
+        kind="paper",
+        rule=PAPER_RULE,
+        settings={"gammas_deg": [float(g1), float(g2), float(g3)], **offsets,
+                  "min_separation": min_sep},
+        order="paper",
+        notes=tuple(notes),
+        name=name,
+    )
+
+
+def protocol_from_frame(df: pd.DataFrame, source: str = "protocol", *,
+                        name: str | None = None) -> Protocol:
+    """A protocol from a table with ``gamma_deg, theta_deg`` and optional ``purpose``
+    (extra columns, such as a filled-in ``power``, are ignored)."""
+    cols = {str(c).strip(): c for c in df.columns}
+    missing = [c for c in ("gamma_deg", "theta_deg") if c not in cols]
+    if missing:
+        raise IrreflectError(
+            f"{source}: missing column '{missing[0]}': a protocol needs columns gamma_deg, "
+            f"theta_deg (optional purpose); found {', '.join(map(str, df.columns)) or 'none'}"
+        )
+    if len(df) == 0:
+        raise IrreflectError(f"{source}: the protocol has no rows: expected at least one point")
+    out = {}
+    for col in ("gamma_deg", "theta_deg"):
+        values = pd.to_numeric(df[cols[col]], errors="coerce").to_numpy(float)
+        bad = ~np.isfinite(values)
+        if bad.any():
+            i = int(np.nonzero(bad)[0][0])
+            raise IrreflectError(
+                f"{source}: column '{col}' must hold numbers in degrees; found "
+                f"'{df[cols[col]].iloc[i]}' in data row {i + 1}: fix that row"
+            )
+        if np.any(np.abs(values) >= 90):
+            i = int(np.nonzero(np.abs(values) >= 90)[0][0])
+            raise IrreflectError(
+                f"{source}: {col} must lie strictly between -90 and 90 degrees; found "
+                f"{values[i]:g} in data row {i + 1}"
+            )
+        out[col] = values
+    gamma = normalise_gammas(out["gamma_deg"], what=f"{source}: gamma_deg values")
+    theta = np.array([_clean(t) for t in out["theta_deg"]])
+    key = pd.DataFrame({"g": gamma, "t": theta})
+    if key.duplicated().any():
+        i = int(np.nonzero(key.duplicated().to_numpy())[0][0])
+        raise IrreflectError(
+            f"{source}: point ({gamma[i]:g}, {theta[i]:g}) appears twice (data row {i + 1}): "
+            "a protocol lists each setting once"
+        )
+    if "purpose" in cols:
+        purpose = tuple(str(p) if isinstance(p, str) and p.strip() else "custom"
+                        for p in df[cols["purpose"]])
+    else:
+        purpose = ("custom",) * len(df)
+    return Protocol(
+        gamma_deg=gamma, theta_deg=theta, purpose=purpose,
+        requested_theta_deg=np.full(gamma.size, np.nan), adjustment=("",) * gamma.size,
+        kind="file", rule=f"read from {source}", order="given", name=name or "protocol",
+    )

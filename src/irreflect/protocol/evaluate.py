@@ -1,0 +1,340 @@
+"""How well a protocol pins the model down: fit on its points, judge against a dense scan.
+
+The model is fitted to the protocol's points only, then its R^2, RMSE, MSE and per-gamma
+polar-area error (section 5.3) are measured against *all* points of the dense dataset,
+as in the paper's Table 2 and Table 5 (column "12").
+
+Where the protocol asks for an angle the dataset does not contain, the power there is
+interpolated linearly along theta between the two nearest measured angles of the same
+gamma (``method="interpolate"``, the default) or taken from the nearest measured angle
+(``method="snap"``); every such point is listed. A point farther than ``tolerance_deg``
+from any measured theta of its gamma, or whose gamma the dataset lacks, is refused:
+interpolating across a wide gap (for instance across a specular peak) would invent data.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+import pandas as pd
+
+from .. import metrics
+from ..data import Measurements, as_measurements
+from ..errors import IrreflectError
+from ..fitting import FitResult, fit
+from ..model import get_model
+from .core import Protocol
+from .export import as_protocol
+
+METHODS = ("interpolate", "snap")
+#: Two fitted coefficients whose |correlation| exceeds this are called ill-determined.
+CORRELATION_LIMIT = 0.99
+#: A coefficient whose standard error (or Monte Carlo spread) exceeds this multiple of
+#: its magnitude is called ill-determined.
+RELATIVE_ERROR_LIMIT = 1.0
+
+
+def coefficient_scale(model, values) -> np.ndarray:
+    """Scale against which a coefficient's uncertainty is judged: ``|value|``, but at
+    least 1 for dimensionless coefficients that may change sign (the exponents ``v_*``,
+    orientations ``t_*``), for which a value near 0 is not a small quantity."""
+    model = get_model(model)
+    values = np.abs(np.asarray(values, float))
+    floor = np.array([1.0 if (p.unit == "1" and p.lower < 0) else 0.0 for p in model.params])
+    return np.maximum(values, floor)
+
+
+def ill_determined(model, values, spread, correlation, *, relative_limit=RELATIVE_ERROR_LIMIT,
+                   correlation_limit=CORRELATION_LIMIT) -> list[str]:
+    """Reasons why coefficients are ill-determined (empty list if none).
+
+    ``spread``: standard errors or Monte Carlo spreads (k,); ``correlation``: (k, k).
+    """
+    model = get_model(model)
+    names = model.param_names
+    reasons = []
+    scale = coefficient_scale(model, values)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        rel = np.asarray(spread, float) / scale
+    for name, r in zip(names, rel, strict=True):
+        if not np.isfinite(r) or r > relative_limit:
+            reasons.append(f"{name}: uncertainty {r * 100:.0f}% of its value" if np.isfinite(r)
+                           else f"{name}: uncertainty not finite")
+    corr = np.asarray(correlation, float)
+    k = len(names)
+    for i in range(k):
+        for j in range(i + 1, k):
+            c = corr[i, j]
+            if np.isfinite(c) and abs(c) > correlation_limit:
+                reasons.append(f"{names[i]} and {names[j]}: correlation {c:+.3f}")
+    return reasons
+
+
+@dataclass(frozen=True)
+class ProtocolEvaluation:
+    """The model fitted on a protocol's points, judged against all points of a dense set."""
+
+    protocol: str
+    dataset: str
+    model: str
+    n_protocol_points: int
+    n_dense_points: int
+    r2: float
+    rmse: float
+    mse: float
+    polar_errors: dict  # |gamma| -> percent
+    params: dict
+    stderrs: dict
+    reference_r2: float  # fit on all dense points (the paper's Method A)
+    reference_rmse: float
+    r2_within: float  # R^2 on the dense points whose |gamma| lies within the protocol's range
+    n_within: int
+    points: pd.DataFrame  # gamma_deg, theta_deg, purpose, power, source, gap_deg
+    n_interpolated: int
+    method: str
+    tolerance_deg: float
+    ill_determined: tuple[str, ...]
+    notes: tuple[str, ...] = ()
+    fit: FitResult | None = field(default=None, repr=False, compare=False)
+
+    def summary(self) -> str:
+        lines = [
+            f"protocol {self.protocol}: {self.n_protocol_points} points on {self.dataset} "
+            f"({self.n_dense_points} points), model {self.model}",
+        ]
+        if self.n_interpolated:
+            moved = self.points[self.points["source"] != "measured"]
+            verb = "interpolated along theta" if self.method == "interpolate" else "snapped"
+            lines.append(
+                f"  {self.n_interpolated} of {self.n_protocol_points} protocol angles not in the "
+                f"dataset, {verb} (largest gap {moved['gap_deg'].max():.2f} deg, tolerance "
+                f"{self.tolerance_deg:g} deg)"
+            )
+        lines += [
+            f"fit on the protocol's points, judged against all {self.n_dense_points} points:",
+            f"  R^2 = {self.r2:.4f}   RMSE = {self.rmse:.4g}   MSE = {self.mse:.4g}",
+            f"  on the {self.n_within} points within the protocol's |gamma| range: "
+            f"R^2 = {self.r2_within:.4f}",
+            f"  fit on all points (reference): R^2 = {self.reference_r2:.4f}   "
+            f"RMSE = {self.reference_rmse:.4g}",
+            f"{'coefficient':<12}{'value':>12}{'std. error':>12}",
+        ]
+        for name, value in self.params.items():
+            lines.append(f"{name:<12}{value:>12.5g}{self.stderrs[name]:>12.3g}")
+        if self.polar_errors:
+            lines.append("polar-area error per angle of incidence (section 5.3):")
+            lines.append("  " + "  ".join(f"{g:g} deg: {e:.2f}%"
+                                          for g, e in self.polar_errors.items()))
+        if self.ill_determined:
+            lines.append("ill-determined coefficients: " + "; ".join(self.ill_determined))
+        lines += [f"note: {n}" for n in self.notes]
+        return "\n".join(lines)
+
+    def to_dict(self) -> dict:
+        return {
+            "protocol": self.protocol, "dataset": self.dataset, "model": self.model,
+            "n_protocol_points": self.n_protocol_points, "n_dense_points": self.n_dense_points,
+            "r2": self.r2, "rmse": self.rmse, "mse": self.mse,
+            "polar_error_pct": {f"{g:g}": e for g, e in self.polar_errors.items()},
+            "params": self.params, "stderr": self.stderrs,
+            "reference_r2": self.reference_r2, "reference_rmse": self.reference_rmse,
+            "r2_within_gamma_range": self.r2_within, "n_within_gamma_range": self.n_within,
+            "method": self.method, "tolerance_deg": self.tolerance_deg,
+            "n_interpolated": self.n_interpolated,
+            "ill_determined": list(self.ill_determined),
+            "points": self.points.to_dict(orient="records"),
+            "notes": list(self.notes),
+        }
+
+
+def sample_protocol(protocol, dense, *, tolerance_deg: float = 5.0,
+                    gamma_tolerance_deg: float = 1e-6, method: str = "interpolate"):
+    """The protocol's points as measurements taken from a dense dataset.
+
+    Returns ``(Measurements, DataFrame)``: the table to fit, and one row per protocol
+    point with ``gamma_deg, theta_deg, purpose, power, source, gap_deg`` where ``source`` is
+    ``measured`` (present in the dataset), ``interpolated`` (linear in theta between the
+    neighbours of the same gamma), ``nearest`` (beyond the measured theta range, the end
+    value is used) or ``snapped`` (``method="snap"``: the nearest measured angle is used),
+    and ``gap_deg`` is the distance to the nearest measured theta of that gamma.
+    """
+    protocol = as_protocol(protocol)
+    dense = as_measurements(dense)
+    if method not in METHODS:
+        from ..errors import unknown_name
+
+        raise unknown_name("protocol sampling method", method, METHODS)
+    if not tolerance_deg >= 0:
+        raise IrreflectError(f"tolerance must be >= 0 degrees; found {tolerance_deg:g}")
+    rows = []
+    sigma_out = []
+    for g, t, purpose in zip(protocol.gamma_deg, protocol.theta_deg, protocol.purpose,
+                             strict=True):
+        sel = np.abs(dense.gamma_deg - g) <= gamma_tolerance_deg
+        if not sel.any():
+            have = ", ".join(f"{x:g}" for x in dense.gammas)
+            raise IrreflectError(
+                f"the protocol's angle of incidence {g:g} deg is not in {dense.name} (it has "
+                f"{have}): evaluate on a dataset measured at that gamma, or make the protocol "
+                "for the dataset's gammas"
+            )
+        th = dense.theta_deg[sel]
+        order = np.argsort(th)
+        th = th[order]
+        pw = dense.power[sel][order]
+        sg = None if dense.sigma is None else dense.sigma[sel][order]
+        dist = np.abs(th - t)
+        j = int(np.argmin(dist))
+        gap = float(dist[j])
+        if gap <= 1e-6:
+            source, theta_used, power = "measured", t, pw[j]
+            s = None if sg is None else sg[j]
+        elif gap > tolerance_deg:
+            raise IrreflectError(
+                f"protocol point (gamma {g:g}, theta {t:g}) is {gap:.2f} deg from the nearest "
+                f"measured theta of {dense.name} at that gamma ({th[j]:g}), more than the "
+                f"tolerance of {tolerance_deg:g} deg: use a denser dataset or a larger tolerance"
+            )
+        elif method == "snap":
+            source, theta_used, power = "snapped", th[j], pw[j]
+            s = None if sg is None else sg[j]
+        elif th[0] <= t <= th[-1]:
+            source, theta_used, power = "interpolated", t, float(np.interp(t, th, pw))
+            s = None if sg is None else float(np.interp(t, th, sg))
+        else:
+            source, theta_used, power = "nearest", t, pw[j]
+            s = None if sg is None else sg[j]
+        rows.append({"gamma_deg": float(g), "theta_deg": float(theta_used), "purpose": purpose,
+                     "power": float(power), "source": source, "gap_deg": round(gap, 6)})
+        sigma_out.append(s)
+    frame = pd.DataFrame(rows)
+    sigma = None if dense.sigma is None else np.array(sigma_out, float)
+    meas = Measurements(
+        gamma_deg=frame["gamma_deg"].to_numpy(float), theta_deg=frame["theta_deg"].to_numpy(float),
+        power=frame["power"].to_numpy(float), sigma=sigma, material=dense.material,
+        name=f"{protocol.name} on {dense.name}",
+    )
+    return meas, frame
+
+
+def evaluate_protocol(protocol, dense, model="two-lobe", *, tolerance_deg: float = 5.0,
+                      method: str = "interpolate", seed: int = 0,
+                      reference: FitResult | None = None) -> ProtocolEvaluation:
+    """Fit ``model`` on the protocol's points of ``dense`` and judge it on all its points.
+
+    Parameters
+    ----------
+    protocol : Protocol, table or path
+    dense : Measurements, table or path
+        A dense scan of the material (gamma_deg, theta_deg in degrees).
+    model : str
+        Registry name (see :func:`irreflect.model.model_names`).
+    tolerance_deg : float, degrees
+        Largest distance from a protocol angle to the nearest measured theta of the same
+        gamma that may be bridged (see the module docstring).
+    method : ``"interpolate"`` or ``"snap"``
+    seed : int
+        Seed of the fits' random extra starts.
+    reference : FitResult, optional
+        A fit of the same model on all dense points (computed when not given).
+    """
+    protocol = as_protocol(protocol)
+    dense = as_measurements(dense)
+    model_obj = get_model(model)
+    meas, frame = sample_protocol(protocol, dense, tolerance_deg=tolerance_deg, method=method)
+    result = fit(meas, model_obj, seed=seed)
+    if reference is None or reference.model != model_obj.name:
+        reference = fit(dense, model_obj, seed=seed)
+    predicted = result.predict(dense.gamma_deg, dense.theta_deg)
+    polar = metrics.polar_area_errors(dense.gamma_deg, dense.theta_deg, dense.power,
+                                      result.predict)
+    notes = []
+    n_moved = int((frame["source"] != "measured").sum())
+    if n_moved:
+        moved = frame[frame["source"] != "measured"]
+        notes.append(
+            f"{n_moved} protocol angle(s) not in the dataset were "
+            f"{'interpolated along theta' if method == 'interpolate' else 'snapped'}: "
+            + ", ".join(f"({g:g}, {t:g}) gap {d:.2f}"
+                        for g, t, d in zip(moved["gamma_deg"], moved["theta_deg"],
+                                           moved["gap_deg"], strict=True))
+        )
+    dup = frame.duplicated(["gamma_deg", "theta_deg"])
+    if dup.any():
+        notes.append(f"{int(dup.sum())} protocol point(s) snapped onto the same measured angle "
+                     "as another; both kept")
+    reasons = ill_determined(model_obj, result.values, result.stderr, result.correlation)
+    mags = np.abs(protocol.gamma_deg)
+    within = (np.abs(dense.gamma_deg) >= mags.min() - 1e-9) & (
+        np.abs(dense.gamma_deg) <= mags.max() + 1e-9)
+    r2_within = (float(metrics.r2(dense.power[within], predicted[within]))
+                 if within.sum() >= 2 else float("nan"))
+    return ProtocolEvaluation(
+        protocol=protocol.name, dataset=dense.name, model=model_obj.name,
+        n_protocol_points=protocol.n_points, n_dense_points=dense.n_points,
+        r2=float(metrics.r2(dense.power, predicted)),
+        rmse=float(metrics.rmse(dense.power, predicted)),
+        mse=float(metrics.mse(dense.power, predicted)),
+        polar_errors=polar, params=result.params, stderrs=result.stderrs,
+        reference_r2=float(reference.r2), reference_rmse=float(reference.rmse),
+        r2_within=r2_within, n_within=int(within.sum()), points=frame, n_interpolated=n_moved, method=method, tolerance_deg=float(tolerance_deg),
+        ill_determined=tuple(reasons), notes=tuple(notes), fit=result,
+    )
+
+
+def evaluation_table(evaluations: dict[str, ProtocolEvaluation], digits: int = 4) -> pd.DataFrame:
+    """One row per dataset: R^2, RMSE of the protocol fit and of the all-points fit."""
+    rows = []
+    for name, ev in evaluations.items():
+        rows.append({
+            "dataset": name, "n_points": ev.n_dense_points,
+            "r2_protocol": round(ev.r2, digits), "rmse_protocol": float(f"{ev.rmse:.3g}"),
+            "r2_protocol_gamma_range": round(ev.r2_within, digits),
+            "r2_all_points": round(ev.reference_r2, digits),
+            "rmse_all_points": float(f"{ev.reference_rmse:.3g}"),
+            "interpolated": ev.n_interpolated,
+        })
+    return pd.DataFrame(rows)
+
+
+def paper_protocol_for(dense, *, preferred=(-20.0, -40.0, -60.0), theta_min=None,
+                       theta_max=None, tolerance_deg: float = 5.0, **kwargs) -> Protocol:
+    """The paper's protocol that a dense dataset can evaluate.
+
+    The receiver range defaults to the dataset's theta range. The ``preferred`` gammas
+    (the paper's Table 1) are used when the dataset has them and every point can be
+    sampled within ``tolerance_deg``; otherwise, among all triples of the dataset's angles
+    of incidence, the first that works is used, trying the widest spread of |gamma| first
+    and then the most central middle gamma (ties: smaller gammas). ``kwargs`` go to
+    :func:`~.core.paper_protocol`.
+    """
+    import itertools
+
+    from .core import paper_protocol
+
+    dense = as_measurements(dense)
+    lo = float(np.min(dense.theta_deg)) if theta_min is None else float(theta_min)
+    hi = float(np.max(dense.theta_deg)) if theta_max is None else float(theta_max)
+    levels = sorted({float(abs(g)) for g in dense.gammas})
+    triples = sorted(
+        itertools.combinations(levels, 3),
+        key=lambda t: (-(t[2] - t[0]), abs(t[1] - (t[0] + t[2]) / 2), t),
+    )
+    pref = tuple(sorted(abs(float(g)) for g in preferred)) if preferred is not None else None
+    if pref is not None and pref in triples:
+        triples.remove(pref)
+        triples.insert(0, pref)
+    errors = []
+    for triple in triples:
+        try:
+            proto = paper_protocol(triple, lo, hi, **kwargs)
+            sample_protocol(proto, dense, tolerance_deg=tolerance_deg)
+            return proto
+        except IrreflectError as exc:
+            errors.append(str(exc))
+    raise IrreflectError(
+        f"no triple of {dense.name}'s angles of incidence gives a paper protocol it can "
+        f"evaluate within {tolerance_deg:g} deg (tried {len(triples)}; first problem: "
+        f"{errors[0] if errors else 'fewer than three angles of incidence'})"
+    )

@@ -1,0 +1,158 @@
+"""The protocol section of the reproduction report (``irreflect reproduce``)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+
+from ..errors import FitError, IrreflectError
+from ..fitting import fit
+from ..reporting import ReportContext, Section
+from .core import paper_protocol
+from .evaluate import evaluate_protocol, paper_protocol_for
+from .robustness import protocol_robustness
+
+TABLE1_GAMMAS = (-20.0, -40.0, -60.0)
+
+
+def _table1(ctx: ReportContext) -> tuple[pd.DataFrame, bool | None]:
+    proto = paper_protocol(TABLE1_GAMMAS, -70.0, 70.0)
+    df = proto.to_frame()
+    df["requested_theta_deg"] = df["requested_theta_deg"].round(3)
+    paper = ctx.paper_table("table1_protocol_12pt.csv")
+    same = None
+    if paper is not None and len(paper) == len(df):
+        df["paper_theta_deg"] = paper["theta_deg"].to_numpy(float)
+        same = bool(np.allclose(paper["gamma_deg"], df["gamma_deg"])
+                    and np.allclose(paper["theta_deg"], df["theta_deg"]))
+    return df, same
+
+
+def reproduce_section(ctx: ReportContext) -> Section:
+    """The paper's protocol (Table 1), its evaluation on every dataset and its robustness."""
+    n_trials = 40 if ctx.quick else 400
+    table1, same = _table1(ctx)
+    paper2 = ctx.paper_table("table2_fit_quality_12pt.csv")
+    paper5 = ctx.paper_table("table5_methods_r2.csv")
+    eval_rows, polar_rows, rob_rows, spread_rows, skipped = [], [], [], [], []
+    first = None
+    for name, meas in ctx.datasets.items():
+        ctx.progress(f"protocol: {name}")
+        try:
+            proto = paper_protocol_for(meas, preferred=TABLE1_GAMMAS)
+            reference = ctx.fits.get(name) or fit(meas, "two-lobe", seed=ctx.seed)
+            ev = evaluate_protocol(proto, meas, "two-lobe", seed=ctx.seed, reference=reference)
+        except (IrreflectError, FitError) as exc:
+            skipped.append(f"{name}: {exc}")
+            continue
+        row = {
+            "dataset": name,
+            "gammas_deg": " / ".join(f"{g:g}" for g in proto.settings["gammas_deg"]),
+            "n_points": meas.n_points,
+            "interpolated": ev.n_interpolated,
+            "r2_protocol": round(ev.r2, 4),
+            "r2_protocol_gamma_range": round(ev.r2_within, 4),
+            "rmse_protocol": float(f"{ev.rmse:.3g}"),
+            "r2_all_points": round(ev.reference_r2, 4),
+        }
+        if paper2 is not None and name in set(paper2["material"]):
+            row["paper_r2_12pt"] = float(paper2.set_index("material").loc[name, "r2"])
+        if paper5 is not None and name in set(paper5["material"]):
+            a = paper5[(paper5["material"] == name) & (paper5["method"] == "A")]
+            if len(a):
+                row["paper_r2_all_points"] = float(a["r2"].iloc[0])
+        eval_rows.append(row)
+        polar_rows.append({"dataset": name, **{f"{g:g}": round(e, 2)
+                                               for g, e in ev.polar_errors.items()}})
+        rob = protocol_robustness(proto, reference, dense=meas, n_trials=n_trials,
+                                  seed=ctx.seed)
+        s = rob.r2_summary()
+        rob_rows.append({
+            "dataset": name, "trials": n_trials,
+            "r2_nominal": round(s["r2_nominal"], 4), "r2_median": round(s["r2_median"], 4),
+            "r2_p5": round(s["r2_p5"], 4), "r2_p95": round(s["r2_p95"], 4),
+            "failed_fits": s["n_failed"], "flagged": rob.flagged,
+            "reasons": "; ".join(rob.reasons) if rob.reasons else "",
+        })
+        spread_rows.append({"dataset": name, **{
+            n: round(float(r) * 100, 1) for n, r in zip(rob.param_names, rob.relative_spread,
+                                                        strict=True)}})
+        loss = ev.reference_r2 - ev.r2
+        if first is None or loss > first[0]:
+            first = (loss, name, meas, proto, ev, reference)
+
+    tables = {"protocol_table1": table1}
+    figures = {}
+    if eval_rows:
+        tables["protocol_evaluation"] = pd.DataFrame(eval_rows)
+        tables["protocol_polar_error_pct"] = pd.DataFrame(polar_rows)
+        tables["protocol_robustness"] = pd.DataFrame(rob_rows)
+        tables["protocol_coefficient_spread_pct"] = pd.DataFrame(spread_rows)
+    if first is not None:
+        from ..plots import plot_polar_per_gamma, save_figure
+        from .plot import plot_protocol
+
+        _, name, meas, proto, ev, reference = first  # the dataset the protocol suits least
+        ax = plot_protocol(proto, meas, title=f"paper protocol on the {name} grid")
+        figures["protocol_points"] = save_figure(ax.figure, ctx.figure_path("protocol_points"))
+        fig = plot_polar_per_gamma(
+            meas, {"fit on the 12 protocol points": ev.fit.predict,
+                   "fit on all points": reference.predict},
+            title=f"{name}: two-lobe model fitted on the protocol vs on all points",
+        )
+        figures["protocol_polar"] = save_figure(fig, ctx.figure_path("protocol_polar"))
+
+    if same is True:
+        match = "It is identical to the paper's Table 1, point for point and in the same order."
+    elif same is False:
+        match = "**It differs from the paper's Table 1** (see the paper_theta_deg column)."
+    else:
+        match = "(The paper's Table 1 was not available to compare.)"
+    md = [
+        "The paper's 12-point protocol (section 4.3, Eqs. 23-34) for angles of incidence "
+        "-20/-40/-60 deg and a receiver limited to +-70 deg. " + match + " The requested "
+        "+120 deg for gamma = -60 is clamped to 70, which coincides with the lobe-width point "
+        "at 70; irreflect's rule replaces it by the reachable angle farthest from the mirror "
+        "direction, -70, which is the paper's choice.",
+        "",
+        "{table:protocol_table1}",
+        "",
+    ]
+    if eval_rows:
+        md += [
+            "The two-lobe model fitted on the protocol's 12 points only, judged against all "
+            "points of each dataset (`r2_protocol`; `r2_protocol_gamma_range` counts only the "
+            "points whose |gamma| lies within the protocol's), next to the fit on all points. "
+            "Where the protocol's angles are not in a dataset, the power is interpolated along "
+            "theta within 5 deg (`interpolated` points). The paper's columns are its Table 2 "
+            "(12 points) and Table 5 (Method A). The bundled datasets are reconstructions from "
+            "the paper's Table 3 plus Gaussian noise, so the two-lobe model is exactly right "
+            "for them and the protocol loses less to the all-points fit than on the paper's "
+            "real measurements.",
+            "",
+            "{table:protocol_evaluation}",
+            "",
+            "Relative polar-area error (section 5.3, percent) of the protocol fit per angle of "
+            "incidence |gamma| (deg):",
+            "",
+            "{table:protocol_polar_error_pct}",
+            "",
+            f"Robustness: {n_trials} Monte Carlo trials of goniometer errors (uniform +-1 deg on "
+            "each arm, one gamma error per gamma setting, one theta error per point) and 1 % "
+            "power noise, the material played by the two-lobe fit on all points; R^2 against "
+            "all points, and the robust spread (IQR / 1.349) of every coefficient in percent of "
+            "its value (of max(|value|, 1) for the exponents v_*). A protocol is flagged when a "
+            "spread exceeds 100 % or two coefficients correlate beyond |0.99|.",
+            "",
+            "{table:protocol_robustness}",
+            "",
+            "{table:protocol_coefficient_spread_pct}",
+            "",
+            "{figure:protocol_points}",
+            "",
+            "{figure:protocol_polar}",
+        ]
+    if skipped:
+        md += ["", "Not evaluated: " + "; ".join(skipped)]
+    return Section(key="protocol", title="Measurement protocol (section 4.3, Tables 1-2)",
+                   markdown="\n".join(md), tables=tables, figures=figures)
