@@ -1,0 +1,123 @@
+"""``irreflect diagnose DATA [--model NAME] [--json] [--out DIR]``."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+
+from ..errors import IrreflectError
+
+
+def register(sub) -> None:
+    """Add the ``diagnose`` subcommand to the CLI's subparsers."""
+    from ..cli import add_data_argument
+    from .extensions import EXTENSIONS
+
+    p = sub.add_parser(
+        "diagnose",
+        help="find what a model misses: residual structure, named effect, extended fit",
+        description="Fit the model, estimate the noise (sigma column or estimated), test the "
+                    "residual for structure, try every catalogue extension on top of the model "
+                    "(ranked by BIC, accepted only on strong evidence) and repeat; end with a "
+                    "verdict: 'no missing effect', 'effects found' or 'unexplained structure "
+                    "remains'. Extensions: " + ", ".join(EXTENSIONS) + ".",
+    )
+    add_data_argument(p)
+    p.add_argument("--model", default="two-lobe",
+                   help="base model (default two-lobe; extensions may be appended with '+', "
+                        "e.g. two-lobe+background)")
+    p.add_argument("--json", action="store_true", help="one JSON object on stdout")
+    p.add_argument("--out", metavar="DIR",
+                   help="write residual maps before/after, polar fits and diagnosis.json here")
+    p.add_argument("--extensions", metavar="A,B",
+                   help="candidate extensions, comma-separated (default: all registered)")
+    p.add_argument("--max-effects", type=int, default=3, metavar="N",
+                   help="add at most N effects (default 3)")
+    p.add_argument("--alpha", type=float, default=0.01,
+                   help="significance level of the lack-of-fit and structure tests (default 0.01)")
+    p.add_argument("--seed", type=int, default=0, help="seed of the fits' random starts")
+    p.set_defaults(handler=_cmd_diagnose)
+
+
+def _cmd_diagnose(args: argparse.Namespace) -> int:
+    from ..cli import load_data, print_json
+    from .workflow import diagnose
+
+    if not 0.0 < args.alpha < 1.0:
+        raise IrreflectError(f"--alpha must lie between 0 and 1, found {args.alpha:g}")
+    if args.max_effects < 0:
+        raise IrreflectError(f"--max-effects must be >= 0, found {args.max_effects}")
+    extensions = None
+    if args.extensions is not None:
+        extensions = [e.strip() for e in args.extensions.split(",") if e.strip()]
+    meas = load_data(args)
+    bar = _progress()
+    try:
+        result = diagnose(meas, args.model, extensions=extensions, max_effects=args.max_effects,
+                          seed=args.seed, alpha=args.alpha, progress=bar)
+    finally:
+        bar.close()
+    written = write_outputs(result, meas, args.out) if args.out else []
+    if args.json:
+        print_json(result.to_dict())
+    else:
+        print(result.report())
+        for path in written:
+            print(f"wrote {path}")
+    return 0
+
+
+class _progress:
+    """tqdm on stderr (silent when stderr is not a terminal), fed with step messages."""
+
+    def __init__(self):
+        from tqdm import tqdm
+
+        self.bar = tqdm(desc="diagnose", unit="fit", file=sys.stderr, disable=None, leave=False)
+
+    def __call__(self, message: str) -> None:
+        self.bar.set_postfix_str(message, refresh=False)
+        self.bar.update(1)
+
+    def close(self) -> None:
+        self.bar.close()
+
+
+def write_outputs(result, measurements, out_dir) -> list:
+    """Residual maps before/after, polar fits and the JSON of a diagnosis, written into
+    ``out_dir`` all together or not at all. Returns the final paths."""
+    from pathlib import Path
+
+    from .._atomic import atomic_directory
+    from ..plots import plt, save_figure
+    from .figures import plot_diagnosis_polar, plot_residual_map
+
+    out = Path(out_dir)
+    if out.exists() and not out.is_dir():
+        raise IrreflectError(f"--out must be a folder, found the file '{out}'")
+    names = []
+    with atomic_directory(out) as tmp:
+        for label, a in (("before", result.before), ("after", result.after)):
+            fig, ax = plt.subplots(figsize=(6.4, 3.8))
+            plot_residual_map(a.fit.gamma_deg, a.fit.theta_deg, a.residuals_z, ax=ax,
+                              title=f"{result.name} {label}: {a.model_name}, chi2/dof "
+                                    f"{a.lack_of_fit.ratio:.3g}")
+            save_figure(fig, tmp / f"residuals_{label}.png")
+            names.append(f"residuals_{label}.png")
+        save_figure(plot_diagnosis_polar(result, measurements), tmp / "polar_fits.png")
+        names.append("polar_fits.png")
+        (tmp / "diagnosis.json").write_text(json.dumps(result.to_dict(), indent=2,
+                                                       default=_json_default) + "\n")
+        names.append("diagnosis.json")
+    return [out / n for n in names]
+
+
+def _json_default(o):
+    import numpy as np
+
+    if isinstance(o, np.generic):
+        return o.item()
+    if isinstance(o, np.ndarray):
+        return o.tolist()
+    raise TypeError(f"not JSON serialisable: {type(o).__name__}")
