@@ -26,6 +26,7 @@ from .model import ReflectionModel, get_model, plane_geometry, take_geometry
 
 # ----------------------------------------------------------------------------- core solver
 _RIDGE = 1e-12
+_EYES = [np.eye(k) for k in range(8)]
 
 
 def _small_inverse(a):
@@ -56,8 +57,8 @@ def _solve_linear(bw, yw, nonneg):
     bwt = bw.swapaxes(1, 2)
     gram = bwt @ bw
     rhs = (bwt @ yw[:, :, None])[:, :, 0]
-    eye = np.eye(n_lin)
-    diag = gram[:, eye.astype(bool)]
+    eye = _EYES[n_lin] if n_lin < len(_EYES) else np.eye(n_lin)
+    diag = np.diagonal(gram, axis1=1, axis2=2)
     scale = np.maximum(diag, 1e-300)
     inv = _small_inverse(gram + eye * (_RIDGE * scale)[:, :, None])
     alpha = (inv @ rhs[:, :, None])[:, :, 0]
@@ -93,10 +94,11 @@ def _evaluate(model, geom, z, sw, yw):
     bw = basis * sw[:, :, None]
     alpha, free, inv = _solve_linear(bw, yw, model.alpha_nonneg)
     resid = yw - (bw @ alpha[:, :, None])[:, :, 0]
-    cost = 0.5 * np.sum(resid * resid, axis=1)
+    cost = 0.5 * np.einsum("ij,ij->i", resid, resid)
     cost[~np.isfinite(cost)] = np.inf
-    return {"dbasis": dbasis, "bw": bw * free[:, None, :], "alpha": alpha, "inv": inv,
-            "resid": resid, "cost": cost}
+    if not free.all():
+        bw = bw * free[:, None, :]
+    return {"dbasis": dbasis, "bw": bw, "alpha": alpha, "inv": inv, "resid": resid, "cost": cost}
 
 
 def _kaufman_jacobian(state, sw):
@@ -165,8 +167,9 @@ def _lm_loop(model, geom, z0, sw, yw, max_iter, ftol, xtol):
         better = trial["cost"] < st["cost"]
         gain = st["cost"] - trial["cost"]
         lam_new = np.where(better, np.maximum(lam_i / 3.0, 1e-12), lam_i * 4.0)
-        dz = np.sqrt(np.sum((z_trial - zi) ** 2, axis=1))
-        small_step = dz <= xtol * (np.sqrt(np.sum(zi * zi, axis=1)) + xtol)
+        dzv = z_trial - zi
+        dz = np.sqrt(np.einsum("ij,ij->i", dzv, dzv))
+        small_step = dz <= xtol * (np.sqrt(np.einsum("ij,ij->i", zi, zi)) + xtol)
         small_gain = better & (gain <= ftol * np.maximum(st["cost"], 1e-300))
         stuck = lam_new > 1e10
         done = small_gain | small_step | stuck

@@ -371,7 +371,7 @@ _TWO_LOBE_PARAMS = (
 
 def _two_lobe_basis(geom, z, derivatives=True):
     log_cg = geom["log_cos_gamma"]
-    v_as, ln_u_nd, v_nd, ln_u_ns, v_ns = (_col(z, k) for k in range(5))
+    v_as, ln_u_nd, v_nd, ln_u_ns, v_ns = z.T[:, :, None]
     share_shape = np.exp(v_as * log_cg)  # a_s / u_as = cos^v_as(gamma)
     n_d = np.exp(ln_u_nd + v_nd * log_cg)
     n_s = np.exp(ln_u_ns + v_ns * log_cg)
@@ -379,7 +379,7 @@ def _two_lobe_basis(geom, z, derivatives=True):
     lobe_s, dlobe_s = _lobe_from_log(geom["log_cos_phi"], geom["pos_phi"], n_s)
     # P = K * lobe_d + (K u_as) * cos^v_as(gamma) * (lobe_s - lobe_d)
     b2 = share_shape * (lobe_s - lobe_d)
-    shape = np.broadcast_shapes(lobe_d.shape, b2.shape)
+    shape = b2.shape
     basis = np.empty(shape + (2,))
     basis[..., 0] = lobe_d
     basis[..., 1] = b2
