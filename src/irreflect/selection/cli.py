@@ -1,0 +1,217 @@
+"""``irreflect select``: which measurements to take (Pareto frontier, knee, best 12 points).
+
+One DATA file and one seed write straight into ``--out DIR``::
+
+    DIR/pareto.csv           n_points, one_minus_r2, r2, points ("(gamma,theta);...", degrees)
+    DIR/optimal_points.csv   gamma_deg, theta_deg of the best 12-point subset
+    DIR/summary.json         knee_n, methods A/B/12, evaluations, failed_fits, seconds, ...
+    DIR/pareto.png           the frontier with the ideal point and the knee (Fig. 18)
+    DIR/optimal_points.png   the chosen points in the (gamma, theta) plane (Fig. 19)
+
+Several DATA files and/or ``--seeds`` run in parallel (local processes, or a Dask cluster
+with ``--scheduler``) and write one such folder per run, ``DIR/<name>/seed<S>/``, plus
+``DIR/runs.csv`` and ``DIR/summary.json`` over all runs. Everything appears atomically.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from .._atomic import atomic_directory
+from ..errors import IrreflectError
+from .run import PAPER_N, SelectionResult
+from .selectors import SELECTORS, get_selector
+
+
+def _points_text(meas, mask) -> str:
+    return ";".join(f"({g:g},{t:g})" for g, t in zip(meas.gamma_deg[mask], meas.theta_deg[mask],
+                                                        strict=True))
+
+
+def summary_dict(result: SelectionResult, methods: dict | None) -> dict:
+    """The content of ``summary.json`` (JSON-ready)."""
+    out = result.summary()
+    if methods is not None:
+        out["methods"] = {k: {kk: vv for kk, vv in methods[k].items()} for k in ("A", "B", "12")}
+        out["methods_order_holds"] = methods["order_holds"]
+        out["methods_note"] = methods["note"]
+    else:
+        out["methods"] = None
+    best12 = result.best_mask(PAPER_N)
+    out["optimal_points_n"] = PAPER_N if best12 is not None else result.knee_n
+    return out
+
+
+def write_selection(result: SelectionResult, methods: dict | None, directory) -> Path:
+    """Write the five output files of one run into ``directory`` (not atomic by itself:
+    call it inside :func:`irreflect._atomic.atomic_directory`)."""
+    from ..plots import save_figure
+    from .plots import plot_pareto, plot_points
+
+    directory = Path(directory)
+    directory.mkdir(parents=True, exist_ok=True)
+    meas = result.measurements
+    front = result.front.copy()
+    front["points"] = [_points_text(meas, result.masks[int(k)]) for k in front["n_points"]]
+    front.to_csv(directory / "pareto.csv", index=False)
+    n_opt = PAPER_N if result.best_mask(PAPER_N) is not None else result.knee_n
+    result.points(n_opt).to_csv(directory / "optimal_points.csv", index=False)
+    with open(directory / "summary.json", "w") as fh:
+        json.dump(summary_dict(result, methods), fh, indent=2, default=_json_default)
+        fh.write("\n")
+    ax = plot_pareto(result.front, title=f"{meas.name}: Pareto frontier ({result.selector}, "
+                                         f"seed {result.seed})")
+    save_figure(ax.figure, directory / "pareto.png")
+    masks = {f"best {n_opt}": result.best_mask(n_opt)}
+    if result.knee_n != n_opt:
+        masks[f"knee ({result.knee_n})"] = result.best_mask(result.knee_n)
+    ax = plot_points(meas, masks, title=f"{meas.name}: chosen points")
+    save_figure(ax.figure, directory / "optimal_points.png")
+    return directory
+
+
+def _json_default(o):
+    if isinstance(o, np.generic):
+        return o.item()
+    if isinstance(o, np.ndarray):
+        return o.tolist()
+    raise TypeError(f"not JSON serialisable: {type(o).__name__}")
+
+
+def _print_run(result: SelectionResult, methods: dict | None) -> None:
+    m = result.measurements
+    state = " (interrupted: results so far)" if result.interrupted else ""
+    print(f"{m.name}: {m.n_points} points, selector {result.selector}, seed {result.seed}{state}")
+    print(f"  {result.evaluations} subset fits ({result.failed_fits} failed) in "
+          f"{result.seconds:.1f} s, {result.fits_per_second:.0f} fits/s; "
+          f"hypervolume {result.hypervolume:.5f}")
+    front = result.front
+    shown = front[front["n_points"] <= max(result.knee_n, PAPER_N) + 3]
+    print("  frontier: " + ", ".join(f"N={int(r.n_points)}: R2={r.r2:.5f}"
+                                     for r in shown.itertuples()))
+    print(f"  knee: N = {result.knee_n}")
+    if methods is not None:
+        parts = []
+        for key in ("A", "B", "12"):
+            r2 = methods[key]["r2"]
+            parts.append(f"{key}: R2={r2:.5f} ({methods[key]['n_points']} points)"
+                         if r2 is not None else f"{key}: n/a")
+        print("  methods: " + "; ".join(parts) + f"  [{methods['note']}]")
+
+
+def _cmd_select(args) -> int:
+    from ..data import read_measurements
+    from .parallel import run_many
+    from .run import compare_methods, run_selection
+
+    get_selector(args.selector)
+    tables = [read_measurements(p, average_duplicates=args.average_duplicates)
+              for p in args.data]
+    seeds = args.seeds if args.seeds else [args.seed]
+    kwargs = dict(model=args.model, selector=args.selector, pop_size=args.pop_size,
+                  generations=args.generations, max_points=args.max_points,
+                  checkpoint_every=args.checkpoint_every)
+    out = Path(args.out)
+    flat = len(tables) == 1 and len(seeds) == 1
+    if flat and args.scheduler is None:
+        res = run_selection(tables[0], seed=seeds[0], progress=not args.quiet,
+                            checkpoint=args.checkpoint, **kwargs)
+        methods = compare_methods(tables[0], res, model=args.model, seed=seeds[0])
+        with atomic_directory(out) as tmp:
+            write_selection(res, methods, tmp)
+        _print_run(res, methods)
+        print(f"wrote {out}/pareto.csv, optimal_points.csv, summary.json, pareto.png, "
+              "optimal_points.png")
+        return 130 if res.interrupted else 0
+    outcomes, interrupted = run_many(tables, seeds, scheduler=args.scheduler,
+                                     workers=args.workers, progress=not args.quiet,
+                                     checkpoint_dir=args.checkpoint, **kwargs)
+    if flat and outcomes:
+        o = outcomes[0]
+        with atomic_directory(out) as tmp:
+            write_selection(o.result, o.methods, tmp)
+        _print_run(o.result, o.methods)
+        print(f"wrote {out}/pareto.csv, optimal_points.csv, summary.json, pareto.png, "
+              "optimal_points.png")
+        return 130 if interrupted else 0
+    if not outcomes:
+        raise IrreflectError("interrupted before any run finished: nothing written")
+    rows, summaries = [], []
+    with atomic_directory(out) as tmp:
+        for o in outcomes:
+            write_selection(o.result, o.methods, tmp / o.dataset / f"seed{o.seed}")
+            s = summary_dict(o.result, o.methods)
+            summaries.append(s)
+            row = {"dataset": o.dataset, "seed": o.seed, "knee_n": o.result.knee_n,
+                   f"r2_at_{PAPER_N}": 1 - o.result.best_score(PAPER_N),
+                   "hypervolume": o.result.hypervolume, "evaluations": o.result.evaluations,
+                   "failed_fits": o.result.failed_fits, "seconds": round(o.result.seconds, 2),
+                   "interrupted": o.result.interrupted}
+            if o.methods is not None:
+                for k in ("A", "B", "12"):
+                    row[f"r2_{k}"] = o.methods[k]["r2"]
+            rows.append(row)
+        pd.DataFrame(rows).to_csv(tmp / "runs.csv", index=False)
+        with open(tmp / "summary.json", "w") as fh:
+            json.dump({"runs": summaries, "interrupted": interrupted}, fh, indent=2,
+                      default=_json_default)
+            fh.write("\n")
+    for o in outcomes:
+        _print_run(o.result, o.methods)
+    print(f"wrote {len(outcomes)} run folder(s), {out}/runs.csv and {out}/summary.json")
+    return 130 if interrupted else 0
+
+
+def _positive(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a positive integer, found '{text}'") from None
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"expected a positive integer, found {value}")
+    return value
+
+
+def register(sub) -> None:
+    p = sub.add_parser(
+        "select",
+        help="choose which few measurements to take (Pareto frontier, knee, best 12 points)",
+        description="Search subsets of a dense measurement set for the fewest points whose "
+                    "fit still describes all points (NSGA-II by default, the paper's Fig. 18), "
+                    "and compare Method A (all points), B (best 12) and 12 (the paper's "
+                    "protocol, Table 1).",
+    )
+    p.add_argument("data", metavar="DATA", nargs="+",
+                   help="dense measurement table(s) (CSV or Parquet: gamma_deg, theta_deg, "
+                        "power[, sigma]); several run in parallel")
+    p.add_argument("--average-duplicates", action="store_true",
+                   help="average the power of duplicated (gamma, theta) rows")
+    p.add_argument("--model", default="two-lobe", help="reflection model (default two-lobe)")
+    p.add_argument("--selector", default="nsga2",
+                   help=f"search strategy: {', '.join(SELECTORS)} (default nsga2)")
+    p.add_argument("--pop-size", type=_positive, default=100, help="population (default 100)")
+    p.add_argument("--generations", type=_positive, default=200,
+                   help="generations (default 200); other selectors spend pop-size x "
+                        "generations fits")
+    p.add_argument("--seed", type=int, default=0, help="seed (default 0)")
+    p.add_argument("--seeds", type=int, nargs="+", metavar="S",
+                   help="several seeds: one run per DATA and seed")
+    p.add_argument("--max-points", type=_positive, default=None,
+                   help="largest number of points considered (default: all)")
+    p.add_argument("--checkpoint", metavar="FILE",
+                   help="save the search every few generations and resume from it if it "
+                        "exists (with several runs or --scheduler: a folder of per-run files)")
+    p.add_argument("--checkpoint-every", type=_positive, default=10, metavar="G",
+                   help="generations between checkpoints (default 10)")
+    p.add_argument("--scheduler", metavar="ADDRESS",
+                   help="dask.distributed scheduler (e.g. tcp://host:8786) for the runs")
+    p.add_argument("--workers", type=_positive, default=None,
+                   help="local worker processes for several runs (default: CPU count)")
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    p.add_argument("--out", required=True, metavar="DIR", help="output folder")
+    p.set_defaults(handler=_cmd_select)

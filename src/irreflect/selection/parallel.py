@@ -1,0 +1,194 @@
+"""Several datasets x seeds in one call: a local process pool, or a Dask cluster.
+
+Every run is independent and deterministic given its seed, so the results are identical
+whether the runs go one after the other, to local worker processes or to the workers of a
+``dask.distributed`` scheduler (``--scheduler tcp://host:8786``). Results come back in
+task order (dataset-major, then seed).
+
+Ctrl-C: the runs in progress stop at their next generation and return what they found
+(:attr:`SelectionResult.interrupted`); runs not yet started are dropped.
+"""
+
+from __future__ import annotations
+
+import concurrent.futures as cf
+import multiprocessing as mp
+import os
+import sys
+from dataclasses import dataclass
+from pathlib import Path
+
+from ..data import Measurements, as_measurements
+from ..errors import IrreflectError
+from .run import SelectionResult, compare_methods, run_selection
+
+
+@dataclass
+class RunOutcome:
+    """One finished run: its dataset name, seed, result and Methods A/B/12."""
+
+    dataset: str
+    seed: int
+    result: SelectionResult
+    methods: dict | None
+
+
+@dataclass
+class _Task:
+    meas: Measurements
+    seed: int
+    kwargs: dict
+    with_methods: bool
+    checkpoint: str | None
+
+
+def _run_task(task: _Task) -> RunOutcome:
+    res = run_selection(task.meas, seed=task.seed, checkpoint=task.checkpoint, progress=False,
+                        **task.kwargs)
+    methods = None
+    if task.with_methods and not res.interrupted:
+        methods = compare_methods(task.meas, res, model=task.kwargs.get("model", "two-lobe"),
+                                  seed=task.seed)
+    return RunOutcome(task.meas.name, task.seed, res, methods)
+
+
+def _tasks(datasets, seeds, kwargs, with_methods, checkpoint_dir) -> list[_Task]:
+    tables = [as_measurements(d) for d in datasets]
+    names = [t.name for t in tables]
+    if len(set(names)) != len(names):
+        raise IrreflectError(
+            f"datasets must have distinct names (file stems) in one run; found {names}"
+        )
+    seeds = [int(s) for s in seeds]
+    if not tables or not seeds:
+        raise IrreflectError("run_many needs at least one dataset and one seed")
+    if len(set(seeds)) != len(seeds):
+        raise IrreflectError(f"seeds must be distinct; found {seeds}")
+    out = []
+    for t in tables:
+        for s in seeds:
+            ckpt = None
+            if checkpoint_dir is not None:
+                ckpt = str(Path(checkpoint_dir) / f"{t.name}_seed{s}.ckpt")
+            out.append(_Task(t, s, dict(kwargs), with_methods, ckpt))
+    return out
+
+
+def run_many(datasets, seeds=(0,), *, scheduler=None, workers: int | None = None,
+             progress: bool = False, with_methods: bool = True, checkpoint_dir=None,
+             **kwargs) -> tuple[list[RunOutcome], bool]:
+    """Run :func:`run_selection` for every dataset and seed.
+
+    Parameters
+    ----------
+    datasets : Measurements, DataFrames or paths (names, i.e. file stems, must differ)
+    seeds : seeds, one run per dataset and seed
+    scheduler : None (local), a ``dask.distributed`` scheduler address or a ``Client``
+    workers : local worker processes (default: CPU count, at most the number of runs;
+        1 runs everything in this process)
+    checkpoint_dir : folder for one checkpoint per run (``<name>_seed<S>.ckpt``); with a
+        Dask cluster it must be visible to the workers
+    kwargs : passed to :func:`run_selection` (model, selector, pop_size, generations, ...)
+
+    Returns
+    -------
+    (outcomes in task order, interrupted)
+    """
+    if checkpoint_dir is not None:
+        Path(checkpoint_dir).mkdir(parents=True, exist_ok=True)
+    tasks = _tasks(datasets, seeds, kwargs, with_methods, checkpoint_dir)
+    bar = None
+    if progress:
+        from tqdm import tqdm
+
+        bar = tqdm(total=len(tasks), desc="select runs", unit="run", file=sys.stderr)
+    try:
+        if scheduler is not None:
+            return _run_dask(tasks, scheduler, bar)
+        n_workers = min(workers or os.cpu_count() or 1, len(tasks))
+        if n_workers <= 1:
+            return _run_serial(tasks, bar)
+        return _run_pool(tasks, n_workers, bar)
+    finally:
+        if bar is not None:
+            bar.close()
+
+
+def _tick(bar):
+    if bar is not None:
+        bar.update(1)
+
+
+def _run_serial(tasks, bar):
+    out = []
+    for task in tasks:
+        try:
+            outcome = _run_task(task)
+        except KeyboardInterrupt:
+            return out, True
+        out.append(outcome)
+        _tick(bar)
+        if outcome.result.interrupted:
+            return out, True
+    return out, False
+
+
+def _collect(futures, results):
+    """Results of the futures that finished cleanly, in task order."""
+    out, interrupted = [], False
+    for i in sorted(results):
+        out.append(results[i])
+        interrupted |= results[i].result.interrupted
+    return out, interrupted or len(out) < len(futures)
+
+
+def _run_pool(tasks, n_workers, bar):
+    results: dict[int, RunOutcome] = {}
+    ctx = mp.get_context("forkserver")
+    pool = cf.ProcessPoolExecutor(max_workers=n_workers, mp_context=ctx)
+    futures = {pool.submit(_run_task, t): i for i, t in enumerate(tasks)}
+    try:
+        for fut in cf.as_completed(futures):
+            results[futures[fut]] = fut.result()
+            _tick(bar)
+    except KeyboardInterrupt:
+        # workers got the same SIGINT: running ones return what they found so far
+        for fut in futures:
+            fut.cancel()
+        done, _ = cf.wait(futures, timeout=60)
+        for fut in done:
+            if not fut.cancelled() and fut.exception() is None:
+                results[futures[fut]] = fut.result()
+        pool.shutdown(wait=False, cancel_futures=True)
+        return _collect(futures, results)[0], True
+    pool.shutdown()
+    return _collect(futures, results)
+
+
+def _run_dask(tasks, scheduler, bar):
+    try:
+        from distributed import Client, as_completed
+    except ImportError as exc:  # pragma: no cover - dask is a dependency
+        raise IrreflectError("--scheduler needs dask.distributed: pip install distributed") from exc
+    own = not isinstance(scheduler, Client)
+    try:
+        client = Client(scheduler, timeout="10s") if own else scheduler
+    except OSError as exc:
+        raise IrreflectError(
+            f"cannot reach the Dask scheduler at '{scheduler}' ({exc}): start one with "
+            "'dask scheduler' or leave out --scheduler to use local processes"
+        ) from exc
+    results: dict[int, RunOutcome] = {}
+    futures = client.map(_run_task, tasks, pure=False)
+    index = {f.key: i for i, f in enumerate(futures)}
+    try:
+        for fut in as_completed(futures):
+            results[index[fut.key]] = fut.result()
+            _tick(bar)
+    except KeyboardInterrupt:
+        client.cancel(futures)
+        return _collect(futures, results)[0], True
+    finally:
+        if own:
+            client.close()
+    return _collect(futures, results)

@@ -1,0 +1,286 @@
+"""The measurement-point optimiser (issue 3): fronts, knee, methods A/B/12, scale, resume."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pandas as pd
+import pytest
+from conftest import synthetic
+
+from irreflect import fitting
+from irreflect.cli import main
+from irreflect.data import load_bundled, write_measurements
+from irreflect.errors import IrreflectError
+from irreflect.selection import (
+    SELECTORS,
+    SubsetEvaluator,
+    compare_methods,
+    hypervolume,
+    knee_point,
+    non_dominated,
+    protocol_points_mask,
+    run_selection,
+    snap_points,
+)
+from irreflect.selection.parallel import run_many
+
+SMALL = dict(pop_size=24, generations=12, max_points=20)
+
+
+@pytest.fixture(scope="module")
+def noisy():
+    return synthetic(noise=0.004, seed=3, name="noisy")
+
+
+@pytest.fixture(scope="module")
+def small_run(noisy):
+    return run_selection(noisy, seed=1, **SMALL)
+
+
+def _same_front(a, b):
+    pd.testing.assert_frame_equal(a.front, b.front)
+    assert a.masks.keys() == b.masks.keys()
+    for k in a.masks:
+        np.testing.assert_array_equal(a.masks[k], b.masks[k])
+
+
+# ----------------------------------------------------------------------------- the front
+def test_front_is_non_dominated_and_monotone(small_run):
+    front = small_run.front
+    n, f = front["n_points"].to_numpy(), front["one_minus_r2"].to_numpy()
+    assert len(front) >= 3
+    assert np.all(np.diff(n) > 0) and np.all(np.diff(f) < 0)
+    assert n.min() >= 7 and n.max() <= SMALL["max_points"]
+    # no checked subset dominates a front point
+    for k, (score, _mask) in small_run.verified.items():
+        dominated = (n >= k) & (f >= score) & ((n > k) | (f > score))
+        assert not dominated.any(), (k, score)
+    # every front mask has the size it claims, and its R^2 is what fit() on it gives
+    for k, mask in small_run.masks.items():
+        assert mask.sum() == k
+    k = int(n[len(n) // 2])
+    meas = small_run.measurements
+    res = fitting.fit(meas.subset(small_run.masks[k]))
+    r2 = 1 - np.sum((meas.power - res.predict(meas.gamma_deg, meas.theta_deg)) ** 2) / np.sum(
+        (meas.power - meas.power.mean()) ** 2)
+    assert r2 == pytest.approx(front.set_index("n_points").loc[k, "r2"], abs=2e-4)
+    assert small_run.evaluations <= SMALL["pop_size"] * SMALL["generations"]
+    assert 0 < small_run.hypervolume < 1
+
+
+def test_same_seed_same_front_other_seed_differs(noisy, small_run):
+    again = run_selection(noisy, seed=1, **SMALL)
+    _same_front(small_run, again)
+    assert again.evaluations == small_run.evaluations
+    other = run_selection(noisy, seed=2, **SMALL)
+    differs = (len(other.front) != len(small_run.front)
+               or not np.allclose(other.front["one_minus_r2"], small_run.front["one_minus_r2"]))
+    assert differs
+
+
+def test_knee_rule_on_a_hand_made_front():
+    n = np.array([7, 8, 9, 10, 12, 15, 20])
+    f = np.array([0.5, 0.2, 0.05, 0.03, 0.025, 0.022, 0.02])
+    # normalised distances to (7, 0.02): 1.0, 0.383, 0.166, 0.232, 0.385, 0.616, 1.0
+    assert knee_point(n, f) == 9
+    assert knee_point(pd.DataFrame({"n_points": n, "one_minus_r2": f})) == 9
+    # a later, deeper drop moves the knee
+    f2 = np.array([0.5, 0.45, 0.4, 0.35, 0.02, 0.019, 0.018])
+    assert knee_point(n, f2) == 12
+    assert non_dominated([7, 8, 8, 9, 10], [0.3, 0.2, 0.25, 0.2, 0.1]).tolist() == [0, 1, 4]
+
+
+def test_hypervolume_uses_one_reference_point():
+    # one point (N/n, f) = (0.5, 0.2) dominates (1 - 0.5) * (1 - 0.2) of the unit box
+    assert hypervolume([50], [0.2], 100) == pytest.approx(0.4)
+    assert hypervolume([50, 80], [0.2, 0.1], 100) == pytest.approx(0.4 + 0.2 * 0.1)
+    assert hypervolume([50], [1.5], 100) == 0.0
+
+
+# ----------------------------------------------------------------------------- methods A/B/12
+@pytest.mark.parametrize("name", ["terrazzo", "plasterboard", "foam_board"])
+def test_methods_a_b_12_order_on_bundled_data(name):
+    meas = load_bundled(name)
+    res = run_selection(meas, pop_size=40, generations=40, max_points=30, seed=0)
+    m = compare_methods(meas, res)
+    a, b, c = m["A"]["r2"], m["B"]["r2"], m["12"]["r2"]
+    assert m["A"]["n_points"] == meas.n_points and m["B"]["n_points"] == 12
+    assert m["12"]["n_points"] == 12
+    assert a >= b >= c, (a, b, c)
+    assert m["order_holds"]
+    assert 0.9 < c < a < 1
+
+
+def test_noiseless_data_front_reaches_r2_0_9999_with_at_most_10_points():
+    clean = synthetic(noise=0.0, name="clean")
+    res = run_selection(clean, pop_size=30, generations=15, max_points=12, seed=0)
+    good = res.front[res.front["r2"] > 0.9999]
+    assert len(good) and good["n_points"].min() <= 10
+
+
+def test_protocol_points_snap_to_distinct_nearest_points():
+    meas = load_bundled("terrazzo")
+    mask = protocol_points_mask(meas)
+    assert mask.sum() == 12
+    pts = set(zip(meas.gamma_deg[mask], meas.theta_deg[mask], strict=True))
+    assert (-20.0, 20.0) in pts and (-60.0, -70.0) in pts
+    # two requests near the same measured point take it and its next nearest
+    snapped = snap_points(meas, [(-20.4, 20.3), (-20.2, 20.1)])
+    assert snapped["index"].nunique() == 2
+    assert snapped["distance_deg"].iloc[0] == pytest.approx(np.hypot(0.4, 0.3))
+    assert snapped["distance_deg"].iloc[1] > 1.0
+
+
+# ----------------------------------------------------------------------------- evaluation
+def test_failed_fits_score_one_and_are_counted(noisy, monkeypatch):
+    real = fitting.fit_subsets
+
+    def flaky(*args, **kwargs):
+        out = real(*args, **kwargs)
+        failed = out.failed.copy()
+        failed[::2] = True
+        return fitting.SubsetFits(out.params, np.where(failed, 0.0, out.r2_all), out.cost,
+                                  failed, out.nfev)
+
+    monkeypatch.setattr("irreflect.selection.problem.fit_subsets", flaky)
+    ev = SubsetEvaluator(noisy.gamma_deg, noisy.theta_deg, noisy.power)
+    masks = np.zeros((6, noisy.n_points), bool)
+    for i in range(6):
+        masks[i, np.arange(i, noisy.n_points, 6)] = True  # 22 points over every gamma
+    scores = ev(masks)
+    assert ev.failed_fits == 3 and ev.evaluations == 6
+    assert np.all(scores[::2] == 1.0) and np.all(scores[1::2] < 0.5)
+    ev(masks)  # cached: no new fits
+    assert ev.evaluations == 6 and ev.cache_hits == 6
+
+
+def test_candidates_restrict_the_chosen_points(noisy):
+    allowed = np.abs(noisy.gamma_deg) >= 30
+    res = run_selection(noisy, seed=0, candidates=allowed, **SMALL)
+    for mask in res.masks.values():
+        assert not (mask & ~allowed).any()
+
+
+@pytest.mark.parametrize("selector", ["random", "greedy", "d-optimal"])
+def test_other_selectors_give_valid_fronts_within_budget(noisy, selector):
+    res = run_selection(noisy, selector=selector, seed=0, pop_size=20, generations=10,
+                        max_points=16)
+    f = res.front["one_minus_r2"].to_numpy()
+    assert np.all(np.diff(f) < 0)
+    assert res.evaluations <= 200
+    assert res.front["r2"].max() > 0.95
+    assert res.selector == selector and set(SELECTORS) >= {selector}
+
+
+# ----------------------------------------------------------------------------- resume, Ctrl-C
+def test_checkpoint_resume_gives_the_uninterrupted_result(noisy, tmp_path):
+    kw = dict(pop_size=16, max_points=18, seed=4, checkpoint_every=3)
+    straight = run_selection(noisy, generations=8, **kw)
+    ckpt = tmp_path / "run.ckpt"
+    half = run_selection(noisy, generations=4, checkpoint=ckpt, **kw)
+    assert ckpt.exists() and half.generations_done == 4
+    resumed = run_selection(noisy, generations=8, checkpoint=ckpt, **kw)
+    assert resumed.settings["resumed_from_generation"] == 4
+    _same_front(straight, resumed)
+    assert resumed.evaluations == straight.evaluations
+    # a checkpoint of another run is refused
+    with pytest.raises(IrreflectError, match="different run"):
+        run_selection(noisy, generations=8, checkpoint=ckpt, **(kw | {"seed": 5}))
+
+
+def test_ctrl_c_stops_cleanly_with_what_was_found(noisy, monkeypatch):
+    calls = {"n": 0}
+    real = SubsetEvaluator.fit_masks
+
+    def interrupt_on_fourth(self, masks, settings=None):
+        calls["n"] += 1
+        if calls["n"] == 4:
+            raise KeyboardInterrupt
+        return real(self, masks, settings)
+
+    monkeypatch.setattr(SubsetEvaluator, "fit_masks", interrupt_on_fourth)
+    res = run_selection(noisy, seed=0, pop_size=20, generations=50, max_points=20)
+    assert res.interrupted
+    assert 0 < res.evaluations < 20 * 50
+    assert len(res.front) >= 1 and np.all(np.diff(res.front["one_minus_r2"]) < 0)
+
+
+# ----------------------------------------------------------------------------- scale
+def test_dask_and_process_pool_give_the_serial_result(noisy):
+    distributed = pytest.importorskip("distributed")
+    other = synthetic(noise=0.004, seed=8, name="other")
+    kw = dict(pop_size=12, generations=5, max_points=14, with_methods=False)
+    serial, _ = run_many([noisy, other], seeds=[0], workers=1, **kw)
+    with distributed.LocalCluster(n_workers=1, threads_per_worker=1, processes=False,
+                                  dashboard_address=None) as cluster, \
+            distributed.Client(cluster) as client:
+        on_dask, interrupted = run_many([noisy, other], seeds=[0], scheduler=client, **kw)
+    assert not interrupted
+    pooled, _ = run_many([noisy, other], seeds=[0], workers=2, **kw)
+    assert [o.dataset for o in on_dask] == ["noisy", "other"] == [o.dataset for o in pooled]
+    for a, b, c in zip(serial, on_dask, pooled, strict=True):
+        _same_front(a.result, b.result)
+        _same_front(a.result, c.result)
+
+
+# ----------------------------------------------------------------------------- CLI and errors
+def test_cli_writes_every_output(noisy, tmp_path, capsys):
+    data = write_measurements(noisy, tmp_path / "noisy.csv")
+    out = tmp_path / "out"
+    code = main(["select", str(data), "--pop-size", "16", "--generations", "4",
+                 "--max-points", "16", "--quiet", "--out", str(out)])
+    assert code == 0
+    for name in ("pareto.csv", "optimal_points.csv", "summary.json", "pareto.png",
+                 "optimal_points.png"):
+        assert (out / name).stat().st_size > 0
+    pareto = pd.read_csv(out / "pareto.csv")
+    assert list(pareto.columns) == ["n_points", "one_minus_r2", "r2", "points"]
+    first = pareto.iloc[0]
+    assert first["points"].count("(") == first["n_points"]
+    opt = pd.read_csv(out / "optimal_points.csv")
+    assert list(opt.columns) == ["gamma_deg", "theta_deg"] and len(opt) == 12
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["knee_n"] in pareto["n_points"].tolist()
+    assert set(summary["methods"]) == {"A", "B", "12"}
+    assert summary["methods"]["A"]["n_points"] == noisy.n_points
+    assert summary["evaluations"] > 0 and summary["seed"] == 0
+    assert "knee: N =" in capsys.readouterr().out
+
+
+def test_cli_several_seeds_write_one_folder_per_run(noisy, tmp_path):
+    data = write_measurements(noisy, tmp_path / "noisy.csv")
+    out = tmp_path / "multi"
+    code = main(["select", str(data), "--seeds", "3", "4", "--workers", "1", "--pop-size", "12",
+                 "--generations", "3", "--max-points", "14", "--quiet", "--out", str(out)])
+    assert code == 0
+    runs = pd.read_csv(out / "runs.csv")
+    assert runs["seed"].tolist() == [3, 4] and (runs["dataset"] == "noisy").all()
+    for seed in (3, 4):
+        summary = json.loads((out / "noisy" / f"seed{seed}" / "summary.json").read_text())
+        assert summary["seed"] == seed
+        assert summary["knee_n"] == runs.set_index("seed").loc[seed, "knee_n"]
+    assert (runs["r2_A"] >= runs["r2_12"]).all()
+
+
+def test_cli_errors_are_one_line(noisy, tmp_path, capsys):
+    data = write_measurements(noisy, tmp_path / "noisy.csv")
+    code = main(["select", str(data), "--selector", "nsga3", "--out", str(tmp_path / "o")])
+    err = capsys.readouterr().err
+    assert code == 2 and "unknown selector 'nsga3'" in err and "nsga2" in err
+    assert len(err.strip().splitlines()) == 1
+    code = main(["select", str(data), "--max-points", "5", "--out", str(tmp_path / "o")])
+    assert code == 2 and "at least the 7 model parameters" in capsys.readouterr().err
+    assert not (tmp_path / "o").exists()
+
+
+def test_bad_inputs_raise(noisy):
+    with pytest.raises(IrreflectError, match="candidates must be a boolean mask"):
+        run_selection(noisy, candidates=np.ones(5, bool), **SMALL)
+    with pytest.raises(IrreflectError, match="more than 7 selectable points"):
+        run_selection(noisy.subset(np.arange(7)), **SMALL)
+    with pytest.raises(IrreflectError, match="unknown selector"):
+        run_selection(noisy, selector="genetic", **SMALL)
+    with pytest.raises(IrreflectError, match="distinct names"):
+        run_many([noisy, noisy], seeds=[0], **SMALL)
