@@ -68,6 +68,9 @@ def fmt(value) -> str:
     if isinstance(value, (float, np.floating)):
         if not np.isfinite(value):
             return "n/a" if np.isnan(value) else ("inf" if value > 0 else "-inf")
+        short = f"{value:.6g}"
+        if float(short) == value and "e" not in short:
+            return short  # the producer rounded it: show exactly that
         return f"{value:.4g}" if abs(value) >= 1e-3 or value == 0 else f"{value:.3e}"
     return "" if value is None else str(value)
 
@@ -126,9 +129,9 @@ def fits_section(ctx: ReportContext) -> Section:
             pred = twelve.predict(meas.gamma_deg, meas.theta_deg)
             rows2.append({
                 "material": name, "points fitted": int(mask.sum()),
-                "R^2 ours": metrics.r2(meas.power, pred),
+                "R^2 ours": round(metrics.r2(meas.power, pred), 4),
                 "R^2 paper": paper2["r2"] if paper2 is not None else np.nan,
-                "RMSE ours": metrics.rmse(meas.power, pred),
+                "RMSE ours": round(metrics.rmse(meas.power, pred), 4),
                 "RMSE paper": paper2["rmse"] if paper2 is not None else np.nan,
                 "MSE ours": metrics.mse(meas.power, pred),
                 "MSE paper": paper2["mse"] if paper2 is not None else np.nan,
@@ -155,7 +158,7 @@ def fits_section(ctx: ReportContext) -> Section:
         paper_ms = (t4_paper.set_index("material").loc[name, "fit_time_ms"]
                     if t4_paper is not None and name in set(t4_paper.material) else np.nan)
         rows4.append({"material": name, "points": sub.n_points,
-                      "ours median (ms)": statistics.median(times),
+                      "ours median (ms)": round(statistics.median(times), 2),
                       "paper (ms, MATLAB R2015, Core 2 Duo E8400)": paper_ms,
                       "repeats": repeats})
         figures.update(_fit_figures(ctx, name, meas, full, mask if twelve is not None else None,
