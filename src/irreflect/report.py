@@ -54,10 +54,6 @@ the method are consistent, not that the paper's measurements were reproduced. Ev
 is also a CSV in `tables/` (named under the table), holding exactly the numbers shown.
 """
 
-TABLE1_POINTS = [(-20, 20), (-20, 10), (-20, 30), (-20, -40), (-20, 70), (-40, -20), (-40, 60),
-                 (-60, 60), (-60, 50), (-60, 70), (-60, 0), (-60, -70)]
-
-
 # ----------------------------------------------------------------------------- helpers
 def fmt(value) -> str:
     """The one formatter for numbers in tables (CSV and report show the same strings)."""
@@ -92,20 +88,17 @@ def markdown_table(df: pd.DataFrame) -> str:
     return "\n".join([header, rule, *rows])
 
 
-def nearest_points_mask(meas: Measurements, points, max_gap_deg: float = 5.0):
-    """Mask of the measured points nearest to each requested (gamma, theta) point (same
-    gamma, nearest theta within ``max_gap_deg``); returns (mask, list of snaps made)."""
+def protocol_mask(meas: Measurements):
+    """Mask of the paper's 12 protocol points in ``meas`` (Table 1 when the dataset has its
+    angles, snapped to distinct nearest measured points) and the snaps that moved a point."""
+    from .selection.run import paper_protocol_points, snap_points
+
+    snapped = snap_points(meas, paper_protocol_points(meas))
     mask = np.zeros(meas.n_points, bool)
-    snaps = []
-    for g, t in points:
-        same = np.nonzero(np.isclose(meas.gamma_deg, g))[0]
-        if same.size == 0:
-            continue
-        j = same[np.argmin(np.abs(meas.theta_deg[same] - t))]
-        if abs(meas.theta_deg[j] - t) <= max_gap_deg and not mask[j]:
-            mask[j] = True
-            if meas.theta_deg[j] != t:
-                snaps.append((g, t, float(meas.theta_deg[j])))
+    mask[snapped["index"].to_numpy()] = True
+    moved = snapped[snapped["distance_deg"] > 0]
+    snaps = [(r.gamma_requested, r.theta_requested, r.gamma_deg, r.theta_deg)
+             for r in moved.itertuples()]
     return mask, snaps
 
 
@@ -121,7 +114,7 @@ def fits_section(ctx: ReportContext) -> Section:
     for name, meas in ctx.datasets.items():
         ctx.progress(f"fits: {name}")
         full = ctx.fits[name]
-        mask, snaps = nearest_points_mask(meas, TABLE1_POINTS)
+        mask, snaps = protocol_mask(meas)
         twelve = fit(meas.subset(mask), seed=ctx.seed, use_sigma=False) if mask.sum() >= 7 else None
         paper2 = t2_paper.set_index("material").loc[name] if (
             t2_paper is not None and name in set(t2_paper.material)) else None
@@ -137,8 +130,9 @@ def fits_section(ctx: ReportContext) -> Section:
                 "MSE paper": paper2["mse"] if paper2 is not None else np.nan,
             })
         if snaps:
-            notes.append(f"{name}: Table 1 points snapped to the nearest measured theta: "
-                         + ", ".join(f"({g:g}, {t:g}) -> {s:g}" for g, t, s in snaps))
+            notes.append(f"{name}: protocol points snapped to the nearest measured point: "
+                         + ", ".join(f"({g:g}, {t:g}) -> ({g2:g}, {t2:g})"
+                                     for g, t, g2, t2 in snaps))
         for label, res in (("all points", full), ("12 points", twelve)):
             if res is None:
                 continue
@@ -166,8 +160,8 @@ def fits_section(ctx: ReportContext) -> Section:
     tables = {"table2_fit_quality": pd.DataFrame(rows2), "table3_coefficients": pd.DataFrame(rows3),
               "table4_fit_time": pd.DataFrame(rows4)}
     md.append("### Table 2: quality of the 12-point fit against all points\n\n"
-              "The model is fitted on the 12 points of the paper's Table 1 and scored on every "
-              "point of the dataset, as in the paper.\n\n{table:table2_fit_quality}\n")
+              "The model is fitted on the 12 points of the paper's protocol (Table 1 where the "
+              "dataset has its angles) and scored on every point of the dataset, as in the paper.\n\n{table:table2_fit_quality}\n")
     if rows2:
         md.append(_table2_note(pd.DataFrame(rows2)))
     md.append("\n### Table 3: model coefficients\n\n{table:table3_coefficients}\n\n"
@@ -383,4 +377,4 @@ def register(sub) -> None:
     p.set_defaults(handler=_cmd_reproduce)
 
 
-__all__ = ["reproduce", "fits_section", "nearest_points_mask", "markdown_table", "fmt"]
+__all__ = ["reproduce", "fits_section", "protocol_mask", "markdown_table", "fmt"]

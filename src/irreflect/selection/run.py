@@ -96,15 +96,12 @@ def paper_protocol_points(meas: Measurements | None = None) -> pd.DataFrame:
     range. Otherwise Table 1 is read from ``../shared/paper/tables``.
     """
     if meas is not None:
+        from ..protocol import paper_protocol_for
+
         try:
-            from ..protocol import paper_protocol_for
-        except ImportError:
-            paper_protocol_for = None
-        if paper_protocol_for is not None:
-            try:
-                return paper_protocol_for(meas).to_frame()[["gamma_deg", "theta_deg"]]
-            except IrreflectError:
-                pass
+            return paper_protocol_for(meas).to_frame()[["gamma_deg", "theta_deg"]]
+        except IrreflectError:
+            pass  # no triple of the dataset's gammas can carry the protocol: use Table 1
     candidates = [project_root().parent / "shared" / "paper" / "tables",
                   project_root().parent.parent / "shared" / "paper" / "tables"]
     for folder in candidates:
