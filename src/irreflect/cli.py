@@ -52,11 +52,12 @@ def load_data(args):
 
 
 def print_json(obj) -> None:
-    json.dump(obj, sys.stdout, indent=2, default=_json_default)
+    json.dump(obj, sys.stdout, indent=2, default=json_default)
     sys.stdout.write("\n")
 
 
-def _json_default(o):
+def json_default(o):
+    """``json.dump(default=...)`` for numpy scalars and arrays."""
     import numpy as np
 
     if isinstance(o, np.generic):

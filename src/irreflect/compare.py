@@ -392,7 +392,7 @@ def write_outputs(comparison: Comparison, out_dir) -> list[Path]:
     """Write ``comparison_polar.png``, ``comparison_errors.png``, ``comparison.csv`` and
     ``comparison.json`` into ``out_dir``, all or nothing."""
     from ._atomic import atomic_directory
-    from .cli import _json_default
+    from .cli import json_default
     from .plots import save_figure
 
     out_dir = Path(out_dir)
@@ -403,7 +403,7 @@ def write_outputs(comparison: Comparison, out_dir) -> list[Path]:
         save_figure(plot_errors_per_gamma(comparison), tmp / names[1])
         comparison.table().to_csv(tmp / names[2], float_format="%.6g")
         (tmp / names[3]).write_text(json.dumps(comparison.to_dict(), indent=2,
-                                               default=_json_default) + "\n")
+                                               default=json_default) + "\n")
     return [out_dir / n for n in names]
 
 

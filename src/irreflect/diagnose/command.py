@@ -6,6 +6,7 @@ import argparse
 import json
 import sys
 
+from ..cli import json_default
 from ..errors import IrreflectError
 
 
@@ -108,16 +109,8 @@ def write_outputs(result, measurements, out_dir) -> list:
         save_figure(plot_diagnosis_polar(result, measurements), tmp / "polar_fits.png")
         names.append("polar_fits.png")
         (tmp / "diagnosis.json").write_text(json.dumps(result.to_dict(), indent=2,
-                                                       default=_json_default) + "\n")
+                                                       default=json_default) + "\n")
         names.append("diagnosis.json")
     return [out / n for n in names]
 
 
-def _json_default(o):
-    import numpy as np
-
-    if isinstance(o, np.generic):
-        return o.item()
-    if isinstance(o, np.ndarray):
-        return o.tolist()
-    raise TypeError(f"not JSON serialisable: {type(o).__name__}")

@@ -19,10 +19,10 @@ import argparse
 import json
 from pathlib import Path
 
-import numpy as np
 import pandas as pd
 
 from .._atomic import atomic_directory
+from ..cli import json_default
 from ..errors import IrreflectError
 from .run import PAPER_N, SelectionResult
 from .selectors import SELECTORS, get_selector
@@ -62,7 +62,7 @@ def write_selection(result: SelectionResult, methods: dict | None, directory) ->
     n_opt = PAPER_N if result.best_mask(PAPER_N) is not None else result.knee_n
     result.points(n_opt).to_csv(directory / "optimal_points.csv", index=False)
     with open(directory / "summary.json", "w") as fh:
-        json.dump(summary_dict(result, methods), fh, indent=2, default=_json_default)
+        json.dump(summary_dict(result, methods), fh, indent=2, default=json_default)
         fh.write("\n")
     ax = plot_pareto(result.front, title=f"{meas.name}: Pareto frontier ({result.selector}, "
                                          f"seed {result.seed})")
@@ -73,14 +73,6 @@ def write_selection(result: SelectionResult, methods: dict | None, directory) ->
     ax = plot_points(meas, masks, title=f"{meas.name}: chosen points")
     save_figure(ax.figure, directory / "optimal_points.png")
     return directory
-
-
-def _json_default(o):
-    if isinstance(o, np.generic):
-        return o.item()
-    if isinstance(o, np.ndarray):
-        return o.tolist()
-    raise TypeError(f"not JSON serialisable: {type(o).__name__}")
 
 
 def _print_run(result: SelectionResult, methods: dict | None) -> None:
@@ -159,7 +151,7 @@ def _cmd_select(args) -> int:
         pd.DataFrame(rows).to_csv(tmp / "runs.csv", index=False)
         with open(tmp / "summary.json", "w") as fh:
             json.dump({"runs": summaries, "interrupted": interrupted}, fh, indent=2,
-                      default=_json_default)
+                      default=json_default)
             fh.write("\n")
     for o in outcomes:
         _print_run(o.result, o.methods)
