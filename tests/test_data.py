@@ -7,6 +7,8 @@ import warnings
 import numpy as np
 import pandas as pd
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from irreflect.data import DataNotice, read_measurements, validate_table, write_measurements
 from irreflect.errors import DataError
@@ -105,3 +107,21 @@ def test_extra_columns_are_ignored(tmp_path):
     text = "gamma_deg,theta_deg,purpose,power\n-10,0,mirror,1\n-10,10,diffuse,2\n"
     m = read_measurements(_csv(tmp_path, text))
     assert m.power.tolist() == [1.0, 2.0]
+
+
+@settings(max_examples=40, deadline=None)
+@given(
+    rows=st.lists(
+        st.tuples(st.integers(-89, 0), st.integers(-89, 89),
+                  st.floats(0, 1e3, allow_nan=False, allow_infinity=False)),
+        min_size=1, max_size=30, unique_by=lambda r: (r[0], r[1])),
+    suffix=st.sampled_from([".csv", ".parquet"]),
+)
+def test_any_valid_table_round_trips_exactly(tmp_path_factory, rows, suffix):
+    """Property: write then read returns the same numbers, bit for bit."""
+    g, t, p = (np.array(c, float) for c in zip(*rows, strict=True))
+    meas = validate_table(pd.DataFrame({"gamma_deg": g, "theta_deg": t, "power": p}))
+    path = write_measurements(meas, tmp_path_factory.mktemp("rt") / f"m{suffix}")
+    back = read_measurements(path)
+    for column in ("gamma_deg", "theta_deg", "power"):
+        np.testing.assert_array_equal(getattr(back, column), getattr(meas, column))
