@@ -530,7 +530,7 @@ def fit_subsets(gamma_deg, theta_deg, power, masks, model="two-lobe", *, sigma=N
     params = model_obj.to_natural(z[flat], state["alpha"][flat])
     best_cost = cost[np.arange(b), best]
     failed = ~ok | ~np.isfinite(best_cost) | ~np.all(np.isfinite(params), axis=1)
-    safe = np.where(failed[:, None], model_obj_default(model_obj, params), params)
+    safe = np.where(failed[:, None], _placeholder_params(model_obj, params), params)
     pred = model_obj.predict(safe, gamma, theta)
     r2_all = np.asarray(metrics.r2(power, pred), float).reshape(b)
     r2_all = np.where(failed | ~np.isfinite(r2_all), 0.0, r2_all)
@@ -539,7 +539,7 @@ def fit_subsets(gamma_deg, theta_deg, power, masks, model="two-lobe", *, sigma=N
                       failed=failed, nfev=int(nfev.sum()) + b * c)
 
 
-def model_obj_default(model_obj, params):
+def _placeholder_params(model_obj, params):
     """A harmless parameter vector to evaluate in place of failed fits (then discarded)."""
     z = 0.5 * (model_obj.z_lower + model_obj.z_upper)[None]
     alpha = np.ones((1, model_obj.n_linear))
