@@ -329,10 +329,16 @@ def _screen_costs(model, geom, z, sw, yw):
     """Variable-projection cost of every candidate ``z`` (no derivatives): a cheap global look."""
     with np.errstate(over="ignore", under="ignore", invalid="ignore", divide="ignore"):
         basis, _ = model.basis(geom, z, False)
+    return _projected_cost(model, basis, sw, yw)
+
+
+def _projected_cost(model, basis, sw, yw):
+    """Cost after eliminating the linear coefficients, for basis values ``(M, n, L)``."""
+    with np.errstate(over="ignore", under="ignore", invalid="ignore", divide="ignore"):
         bw = basis * sw[:, :, None]
         alpha, _, _ = _solve_linear(bw, yw, model.alpha_nonneg)
         resid = yw - (bw @ alpha[:, :, None])[:, :, 0]
-        cost = 0.5 * np.sum(resid * resid, axis=1)
+        cost = 0.5 * np.einsum("ij,ij->i", resid, resid)
     cost[~np.isfinite(cost)] = np.inf
     return cost
 
@@ -500,22 +506,38 @@ def fit_subsets(gamma_deg, theta_deg, power, masks, model="two-lobe", *, sigma=N
     g, t, y = gamma[order], theta[order], power[order]
     sw = np.sqrt(np.where(valid, weights_all[order], 0.0))
     geom = plane_geometry(g, t)
-    # global screening, per subset, on the subset's own points
-    cands = screen_samples(model_obj, n_screen, seed) if n_screen else np.empty((0, model_obj.n_nonlinear))
-    if data_starts:
+    # global screening, per subset, on the subset's own points. The shared candidates'
+    # basis is computed once on all points and gathered per subset (the same numbers as
+    # computing it on each subset, without the repeated trigonometry and powers).
+    cands = screen_samples(model_obj, n_screen, seed) if n_screen else \
+        np.empty((0, model_obj.n_nonlinear))
+    cands = np.clip(cands, model_obj.z_lower, model_obj.z_upper)
+    parts_z, parts_cost = [], []
+    if len(cands):
+        with np.errstate(over="ignore", under="ignore", invalid="ignore", divide="ignore"):
+            basis_all, _ = model_obj.basis(plane_geometry(gamma[None], theta[None]), cands, False)
+        gathered = basis_all[:, order, :].transpose(1, 0, 2, 3)  # (B, C, n_max, L)
+        k = len(cands)
+        rep_k = lambda a: np.repeat(a, k, axis=0)  # noqa: E731
+        cost_shared = _projected_cost(model_obj, gathered.reshape(b * k, n_max, -1), rep_k(sw),
+                                      rep_k(sw * y)).reshape(b, k)
+        parts_z.append(np.broadcast_to(cands, (b,) + cands.shape))
+        parts_cost.append(cost_shared)
+    if data_starts or not len(cands):
         per_subset = [np.asarray(model_obj.starts(g[i, valid[i]], t[i, valid[i]], y[i, valid[i]]))
                       for i in range(b)]
         k0 = min(len(x) for x in per_subset)
-        extra = np.stack([x[:k0] for x in per_subset])  # (B, k0, P)
-    else:
-        extra = np.empty((b, 0, model_obj.n_nonlinear))
-    all_cands = np.concatenate([np.broadcast_to(cands, (b,) + cands.shape), extra], axis=1)
-    all_cands = np.clip(all_cands, model_obj.z_lower, model_obj.z_upper)
+        extra = np.clip(np.stack([x[:k0] for x in per_subset]), model_obj.z_lower,
+                        model_obj.z_upper)  # (B, k0, P)
+        rep_e = lambda a: np.repeat(a, k0, axis=0)  # noqa: E731
+        cost_extra = _screen_costs(model_obj, {key: rep_e(v) for key, v in geom.items()},
+                                   extra.reshape(b * k0, -1), rep_e(sw),
+                                   rep_e(sw * y)).reshape(b, k0)
+        parts_z.append(extra)
+        parts_cost.append(cost_extra)
+    all_cands = np.concatenate(parts_z, axis=1)
+    screen = np.concatenate(parts_cost, axis=1)
     c = all_cands.shape[1]
-    rep_c = lambda a: np.repeat(a, c, axis=0)  # noqa: E731
-    geom_c = {k: rep_c(v) for k, v in geom.items()}
-    screen = _screen_costs(model_obj, geom_c, all_cands.reshape(b * c, -1), rep_c(sw),
-                           rep_c(sw * y)).reshape(b, c)
     keep = min(n_keep, c)
     best_idx = np.argsort(screen, axis=1, kind="stable")[:, :keep]
     starts = np.take_along_axis(all_cands, best_idx[:, :, None], axis=1)  # (B, keep, P)

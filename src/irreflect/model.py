@@ -104,11 +104,14 @@ def take_geometry(geom: dict, idx) -> dict:
     return {k: v[idx] for k, v in geom.items()}
 
 
-def _lobe_from_log(log_cos, positive, n):
-    """Lobe ``(n+1)/(2 pi) cos^n`` and ``d lobe / d n`` from a precomputed ``log cos``."""
+def _lobe_from_log(log_cos, positive, n, derivative=True):
+    """Lobe ``(n+1)/(2 pi) cos^n`` and ``d lobe / d n`` (None unless ``derivative``) from a
+    precomputed ``log cos``."""
     # callers run under np.errstate(under="ignore"): cos^n underflows to 0 for sharp lobes
     power = np.exp(n * log_cos) * positive
     lobe = (n + 1.0) * (1.0 / TWO_PI) * power
+    if not derivative:
+        return lobe, None
     return lobe, power * (1.0 / TWO_PI) + lobe * log_cos
 
 
@@ -375,8 +378,8 @@ def _two_lobe_basis(geom, z, derivatives=True):
     share_shape = np.exp(v_as * log_cg)  # a_s / u_as = cos^v_as(gamma)
     n_d = np.exp(ln_u_nd + v_nd * log_cg)
     n_s = np.exp(ln_u_ns + v_ns * log_cg)
-    lobe_d, dlobe_d = _lobe_from_log(geom["log_cos_theta"], geom["pos_theta"], n_d)
-    lobe_s, dlobe_s = _lobe_from_log(geom["log_cos_phi"], geom["pos_phi"], n_s)
+    lobe_d, dlobe_d = _lobe_from_log(geom["log_cos_theta"], geom["pos_theta"], n_d, derivatives)
+    lobe_s, dlobe_s = _lobe_from_log(geom["log_cos_phi"], geom["pos_phi"], n_s, derivatives)
     # P = K * lobe_d + (K u_as) * cos^v_as(gamma) * (lobe_s - lobe_d)
     b2 = share_shape * (lobe_s - lobe_d)
     shape = b2.shape
