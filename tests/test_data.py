@@ -77,7 +77,8 @@ def test_missing_file_and_unknown_type(tmp_path):
 
 def test_duplicates_averaged_on_request(tmp_path):
     text = "gamma_deg,theta_deg,power,sigma\n-10,0,1,0.3\n-10,0,2,0.4\n-10,5,3,0.1\n"
-    m = read_measurements(_csv(tmp_path, text), average_duplicates=True)
+    with pytest.warns(DataNotice, match="averaged 1 duplicated"):
+        m = read_measurements(_csv(tmp_path, text), average_duplicates=True)
     assert m.n_points == 2
     assert m.power[m.theta_deg == 0][0] == pytest.approx(1.5)
     assert m.sigma[m.theta_deg == 0][0] == pytest.approx(0.25)  # sqrt(0.09+0.16)/2
@@ -98,7 +99,8 @@ def test_positive_gammas_read_as_magnitudes_and_said_once(tmp_path):
 def test_small_negative_power_is_kept_and_reported():
     df = pd.DataFrame({"gamma_deg": [-10, -10, -10], "theta_deg": [0, 10, 20],
                        "power": [1.0, 0.5, -0.01]})
-    m = validate_table(df)
+    with pytest.warns(DataNotice, match="1 slightly negative power"):
+        m = validate_table(df)
     assert m.power[2] == -0.01
     assert any("slightly negative" in n for n in m.notes)
 

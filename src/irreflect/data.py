@@ -159,7 +159,6 @@ def validate_table(df: pd.DataFrame, source: str = "table", *,
         note = (f"{source}: all gamma_deg >= 0, read as magnitudes (gamma = -|gamma|) with the "
                 "mirror direction on the positive-theta side")
         notes.append(note)
-        warnings.warn(note, DataNotice, stacklevel=3)
     material = None
     if "material" in df.columns:
         mats = df["material"].dropna().astype(str).unique()
@@ -204,6 +203,8 @@ def validate_table(df: pd.DataFrame, source: str = "table", *,
             )
         notes.append(f"{source}: {int(neg.sum())} slightly negative power value(s) kept as noise "
                      "around zero")
+    for note in notes:  # said once per table; the CLI prints them as "irreflect: note: ..."
+        warnings.warn(note, DataNotice, stacklevel=3)
     return Measurements(
         gamma_deg=gamma, theta_deg=theta, power=power, sigma=sigma, material=material,
         name=name or Path(str(source)).stem, notes=tuple(notes),
