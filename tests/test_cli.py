@@ -65,3 +65,14 @@ def test_too_few_points_for_the_model(tmp_path, capsys):
         f"-20,{t},{0.1 + t / 1000}\n" for t in range(-30, 30, 10)))
     assert main(["fit", str(small)]) == 2
     assert "found 6 points while at least 7 are needed" in capsys.readouterr().err
+
+
+def test_every_command_is_listed_and_each_builds_alone():
+    from irreflect.cli import COMMANDS, build_parser
+
+    full = build_parser()
+    listed = set(full._subparsers._group_actions[0].choices)
+    assert listed == set(COMMANDS)
+    for command in COMMANDS:
+        alone = build_parser(command)
+        assert command in alone._subparsers._group_actions[0].choices

@@ -18,7 +18,6 @@ import time
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy.stats import qmc
 
 from . import metrics
 from .errors import FitError, IrreflectError
@@ -316,12 +315,19 @@ _SCREEN_CACHE: dict = {}
 
 
 def screen_samples(model, n: int, seed: int) -> np.ndarray:
-    """``n`` scrambled-Sobol points in the model's screening box (deterministic per seed)."""
+    """``n`` Latin-hypercube points in the model's screening box (deterministic per seed).
+
+    Every coordinate's range is cut into ``n`` strata and each stratum is sampled once
+    (McKay, Beckman and Conover 1979). Plain numpy on purpose: ``scipy.stats.qmc`` would
+    cost every command a second of import time for the same coverage of the box.
+    """
     key = (model.name, model.n_nonlinear, n, seed)
     if key not in _SCREEN_CACHE:
         lo, hi = model.screen_box()
-        sobol = qmc.Sobol(d=lo.size, scramble=True, seed=seed)
-        _SCREEN_CACHE[key] = lo + sobol.random(n) * (hi - lo)
+        rng = np.random.default_rng(seed)
+        strata = rng.permuted(np.tile(np.arange(n), (lo.size, 1)), axis=1).T
+        unit = (strata + rng.random((n, lo.size))) / n
+        _SCREEN_CACHE[key] = lo + unit * (hi - lo)
     return _SCREEN_CACHE[key]
 
 
@@ -374,7 +380,7 @@ def fit(measurements, model="two-lobe", *, seed: int = 0, n_random_starts: int =
         Random starts added to the data-driven ones.
     n_screen, n_keep : int
         Global screening: the projected cost is evaluated at the data-driven starts, the
-        random ones and ``n_screen`` scrambled-Sobol points of the model's plausible box
+        random ones and ``n_screen`` Latin-hypercube points of the model's plausible box
         (one batched evaluation); Levenberg-Marquardt then runs from the ``n_keep`` best.
     use_sigma : bool
         Weight by ``1 / sigma^2`` when the table has ``sigma``.
@@ -481,7 +487,7 @@ def fit_subsets(gamma_deg, theta_deg, power, masks, model="two-lobe", *, sigma=N
     """Fit the model to every subset in ``masks`` (B, n) independently, in one batch.
 
     Each subset fit sees only its own points. Its starting points are chosen by the same
-    global screening as :func:`fit`: ``n_screen`` scrambled-Sobol candidates of the model's
+    global screening as :func:`fit`: ``n_screen`` Latin-hypercube candidates of the model's
     plausible box (the same candidates for every subset; with ``data_starts`` also the
     model's data-driven guesses from the subset's own points) are scored by the projected
     cost **on the subset's points**, and Levenberg-Marquardt runs from the ``n_keep`` best.

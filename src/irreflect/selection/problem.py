@@ -71,7 +71,7 @@ class FitSettings:
         return dict(self.options)
 
 
-#: The search: a light global screening (16 Sobol candidates scored on the subset's points)
+#: The search: a light global screening (16 Latin-hypercube candidates scored on the subset's points)
 #: and one Levenberg-Marquardt start. Measured on terrazzo (pop 100, 100 generations, seeds
 #: 0-1): the same checked frontier (hypervolume within 3e-5) as fit_subsets' defaults
 #: (32 candidates, 2 starts) at 1.5-2x the speed; reported values are checked anyway.
