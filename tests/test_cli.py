@@ -64,7 +64,7 @@ def test_too_few_points_for_the_model(tmp_path, capsys):
     small.write_text("gamma_deg,theta_deg,power\n" + "".join(
         f"-20,{t},{0.1 + t / 1000}\n" for t in range(-30, 30, 10)))
     assert main(["fit", str(small)]) == 2
-    assert "found 6 points while at least 7 are needed" in capsys.readouterr().err
+    assert "found 6 points while at least 8 are needed" in capsys.readouterr().err
 
 
 def test_every_command_is_listed_and_each_builds_alone():

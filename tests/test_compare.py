@@ -230,9 +230,9 @@ def test_models_with_more_parameters_than_points_are_skipped_when_asked():
     t = np.tile([-30.0, 10.0, 40.0], 2)
     meas = Measurements(gamma_deg=g, theta_deg=t,
                         power=phong_power(np.radians(g), np.radians(t), 0.3, 10.0, 1.0))
-    with pytest.raises(IrreflectError, match="at least 7 are needed"):
+    with pytest.raises(IrreflectError, match="at least 8 are needed"):
         compare_models(meas, ["phong", "lafortune"])
     comp = compare_models(meas, ["phong", "lafortune"], skip_failures=True)
-    assert list(comp.scores) == ["phong"] and "at least 7" in comp.skipped["lafortune"]
+    assert list(comp.scores) == ["phong"] and "at least 8" in comp.skipped["lafortune"]
     assert comp.scores["phong"].r2 == pytest.approx(1.0, abs=1e-9)
     assert "skipped lafortune" in comp.format()

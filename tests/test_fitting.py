@@ -166,7 +166,7 @@ def test_fit_error_when_no_start_is_finite():
 
 def test_too_few_points_is_a_data_error():
     meas = synthetic().subset(np.arange(6))
-    with pytest.raises(DataError, match="found 6 points while at least 7 are needed"):
+    with pytest.raises(DataError, match="found 6 points while at least 8 are needed"):
         fit(meas)
 
 

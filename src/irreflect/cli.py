@@ -87,12 +87,13 @@ def _cmd_fit(args) -> int:
     if args.json:
         d = result.to_dict()
         print_json({k: d[k] for k in ("model", "params", "stderr", "r2", "rmse", "mse",
-                                      "n_points", "fit_ms")}
+                                      "n_points", "fit_ms", "converged", "message",
+                                      "at_bound", "ill_determined", "warnings")}
                    | {"polar_error_pct": result.polar_errors()})
     else:
         print(f"{meas.name}: {meas.n_points} points, angles of incidence "
               f"{', '.join(f'{g:g}' for g in meas.gammas)} deg")
-        print(result.report())
+        print(result.report(warnings=False))  # the warnings go to stderr
     return 0
 
 
@@ -197,13 +198,17 @@ def main(argv=None) -> int:
 
 
 def _print_notes(caught) -> None:
+    """Reader notes and fit warnings, each once, one line each, on stderr."""
     from .data import DataNotice
+    from .errors import FitWarning
 
     seen = set()
     for w in caught:
-        if issubclass(w.category, DataNotice) and str(w.message) not in seen:
+        kind = ("note" if issubclass(w.category, DataNotice) else
+                "warning" if issubclass(w.category, FitWarning) else None)
+        if kind and str(w.message) not in seen:
             seen.add(str(w.message))
-            print(f"irreflect: note: {w.message}", file=sys.stderr)
+            print(f"irreflect: {kind}: {w.message}", file=sys.stderr)
 
 
 if __name__ == "__main__":

@@ -258,13 +258,14 @@ def as_measurements(obj, **kwargs) -> Measurements:
     _fail(f"expected a measurement table (path, DataFrame or Measurements), found {type(obj).__name__}")
 
 
-def check_enough_points(n_points: int, model) -> None:
-    """Refuse a fit with fewer points than the model has parameters."""
+def check_enough_points(n_points: int, model, source: str = "table") -> None:
+    """Refuse a fit with no degree of freedom left: ``n_points <= n_params``."""
     k = model.n_params
-    if n_points < k:
+    if n_points <= k:
         _fail(
-            f"found {n_points} points while at least {k} are needed to fit the {k} parameters "
-            f"of '{model.name}': measure more points or choose a model with fewer parameters"
+            f"{source}: found {n_points} points while at least {k + 1} are needed to fit the "
+            f"{k} parameters of '{model.name}' with a degree of freedom left: measure more "
+            "points or choose a model with fewer parameters"
         )
 
 

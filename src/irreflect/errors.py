@@ -24,6 +24,12 @@ class FitError(RuntimeError):
     """A fit that did not reach a usable optimum; the message says why."""
 
 
+class FitWarning(UserWarning):
+    """A fit that is usable but not all it seems: not converged, a coefficient at a bound
+    of its physical range, ill-determined coefficients, or an unphysical share. Every
+    command prints these as one line each on stderr (``irreflect: warning: ...``)."""
+
+
 def unknown_name(kind: str, name: str, valid) -> UnknownNameError:
     """Build the one-line error for a registry look-up that failed."""
     import difflib

@@ -16,15 +16,17 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass, field
+from warnings import warn
 
 import numpy as np
 
 from . import metrics
-from .errors import FitError, IrreflectError
+from .errors import FitError, FitWarning, IrreflectError
 from .model import ReflectionModel, get_model, plane_geometry, take_geometry
 
 # ----------------------------------------------------------------------------- core solver
 _RIDGE = 1e-12
+_INVISIBLE = 1e-20  # squared: columns below 1e-10 of the largest column's norm
 _EYES = [np.eye(k) for k in range(8)]
 
 
@@ -59,13 +61,23 @@ def _solve_linear(bw, yw, nonneg):
     eye = _EYES[n_lin] if n_lin < len(_EYES) else np.eye(n_lin)
     diag = np.diagonal(gram, axis1=1, axis2=2)
     scale = np.maximum(diag, 1e-300)
-    inv = _small_inverse(gram + eye * (_RIDGE * scale)[:, :, None])
-    alpha = (inv @ rhs[:, :, None])[:, :, 0]
+    # a column 10^10 times smaller than the largest is left out (coefficient 0): only an
+    # astronomically large coefficient could make it count, i.e. a lobe whose peak lies
+    # outside every measured direction, which the data cannot support (and whose natural
+    # coefficients would not survive floating point)
+    free = diag > _INVISIBLE * diag.max(axis=1, keepdims=True)
+    if free.all():
+        inv = _small_inverse(gram + eye * (_RIDGE * scale)[:, :, None])
+        alpha = (inv @ rhs[:, :, None])[:, :, 0]
+    else:
+        both = free[:, :, None] & free[:, None, :]
+        g = gram * both + eye * np.where(free, _RIDGE * scale, 1.0)[:, :, None]
+        inv = _small_inverse(g) * both
+        alpha = (inv @ (rhs * free)[:, :, None])[:, :, 0]
     nonneg = np.asarray(nonneg, bool)
-    free = np.ones((m, n_lin), bool)
-    bad = (alpha < 0) & nonneg
+    bad = (alpha < 0) & nonneg & free
     if not bad.any():
-        return alpha, free, inv
+        return np.where(free, alpha, 0.0), free, inv
     # active set: drop the most negative coefficient of each offending problem and re-solve
     rows = np.nonzero(bad.any(axis=1))[0]
     for _ in range(n_lin):
@@ -122,6 +134,10 @@ def _levenberg_marquardt(model, geom, z0, sw, yw, max_iter=200, ftol=1e-10, xtol
         return _lm_loop(model, geom, z0, sw, yw, max_iter, ftol, xtol)
 
 
+#: Why the Levenberg-Marquardt iteration of one start ended (``_lm_loop``'s reason codes).
+STOP_FTOL, STOP_XTOL, STOP_STUCK, STOP_MAXITER, STOP_NONFINITE = 1, 2, 3, 4, 5
+
+
 def _lm_loop(model, geom, z0, sw, yw, max_iter, ftol, xtol):
     lo, hi = model.z_lower, model.z_upper
     z = np.clip(np.asarray(z0, float), lo, hi)
@@ -131,7 +147,7 @@ def _lm_loop(model, geom, z0, sw, yw, max_iter, ftol, xtol):
     nfev = np.ones(m, int)
     lam = np.full(m, 1e-3)
     active = np.isfinite(state["cost"])
-    converged = np.zeros(m, bool)
+    reason = np.where(active, 0, STOP_NONFINITE)
     eye = np.eye(p)
     diag_sel = eye.astype(bool)
     for _ in range(max_iter):
@@ -172,6 +188,7 @@ def _lm_loop(model, geom, z0, sw, yw, max_iter, ftol, xtol):
         small_gain = better & (gain <= ftol * np.maximum(st["cost"], 1e-300))
         stuck = lam_new > 1e10
         done = small_gain | small_step | stuck
+        why = np.where(small_gain, STOP_FTOL, np.where(small_step, STOP_XTOL, STOP_STUCK))
         if idx is None:
             nfev += 1
             lam = lam_new
@@ -181,7 +198,7 @@ def _lm_loop(model, geom, z0, sw, yw, max_iter, ftol, xtol):
                 for k in state:
                     state[k][better] = trial[k][better]
                 z[better] = z_trial[better]
-            converged |= done & ~stuck
+            reason = np.where(done, why, reason)
             active &= ~done
         else:
             nfev[idx] += 1
@@ -190,15 +207,47 @@ def _lm_loop(model, geom, z0, sw, yw, max_iter, ftol, xtol):
             for k in state:
                 state[k][acc] = trial[k][better]
             z[acc] = z_trial[better]
-            converged[idx[done & ~stuck]] = True
+            reason[idx[done]] = why[done]
             active[idx[done]] = False
-    return z, state, nfev, converged
+    reason[active] = STOP_MAXITER
+    return z, state, nfev, reason
+
+
+def _gauss_newton_decrease(model, geom, z, sw, yw):
+    """Cost decrease a full (bound-respecting) Gauss-Newton step predicts from ``z`` (M, P):
+    ``g' H^-1 g / 2`` over the coordinates not held at a bound. Near zero at a first-order
+    optimum whatever the scale of the data."""
+    with np.errstate(over="ignore", under="ignore", invalid="ignore", divide="ignore"):
+        st = _evaluate(model, geom, z, sw, yw)
+        jac = _kaufman_jacobian(st, sw)
+        grad = (jac.swapaxes(1, 2) @ st["resid"][:, :, None])[:, :, 0]
+        hess = jac.swapaxes(1, 2) @ jac
+        lo, hi = model.z_lower, model.z_upper
+        pinned = ((z <= lo + 1e-12) & (grad > 0)) | ((z >= hi - 1e-12) & (grad < 0))
+        keep = ~pinned
+        grad = np.where(keep, grad, 0.0)
+        eye = np.eye(z.shape[1])
+        hess = hess * (keep[:, :, None] & keep[:, None, :]) + eye * pinned[:, :, None]
+        scale = np.sqrt(np.maximum(np.diagonal(hess, axis1=1, axis2=2), 1e-300))
+        hs = hess / scale[:, :, None] / scale[:, None, :]
+        gs = grad / scale
+        step = np.linalg.lstsq(hs[0], gs[0], rcond=1e-10)[0] if len(z) == 1 else \
+            np.linalg.solve(hs + 1e-10 * eye, gs[:, :, None])[:, :, 0]
+        dec = 0.5 * np.sum(np.atleast_2d(gs) * np.atleast_2d(step), axis=1)
+    return np.where(np.isfinite(dec), dec, np.inf), st["cost"]
 
 
 # ----------------------------------------------------------------------------- results
-@dataclass(frozen=True)
+@dataclass(frozen=True, repr=False)
 class FitResult:
-    """Outcome of one fit. Frozen: the fitter is not kept inside it."""
+    """Outcome of one fit. Frozen: the fitter is not kept inside it.
+
+    Besides the coefficients and the quality measures, a result says how far it can be
+    trusted: ``converged`` and ``message`` (why the optimiser stopped), ``at_bound`` (the
+    coefficients that sit on a bound of their physical range), ``ill_determined`` (those
+    the data do not pin down: standard error larger than the value, or part of a
+    near-singular covariance) and ``warnings`` (one line each, printed by every command).
+    """
 
     model: str
     param_names: tuple[str, ...]
@@ -221,8 +270,18 @@ class FitResult:
     fit_ms: float
     seed: int
     cost: float
+    converged: bool = True
     message: str = "converged"
-    model_object: ReflectionModel | None = field(default=None, repr=False, compare=False)
+    at_bound: tuple[str, ...] = ()
+    ill_determined: tuple[str, ...] = ()
+    warnings: tuple[str, ...] = ()
+    model_object: ReflectionModel | None = field(default=None, compare=False)
+
+    def __repr__(self) -> str:
+        flags = "" if not self.warnings else f", {len(self.warnings)} warning(s)"
+        params = ", ".join(f"{k}={v:.4g}" for k, v in self.params.items())
+        return (f"FitResult(model={self.model!r}, n_points={self.n_points}, r2={self.r2:.6f}, "
+                f"{params}, converged={self.converged}{flags})")
 
     @property
     def params(self) -> dict[str, float]:
@@ -266,17 +325,26 @@ class FitResult:
             "nfev": self.nfev,
             "fit_ms": self.fit_ms,
             "seed": self.seed,
+            "converged": self.converged,
+            "message": self.message,
+            "at_bound": list(self.at_bound),
+            "ill_determined": list(self.ill_determined),
+            "warnings": list(self.warnings),
         }
 
-    def report(self) -> str:
-        """Readable fit report: coefficients with errors, quality, per-gamma polar error."""
+    def report(self, warnings: bool = True) -> str:
+        """Readable fit report: coefficients with errors, quality, per-gamma polar error,
+        then (with ``warnings``) the warnings, one line each."""
         lines = [
             f"model {self.model}: {self.n_points} points, {self.n_params} parameters, "
             f"{self.n_starts} starts, {self.nfev} evaluations, {self.fit_ms:.1f} ms",
+            f"{self.message}",
             f"{'parameter':<10}{'value':>14}{'std. error':>14}",
         ]
         for name, v, s in zip(self.param_names, self.values, self.stderr, strict=True):
-            lines.append(f"{name:<10}{v:>14.6g}{s:>14.3g}")
+            flag = "  at bound" if name in self.at_bound else (
+                "  ill-determined" if name in self.ill_determined else "")
+            lines.append(f"{name:<10}{v:>14.6g}{s:>14.3g}{flag}")
         lines.append(f"R^2 = {self.r2:.6f}   RMSE = {self.rmse:.6g}   MSE = {self.mse:.6g}")
         if self.sigma is not None:
             lines.append(f"reduced chi^2 = {self.chi2_reduced:.4g} (weighted by 1/sigma^2)")
@@ -284,23 +352,32 @@ class FitResult:
         if errors:
             lines.append("relative polar-area error per angle of incidence (section 5.3):")
             lines.append("  " + "  ".join(f"{g:g} deg: {e:.2f}%" for g, e in errors.items()))
+        if warnings:
+            lines += [f"warning: {w}" for w in self.warnings]
         return "\n".join(lines)
 
 
 # ----------------------------------------------------------------------------- fit()
 def _covariance(model, z, alpha, gamma, theta, weights, absolute_sigma, cost, n_points):
-    """Covariance of the natural parameters from the Jacobian in (z, alpha)."""
-    basis, dbasis = model.basis(plane_geometry(gamma[None], theta[None]), z[None], True)
+    """Covariance of the natural parameters from the Jacobian in (z, alpha), and whether
+    the information matrix is near-singular (then the floored directions' natural
+    parameters are returned too)."""
+    with np.errstate(over="ignore", under="ignore", invalid="ignore", divide="ignore"):
+        basis, dbasis = model.basis(plane_geometry(gamma[None], theta[None]), z[None], True)
     jz = np.einsum("mnlp,ml->mnp", dbasis, alpha[None])[0]
     jfull = np.concatenate([jz, basis[0]], axis=1) * np.sqrt(weights)[:, None]
-    info = jfull.T @ jfull
+    # scale the columns so that the singularity test does not depend on units
+    col = np.sqrt(np.maximum(np.sum(jfull * jfull, axis=0), 1e-300))
+    info = (jfull / col).T @ (jfull / col)
     dof = max(n_points - model.n_params, 1)
     s2 = 1.0 if absolute_sigma else 2.0 * cost / dof
     # inverse through the symmetric eigen-decomposition; directions the data do not
     # determine keep a huge (floored) variance, so their standard errors show it
     evals, evecs = np.linalg.eigh(info)
-    evals = np.maximum(evals, 1e-14 * max(evals.max(), 1e-300))
-    cov_internal = (evecs / evals) @ evecs.T * s2
+    floor = 1e-12 * max(evals.max(), 1e-300)
+    weak = evals < floor
+    evals = np.maximum(evals, floor)
+    cov_internal = (evecs / evals) @ evecs.T * s2 / np.outer(col, col)
     # chain rule to natural parameters, by central differences of the smooth map (one batch)
     x0 = np.concatenate([z, alpha])
     p_dim = z.size
@@ -308,26 +385,64 @@ def _covariance(model, z, alpha, gamma, theta, weights, absolute_sigma, cost, n_
     pert = np.concatenate([x0 + np.diag(steps), x0 - np.diag(steps)])
     nat = model.to_natural(pert[:, :p_dim], pert[:, p_dim:])
     grad = ((nat[: x0.size] - nat[x0.size:]) / (2 * steps[:, None])).T
-    return grad @ cov_internal @ grad.T
+    # natural parameters with a share of their gradient (in the scaled internal
+    # coordinates) along the undetermined directions
+    g_scaled = grad / col
+    along = np.linalg.norm(g_scaled @ evecs[:, weak], axis=1) if weak.any() else \
+        np.zeros(grad.shape[0])
+    singular = along > 0.1 * np.maximum(np.linalg.norm(g_scaled, axis=1), 1e-300)
+    return grad @ cov_internal @ grad.T, singular
 
 
 _SCREEN_CACHE: dict = {}
+#: Default number of screening candidates by number of nonlinear coordinates: a full grid
+#: for one or two coordinates (the search is then exhaustive at the grid's resolution),
+#: a Latin hypercube beyond, 100 candidates per coordinate from 4 on (models with
+#: exchangeable lobes, n-lobe and Lafortune, have many equivalent basins). A model may set
+#: its own ``options["n_screen"]`` and ``options["n_keep"]``.
+DEFAULT_SCREEN = {0: 0, 1: 96, 2: 400, 3: 300}
+
+
+def default_screen(model) -> int:
+    if "n_screen" in model.options:
+        return int(model.options["n_screen"])
+    return DEFAULT_SCREEN.get(model.n_nonlinear, 100 * model.n_nonlinear)
+
+
+def default_keep(model) -> int:
+    """Levenberg-Marquardt starts from the screening: 3, or one per coordinate from 4 on."""
+    if "n_keep" in model.options:
+        return int(model.options["n_keep"])
+    return max(3, model.n_nonlinear if model.n_nonlinear >= 4 else 3)
 
 
 def screen_samples(model, n: int, seed: int) -> np.ndarray:
-    """``n`` Latin-hypercube points in the model's screening box (deterministic per seed).
+    """``n`` screening points in the model's screening box (deterministic per seed).
 
-    Every coordinate's range is cut into ``n`` strata and each stratum is sampled once
-    (McKay, Beckman and Conover 1979). Plain numpy on purpose: ``scipy.stats.qmc`` would
-    cost every command a second of import time for the same coverage of the box.
+    One or two nonlinear coordinates: a regular grid (``n`` points, or ``ceil(sqrt(n))``
+    per axis), which no narrow optimum can slip through. More: a Latin hypercube, every
+    coordinate's range cut into ``n`` strata each sampled once (McKay, Beckman and
+    Conover 1979). Plain numpy on purpose: ``scipy.stats.qmc`` would cost every command
+    a second of import time for the same coverage of the box.
     """
-    key = (model.name, model.n_nonlinear, n, seed)
+    key = (model.name, model.n_nonlinear, n, seed, tuple(np.concatenate(model.screen_box())))
     if key not in _SCREEN_CACHE:
         lo, hi = model.screen_box()
-        rng = np.random.default_rng(seed)
-        strata = rng.permuted(np.tile(np.arange(n), (lo.size, 1)), axis=1).T
-        unit = (strata + rng.random((n, lo.size))) / n
-        _SCREEN_CACHE[key] = lo + unit * (hi - lo)
+        p = lo.size
+        if p == 0 or n == 0:
+            out = np.empty((0, p))
+        elif p == 1:
+            out = np.linspace(lo, hi, n)
+        elif p == 2:
+            k = int(np.ceil(np.sqrt(n)))
+            a, b = np.meshgrid(np.linspace(lo[0], hi[0], k), np.linspace(lo[1], hi[1], k))
+            out = np.column_stack([a.ravel(), b.ravel()])
+        else:
+            rng = np.random.default_rng(seed)
+            strata = rng.permuted(np.tile(np.arange(n), (p, 1)), axis=1).T
+            unit = (strata + rng.random((n, p))) / n
+            out = lo + unit * (hi - lo)
+        _SCREEN_CACHE[key] = out
     return _SCREEN_CACHE[key]
 
 
@@ -349,24 +464,249 @@ def _projected_cost(model, basis, sw, yw):
     return cost
 
 
-def _candidates(model, gamma_rad, theta_rad, power, seed, n_random, n_screen):
-    """Data-driven starts, seeded random perturbations of the first, and screening samples."""
-    starts = np.asarray(model.starts(gamma_rad, theta_rad, power), float)
+def _diverse_best(z, cost, k, lo, hi, min_distance=0.08):
+    """Indices of up to ``k`` low-cost candidates that are apart from each other (distance
+    in the screening box scaled to the unit cube): starts in different basins."""
+    width = np.where(hi > lo, hi - lo, 1.0)
+    unit = (z - lo) / width
+    chosen: list[int] = []
+    for i in np.argsort(cost, kind="stable"):
+        if not np.isfinite(cost[i]):
+            break
+        if all(np.sqrt(np.mean((unit[i] - unit[j]) ** 2)) >= min_distance for j in chosen):
+            chosen.append(int(i))
+            if len(chosen) == k:
+                break
+    return np.array(chosen, int)
+
+
+def _scan_axes(model, n: int) -> list[np.ndarray]:
+    """For every nonlinear coordinate, ``n`` values spanning its screening box and its
+    bounds (within +-15): the values a global scan tries."""
+    lo, hi = model.screen_box()
+    zl = np.maximum(model.z_lower, -15.0)
+    zu = np.minimum(model.z_upper, 15.0)
+    return [np.linspace(min(lo[j], zl[j]), max(hi[j], zu[j]), n) for j in range(lo.size)]
+
+
+def _scan_blocks(model, n1: int = 33, n2: int = 17) -> list[tuple[np.ndarray, np.ndarray]]:
+    """The global scans of a refinement round: ``(coordinates, values (m, len))`` per block.
+
+    A model declares which coordinates belong together in ``options["groups"]`` (a lobe's
+    axis and index, a lobe's ``ln u`` and ``v``): pairs are scanned on a ``n2 x n2`` grid,
+    other coordinates one at a time on ``n1`` values (the default: every coordinate
+    alone)."""
+    groups = model.options.get("groups") or tuple((j,) for j in range(model.n_nonlinear))
+    axes_1, axes_2 = _scan_axes(model, n1), _scan_axes(model, n2)
+    blocks = []
+    for group in groups:
+        idx = np.asarray(group, int)
+        if idx.size == 2:
+            a, b = np.meshgrid(axes_2[idx[0]], axes_2[idx[1]])
+            blocks.append((idx, np.column_stack([a.ravel(), b.ravel()])))
+        else:
+            blocks += [(np.array([j]), axes_1[j][:, None]) for j in idx]
+    return blocks
+
+
+def _block_candidates(z_best, blocks) -> np.ndarray:
+    """Rows of ``z_best`` with each block's coordinates replaced by its scan values."""
+    rows = []
+    for idx, values in blocks:
+        cand = np.repeat(z_best[None], len(values), axis=0)
+        cand[:, idx] = values
+        rows.append(cand)
+    return np.vstack(rows)
+
+
+def _coordinate_scan(model, geom, z_best, cost_best, sw1, yw1):
+    """Global scans through the best point, one block of coordinates at a time.
+
+    A narrow lobe makes the cost multi-modal along its index (and a tilt along the tilt),
+    and lobes that can swap roles make it multi-modal along their axes: a local optimiser
+    stops in whichever basin it started. Every block (:func:`_scan_blocks`) is swept
+    over its whole range with the other coordinates held; each sweep's minimum that beats
+    the current cost is returned as a new start (empty when none does: the point is then
+    optimal along every block at the sweep's resolution)."""
+    blocks = _scan_blocks(model)
+    cand = _block_candidates(z_best, blocks)
+    cost = _screen_costs(model, geom, cand, sw1, np.broadcast_to(yw1, (len(cand), yw1.shape[1])))
+    out, start = [], 0
+    for _, values in blocks:
+        part = cost[start:start + len(values)]
+        j = int(np.argmin(part))
+        if part[j] < cost_best * (1.0 - 1e-9):
+            out.append(cand[start + j])
+        start += len(values)
+    return np.array(out).reshape(-1, z_best.size), len(cand)
+
+
+def _candidates(model, gamma_rad, theta_rad, power, seed, n_random):
+    """Data-driven starts, and seeded random perturbations of the first."""
+    starts = np.atleast_2d(np.asarray(model.starts(gamma_rad, theta_rad, power), float))
+    starts = starts.reshape(-1, model.n_nonlinear)
     parts = [starts]
-    if n_random:
+    if n_random and len(starts):
         rng = np.random.default_rng(seed)
         width = model.z_upper - model.z_lower
         jitter = rng.normal(0.0, 0.15, (n_random, starts.shape[1])) * np.minimum(width, 10.0)
         parts.append(starts[0] + jitter)
-    if n_screen:
-        parts.append(screen_samples(model, n_screen, seed))
-    return np.clip(np.vstack(parts), model.z_lower, model.z_upper)
+    out = np.clip(np.vstack(parts), model.z_lower, model.z_upper)
+    return np.unique(out, axis=0) if len(out) else out
+
+
+def check_fit_data(power, model, source: str = "table") -> None:
+    """Refuse tables no fit can be honest about: no degree of freedom left
+    (``n_points <= n_params``), non-finite or constant power."""
+    from .data import check_enough_points
+    from .errors import DataError
+
+    power = np.asarray(power)
+    n = power.size
+    check_enough_points(n, model, source)
+    if not np.all(np.isfinite(power)):
+        raise DataError(f"{source}: power has non-finite values: remove or fix those rows")
+    if np.ptp(power) == 0:
+        raise DataError(
+            f"{source}: power is constant ({power.flat[0]:g} at all {n} points): a reflection "
+            "model needs the power measured at varying angles; check the power column"
+        )
+
+
+def _fmt_bound(b):
+    return f"{b:g}"
+
+
+def judge(model, values, stderr, singular, gamma_rad, converged, message) -> tuple:
+    """(at_bound, ill_determined, warnings) of a fit: the checks every command prints."""
+    at_bound, detail = [], []
+    for p, v in zip(model.params, values, strict=True):
+        for side, b in (("lower", p.lower), ("upper", p.upper)):
+            if not np.isfinite(b):
+                continue
+            tol = 1e-6 * abs(b) if b != 0 else 1e-12
+            if (side == "lower" and v <= b + tol) or (side == "upper" and v >= b - tol):
+                at_bound.append(p.name)
+                detail.append(f"{p.name} = {v:.4g} ({side} bound {_fmt_bound(b)})")
+    ill, ill_detail = [], []
+    for p, v, s, sing in zip(model.params, values, stderr, singular, strict=True):
+        if not np.isfinite(s) or s > abs(v) or sing:
+            ill.append(p.name)
+            why = "near-singular covariance" if sing else "std. error > |value|"
+            ill_detail.append(f"{p.name} = {v:.4g} +- {s:.2g} ({why})")
+    warnings = []
+    if not converged:
+        warnings.append(f"not converged: {message}; the coefficients may not be the optimum")
+    if at_bound:
+        warnings.append(
+            "at a bound of the physical range: " + ", ".join(detail)
+            + ": the data push past the model's range or do not constrain it"
+        )
+    if ill:
+        warnings.append("ill-determined by these data: " + ", ".join(ill_detail)
+                        + ": measure more angles or fix these coefficients")
+    check = model.options.get("validity")
+    if check is not None:
+        warnings += list(check(values, gamma_rad))
+    return tuple(at_bound), tuple(ill), tuple(warnings)
+
+
+_STOP_MESSAGES = {
+    STOP_FTOL: "converged: relative change of the cost below {ftol:g}",
+    STOP_XTOL: "converged: step below {xtol:g}",
+    STOP_STUCK: "converged: no step lowers the cost further",
+    STOP_MAXITER: "iteration limit ({max_iter}) reached",
+    STOP_NONFINITE: "the cost is not finite at the start",
+}
+
+
+def _global_search(model_obj, gamma, theta, power, weights, *, seed, n_random_starts=2,
+                   n_screen=None, n_keep=None, n_data_starts=2, max_iter=200, max_rounds=3):
+    """The global search of :func:`fit` on one table (radians, power, weights): returns
+    ``(z, alpha, cost, converged, message, n_starts, n_evals)``, or None when no start
+    reaches a finite cost."""
+    geom = plane_geometry(gamma[None], theta[None])
+    sw1 = np.sqrt(weights)[None]
+    yw1 = sw1 * power
+    n_screen = default_screen(model_obj) if n_screen is None else int(n_screen)
+    n_keep = default_keep(model_obj) if n_keep is None else int(n_keep)
+    lo, hi = model_obj.screen_box()
+    # every candidate is scored by its projected cost in one batch; Levenberg-Marquardt
+    # starts from the best data-driven ones and from the best in different basins
+    own = _candidates(model_obj, gamma, theta, power, seed, n_random_starts)
+    cands = own
+    if n_screen and model_obj.n_nonlinear:
+        cands = np.vstack([own, np.clip(screen_samples(model_obj, n_screen, seed),
+                                        model_obj.z_lower, model_obj.z_upper)])
+    screen = _screen_costs(model_obj, geom, cands, sw1,
+                           np.broadcast_to(yw1, (len(cands), power.size)))
+    n_evals = len(cands)
+    first = _diverse_best(own, screen[: len(own)], n_data_starts, lo, hi, min_distance=1e-9)
+    others = _diverse_best(cands, screen, n_keep, lo, hi)
+    starts = cands[np.unique(np.concatenate([first, others]))]
+    if not len(starts):
+        starts = cands[:1]
+
+    def local(z0):
+        m = len(z0)
+        return _levenberg_marquardt(model_obj, geom, z0, np.broadcast_to(sw1, (m, power.size)),
+                                    np.broadcast_to(yw1, (m, power.size)), max_iter=max_iter)
+
+    z, state, nfev, reason = local(starts)
+    n_starts = len(starts)
+    n_evals += int(nfev.sum())
+    best = int(np.argmin(state["cost"]))
+    if not np.isfinite(state["cost"][best]):
+        return None
+    zb, ab, cb, rb = z[best], state["alpha"][best], float(state["cost"][best]), int(reason[best])
+    # refinement rounds: global line searches along every coordinate and, for models
+    # with many coordinates, seeded jumps around the best point (basin hopping, Wales and
+    # Doye 1997); Levenberg-Marquardt from all of them; stop when nothing improves
+    rng = np.random.default_rng([seed, 1])
+    n_hops = n_keep if model_obj.n_nonlinear >= 4 else 0
+    width = np.where(hi > lo, hi - lo, 1.0)
+    for _ in range(max_rounds if model_obj.n_nonlinear else 0):
+        extra, scanned = _coordinate_scan(model_obj, geom, zb, cb, sw1, yw1)
+        n_evals += scanned
+        hops = zb + rng.normal(0.0, 0.15, (n_hops, zb.size)) * width
+        extra = np.clip(np.vstack([extra, hops]), model_obj.z_lower, model_obj.z_upper)
+        if not len(extra):
+            break
+        z2, st2, nfev2, reason2 = local(extra)
+        n_starts += len(extra)
+        n_evals += int(nfev2.sum())
+        j = int(np.argmin(st2["cost"]))
+        if not st2["cost"][j] < cb * (1.0 - 1e-12):
+            break
+        zb, ab, cb, rb = z2[j], st2["alpha"][j], float(st2["cost"][j]), int(reason2[j])
+    converged = rb in (STOP_FTOL, STOP_XTOL)
+    if rb == STOP_STUCK or rb == STOP_MAXITER:
+        decrease, _ = _gauss_newton_decrease(model_obj, geom, zb[None], sw1, yw1)
+        converged = bool(decrease[0] <= 1e-6 * max(cb, 1e-300)) or cb == 0.0
+    message = _STOP_MESSAGES[rb].format(ftol=1e-10, xtol=1e-9, max_iter=max_iter)
+    if rb == STOP_MAXITER and converged:
+        message = f"converged: {message}, first-order optimal"
+    elif not converged and rb == STOP_STUCK:
+        message = "no step lowers the cost, but the gradient is not small"
+    return zb, ab, cb, converged, message, n_starts, n_evals
 
 
 def fit(measurements, model="two-lobe", *, seed: int = 0, n_random_starts: int = 2,
-        n_screen: int = 64, n_keep: int = 3, use_sigma: bool = True,
-        max_iter: int = 200) -> FitResult:
+        n_screen: int | None = None, n_keep: int | None = None, n_data_starts: int = 2,
+        use_sigma: bool = True, max_iter: int = 200, max_rounds: int = 3) -> FitResult:
     """Fit a reflection model to a measurement table by global least squares.
+
+    The search: (1) the model's data-driven starts (for the paper's models, from the
+    per-angle-of-incidence decomposition of :func:`irreflect.model.lobe_profile`: the
+    mirror peak, its width, the diffuse floor) and seeded random perturbations of them;
+    (2) a screening of the model's whole shape space (a grid for one or two nonlinear
+    coordinates, a Latin hypercube beyond); the projected cost of every candidate is
+    computed, and the ``n_data_starts`` best data-driven ones and the ``n_keep`` best
+    *in different basins* are kept; (3) a batched bounded Levenberg-Marquardt from all of them, with the
+    linear coefficients eliminated (variable projection); (4) global line searches through
+    the best point along every coordinate, and Levenberg-Marquardt again from any better
+    point, until none is found (at most ``max_rounds``). The scale of ``power`` does not
+    change the shape coefficients.
 
     Parameters
     ----------
@@ -375,81 +715,100 @@ def fit(measurements, model="two-lobe", *, seed: int = 0, n_random_starts: int =
     model : str or ReflectionModel
         Registry name (see :func:`irreflect.model.model_names`).
     seed : int
-        Seeds the random extra starts; the same seed gives the same result.
+        Seeds the random extra starts and the screening; the same seed gives the same result.
     n_random_starts : int
-        Random starts added to the data-driven ones.
-    n_screen, n_keep : int
-        Global screening: the projected cost is evaluated at the data-driven starts, the
-        random ones and ``n_screen`` Latin-hypercube points of the model's plausible box
-        (one batched evaluation); Levenberg-Marquardt then runs from the ``n_keep`` best.
+        Random perturbations of the first data-driven start.
+    n_screen, n_keep, n_data_starts : int
+        Number of screening candidates (default by model size, see :data:`DEFAULT_SCREEN`);
+        how many of all candidates, in different basins (default :func:`default_keep`),
+        and how many of the best data-driven ones start Levenberg-Marquardt.
     use_sigma : bool
         Weight by ``1 / sigma^2`` when the table has ``sigma``.
+    max_iter, max_rounds : int
+        Iteration limit of each local search; rounds of coordinate scans.
 
     Returns
     -------
     FitResult
+        With ``converged``, ``message``, ``at_bound``, ``ill_determined`` and ``warnings``.
 
     Raises
     ------
-    FitError
-        If no start reaches a finite optimum.
     DataError
-        If the table has fewer points than the model has parameters.
+        Constant or non-finite power, zero sigma, or no degree of freedom left.
+    FitError
+        No start reaches a finite optimum, non-finite coefficients, or a fit that cannot
+        beat a constant (R^2 <= 0).
     """
-    from .data import as_measurements, check_enough_points
+    from .data import as_measurements
 
     t0 = time.perf_counter()
     meas = as_measurements(measurements)
     model_obj = get_model(model)
-    check_enough_points(meas.n_points, model_obj)
+    source = getattr(meas, "name", None) or "table"
+    check_fit_data(meas.power, model_obj, source)
     gamma = np.radians(meas.gamma_deg)
     theta = np.radians(meas.theta_deg)
     power = meas.power
     sigma = meas.sigma if (use_sigma and meas.sigma is not None) else None
     if sigma is not None and np.any(sigma <= 0):
         raise IrreflectError(
-            "sigma must be > 0 to weight a fit by 1/sigma^2: found zero sigma; "
-            "drop the column or fit with use_sigma=False"
+            f"{source}: sigma must be > 0 to weight a fit by 1/sigma^2, found "
+            f"{int(np.sum(sigma <= 0))} zero or negative value(s): fix them or drop the "
+            "sigma column to fit unweighted"
         )
     weights = np.ones_like(power) if sigma is None else 1.0 / sigma**2
-    geom = plane_geometry(gamma[None], theta[None])
-    candidates = _candidates(model_obj, gamma, theta, power, seed, n_random_starts, n_screen)
-    sw1 = np.sqrt(weights)[None]
-    screen = _screen_costs(model_obj, geom, candidates, sw1,
-                           np.broadcast_to(sw1 * power, (len(candidates), power.size)))
-    order = np.argsort(screen, kind="stable")
-    starts = candidates[order[: max(1, min(n_keep, len(order)))]]
-    s = starts.shape[0]
-    sw = np.broadcast_to(sw1, (s, power.size)).copy()
-    yw = sw * power
-    z, state, nfev, _ = _levenberg_marquardt(model_obj, geom, starts, sw, yw, max_iter=max_iter)
-    nfev = nfev.sum() + len(candidates)
-    cost = state["cost"]
-    if not np.any(np.isfinite(cost)):
+    out = _global_search(model_obj, gamma, theta, power, weights, seed=seed,
+                         n_random_starts=n_random_starts, n_screen=n_screen, n_keep=n_keep,
+                         n_data_starts=n_data_starts, max_iter=max_iter, max_rounds=max_rounds)
+    if out is None:
         raise FitError(
-            f"fit of '{model_obj.name}' failed: no start reached a finite cost "
-            f"({len(candidates)} candidates screened, {s} starts tried); check the data for "
-            "extreme values"
+            f"fit of '{model_obj.name}' to {source} failed: no start reached a finite cost; "
+            "check the data for extreme values"
         )
-    best = int(np.argmin(cost))
-    zb, ab = z[best], state["alpha"][best]
+    zb, ab, cb, converged, message, n_starts, n_evals = out
     values = model_obj.to_natural(zb[None], ab[None])[0]
     if not np.all(np.isfinite(values)):
-        raise FitError(f"fit of '{model_obj.name}' ended at non-finite parameters {values}")
+        raise FitError(
+            f"fit of '{model_obj.name}' to {source} ended at non-finite parameters "
+            f"{np.array2string(values, precision=4)}: check the data for extreme values"
+        )
     fitted = model_obj.predict(values, gamma, theta)
+    with np.errstate(over="ignore", under="ignore", invalid="ignore", divide="ignore"):
+        basis, _ = model_obj.basis(plane_geometry(gamma[None], theta[None]), zb[None], False)
+    internal = basis[0] @ ab
+    if not np.allclose(fitted, internal, rtol=1e-6, atol=1e-9 * np.max(np.abs(power))):
+        raise FitError(
+            f"fit of '{model_obj.name}' to {source}: the coefficients "
+            f"{np.array2string(values, precision=4)} do not reproduce the fitted curve in "
+            "floating point (a share within 1e-16 of its bound): check the data for extreme "
+            "values"
+        )
     resid = power - fitted
-    cov = _covariance(model_obj, zb, ab, gamma, theta, weights, sigma is not None,
-                      float(cost[best]), meas.n_points)
-    dof = max(meas.n_points - model_obj.n_params, 1)
-    chi2 = float(2 * cost[best] / dof) if sigma is not None else float("nan")
+    r2 = metrics.r2(power, fitted)
+    if not np.isfinite(r2) or r2 <= 0:
+        raise FitError(
+            f"fit of '{model_obj.name}' to {source} cannot beat a constant (R^2 = {r2:.4g} "
+            "<= 0): check that power is the reflected power and that the angles follow the "
+            "convention (gamma < 0 on the source side, mirror at theta = -gamma)"
+        )
+    cov, singular = _covariance(model_obj, zb, ab, gamma, theta, weights, sigma is not None,
+                                cb, meas.n_points)
+    stderr = np.sqrt(np.clip(np.diag(cov), 0, None))
+    at_bound, ill, warnings = judge(model_obj, values, stderr, singular, gamma, converged,
+                                    message)
+    for text in warnings:
+        warn(FitWarning(f"{source}, {model_obj.name}: {text}"), stacklevel=2)
+    dof = meas.n_points - model_obj.n_params
+    chi2 = float(2 * cb / dof) if sigma is not None else float("nan")
     elapsed = (time.perf_counter() - t0) * 1e3
     return FitResult(
         model=model_obj.name,
         param_names=model_obj.param_names,
         values=values,
-        stderr=np.sqrt(np.clip(np.diag(cov), 0, None)),
+        stderr=stderr,
         covariance=cov,
-        r2=metrics.r2(power, fitted),
+        r2=r2,
         rmse=metrics.rmse(power, fitted),
         mse=metrics.mse(power, fitted),
         chi2_reduced=chi2,
@@ -460,11 +819,16 @@ def fit(measurements, model="two-lobe", *, seed: int = 0, n_random_starts: int =
         sigma=None if sigma is None else sigma.copy(),
         n_points=meas.n_points,
         n_params=model_obj.n_params,
-        nfev=int(nfev),
-        n_starts=s,
+        nfev=int(n_evals),
+        n_starts=n_starts,
         fit_ms=elapsed,
         seed=seed,
-        cost=float(cost[best]),
+        cost=cb,
+        converged=converged,
+        message=message,
+        at_bound=at_bound,
+        ill_determined=ill,
+        warnings=warnings,
         model_object=model_obj,
     )
 
@@ -479,22 +843,46 @@ class SubsetFits:
     cost: np.ndarray  # (B,) weighted least-squares cost on the subset
     failed: np.ndarray  # (B,) bool
     nfev: int
+    converged: np.ndarray | None = None  # (B,) bool: the local search met its tolerance
+
+
+def _subset_data_starts(model, gamma, theta, power, weights, g, t, y, valid):
+    """Data-driven starts of every subset from its own points: ``(B, S, P)``.
+
+    Batched (one call for all subsets) when the model offers ``batch_starts``; otherwise
+    the model's ``starts`` per subset (the same number of rows for every subset)."""
+    batch = model.options.get("batch_starts")
+    if batch is not None:
+        return np.asarray(batch(gamma, theta, power, weights), float)
+    per_subset = [np.atleast_2d(np.asarray(model.starts(g[i, valid[i]], t[i, valid[i]],
+                                                        y[i, valid[i]]), float))
+                  for i in range(g.shape[0])]
+    k0 = min(len(x) for x in per_subset)
+    return np.stack([x[:k0] for x in per_subset])
 
 
 def fit_subsets(gamma_deg, theta_deg, power, masks, model="two-lobe", *, sigma=None,
                 max_iter: int = 40, ftol: float = 1e-8, n_screen: int = 32, n_keep: int = 2,
-                data_starts: bool = False, seed: int = 0) -> SubsetFits:
+                data_starts: bool = True, n_data_starts: int = 1, scan: bool = False,
+                exhaustive: bool = False, seed: int = 0) -> SubsetFits:
     """Fit the model to every subset in ``masks`` (B, n) independently, in one batch.
 
-    Each subset fit sees only its own points. Its starting points are chosen by the same
-    global screening as :func:`fit`: ``n_screen`` Latin-hypercube candidates of the model's
-    plausible box (the same candidates for every subset; with ``data_starts`` also the
-    model's data-driven guesses from the subset's own points) are scored by the projected
-    cost **on the subset's points**, and Levenberg-Marquardt runs from the ``n_keep`` best.
-    Nothing from the points outside the subset is used. The fit's R^2 is then measured
-    against all ``n`` points, as a technician who measured only that subset would get.
-    Subsets with fewer points than parameters, or whose fit fails, are marked failed with
-    R^2 = 0 (score 1 - R^2 = 1).
+    Each subset fit sees only its own points. Its starts are chosen as in :func:`fit`:
+    ``n_screen`` screening candidates of the model's shape space (the same for every
+    subset) and, with ``data_starts``, the model's data-driven starts from the subset's
+    own points (for the paper's models, its per-angle lobe decomposition, batched over
+    all subsets) are scored by the projected cost **on the subset's points**;
+    Levenberg-Marquardt runs from the best data-driven start and the ``n_keep`` best
+    candidates. With ``scan``, global line searches along every coordinate follow (as in
+    :func:`fit`), and Levenberg-Marquardt again from any better point. Nothing from the
+    points outside the subset is used. The fit's R^2 is then measured against all ``n``
+    points, as a technician who measured only that subset would get. Subsets with fewer
+    points than parameters, or whose fit fails, are marked failed with R^2 = 0 (score
+    1 - R^2 = 1).
+
+    With ``exhaustive``, every subset gets the complete search of :func:`fit` (one
+    subset at a time; the screening options above are then ignored): the subset fit is
+    then exactly ``fit`` on the subset's table, for the final check of reported subsets.
     """
     model_obj = get_model(model)
     gamma = np.radians(np.asarray(gamma_deg, float))
@@ -502,9 +890,13 @@ def fit_subsets(gamma_deg, theta_deg, power, masks, model="two-lobe", *, sigma=N
     power = np.asarray(power, float)
     masks = np.atleast_2d(np.asarray(masks, bool))
     b, n = masks.shape
+    p_dim = model_obj.n_nonlinear
     weights_all = np.ones(n) if sigma is None else 1.0 / np.asarray(sigma, float) ** 2
     counts = masks.sum(axis=1)
     ok = counts >= model_obj.n_params
+    if exhaustive:
+        return _fit_subsets_one_by_one(model_obj, gamma, theta, power, masks, weights_all, ok,
+                                       seed)
     n_max = max(int(counts.max()) if b else 0, 1)
     # gather every subset into a padded (B, n_max) problem with zero weight on padding
     order = np.argsort(~masks, axis=1, kind="stable")[:, :n_max]
@@ -512,14 +904,24 @@ def fit_subsets(gamma_deg, theta_deg, power, masks, model="two-lobe", *, sigma=N
     g, t, y = gamma[order], theta[order], power[order]
     sw = np.sqrt(np.where(valid, weights_all[order], 0.0))
     geom = plane_geometry(g, t)
-    # global screening, per subset, on the subset's own points. The shared candidates'
-    # basis is computed once on all points and gathered per subset (the same numbers as
-    # computing it on each subset, without the repeated trigonometry and powers).
-    cands = screen_samples(model_obj, n_screen, seed) if n_screen else \
-        np.empty((0, model_obj.n_nonlinear))
+    cands = screen_samples(model_obj, n_screen, seed) if n_screen else np.empty((0, p_dim))
     cands = np.clip(cands, model_obj.z_lower, model_obj.z_upper)
     parts_z, parts_cost = [], []
+    n_data = 0
+    if data_starts or not len(cands):
+        extra = _subset_data_starts(model_obj, gamma, theta, power, masks * weights_all,
+                                    g, t, y, valid)
+        extra = np.clip(extra, model_obj.z_lower, model_obj.z_upper)  # (B, S, P)
+        n_data = extra.shape[1]
+        rep_e = lambda a: np.repeat(a, n_data, axis=0)  # noqa: E731
+        cost_extra = _screen_costs(model_obj, {key: rep_e(v) for key, v in geom.items()},
+                                   extra.reshape(b * n_data, -1), rep_e(sw),
+                                   rep_e(sw * y)).reshape(b, n_data)
+        parts_z.append(extra)
+        parts_cost.append(cost_extra)
     if len(cands):
+        # the shared candidates' basis is computed once on all points and gathered per
+        # subset (the same numbers as on each subset, without the repeated trigonometry)
         with np.errstate(over="ignore", under="ignore", invalid="ignore", divide="ignore"):
             basis_all, _ = model_obj.basis(plane_geometry(gamma[None], theta[None]), cands, False)
         gathered = basis_all[:, order, :].transpose(1, 0, 2, 3)  # (B, C, n_max, L)
@@ -529,34 +931,32 @@ def fit_subsets(gamma_deg, theta_deg, power, masks, model="two-lobe", *, sigma=N
                                       rep_k(sw * y)).reshape(b, k)
         parts_z.append(np.broadcast_to(cands, (b,) + cands.shape))
         parts_cost.append(cost_shared)
-    if data_starts or not len(cands):
-        per_subset = [np.asarray(model_obj.starts(g[i, valid[i]], t[i, valid[i]], y[i, valid[i]]))
-                      for i in range(b)]
-        k0 = min(len(x) for x in per_subset)
-        extra = np.clip(np.stack([x[:k0] for x in per_subset]), model_obj.z_lower,
-                        model_obj.z_upper)  # (B, k0, P)
-        rep_e = lambda a: np.repeat(a, k0, axis=0)  # noqa: E731
-        cost_extra = _screen_costs(model_obj, {key: rep_e(v) for key, v in geom.items()},
-                                   extra.reshape(b * k0, -1), rep_e(sw),
-                                   rep_e(sw * y)).reshape(b, k0)
-        parts_z.append(extra)
-        parts_cost.append(cost_extra)
     all_cands = np.concatenate(parts_z, axis=1)
     screen = np.concatenate(parts_cost, axis=1)
     c = all_cands.shape[1]
-    keep = min(n_keep, c)
-    best_idx = np.argsort(screen, axis=1, kind="stable")[:, :keep]
+    picks = [np.argsort(screen, axis=1, kind="stable")[:, :min(n_keep, c)]]
+    if n_data:
+        picks.append(np.argsort(screen[:, :n_data], axis=1, kind="stable")[:, :n_data_starts])
+    best_idx = np.concatenate(picks, axis=1)
+    keep = best_idx.shape[1]
     starts = np.take_along_axis(all_cands, best_idx[:, :, None], axis=1)  # (B, keep, P)
     rep = lambda a: np.repeat(a, keep, axis=0)  # noqa: E731
-    z, state, nfev, _ = _levenberg_marquardt(
+    z, state, nfev, reason = _levenberg_marquardt(
         model_obj, {k: rep(v) for k, v in geom.items()}, starts.reshape(b * keep, -1),
         rep(sw), rep(sw * y), max_iter=max_iter, ftol=ftol,
     )
+    nfev_total = int(nfev.sum()) + b * c
     cost = state["cost"].reshape(b, keep)
     best = np.argmin(cost, axis=1)
     flat = np.arange(b) * keep + best
-    params = model_obj.to_natural(z[flat], state["alpha"][flat])
+    zb, ab = z[flat], state["alpha"][flat]
     best_cost = cost[np.arange(b), best]
+    conv = np.isin(reason[flat], (STOP_FTOL, STOP_XTOL, STOP_STUCK))
+    if scan and p_dim:
+        zb, ab, best_cost, conv, extra_fev = _scan_subsets(model_obj, geom, zb, ab, best_cost,
+                                                           conv, sw, y, max_iter, ftol)
+        nfev_total += extra_fev
+    params = model_obj.to_natural(zb, ab)
     failed = ~ok | ~np.isfinite(best_cost) | ~np.all(np.isfinite(params), axis=1)
     safe = np.where(failed[:, None], _placeholder_params(model_obj, params), params)
     pred = model_obj.predict(safe, gamma, theta)
@@ -564,7 +964,64 @@ def fit_subsets(gamma_deg, theta_deg, power, masks, model="two-lobe", *, sigma=N
     r2_all = np.where(failed | ~np.isfinite(r2_all), 0.0, r2_all)
     params = np.where(failed[:, None], np.nan, params)
     return SubsetFits(params=params, r2_all=r2_all, cost=np.where(failed, np.inf, best_cost),
-                      failed=failed, nfev=int(nfev.sum()) + b * c)
+                      failed=failed, nfev=nfev_total, converged=conv & ~failed)
+
+
+def _fit_subsets_one_by_one(model, gamma, theta, power, masks, weights, ok, seed):
+    """``fit``'s global search on every subset in turn (see :func:`fit_subsets`)."""
+    b = masks.shape[0]
+    zs = np.full((b, model.n_nonlinear), np.nan)
+    alphas = np.full((b, model.n_linear), np.nan)
+    cost = np.full(b, np.inf)
+    conv = np.zeros(b, bool)
+    nfev = 0
+    for i in np.flatnonzero(ok):
+        m = masks[i]
+        out = _global_search(model, gamma[m], theta[m], power[m], weights[m], seed=seed)
+        if out is None:
+            continue
+        zs[i], alphas[i], cost[i], conv[i], _, _, evals = out
+        nfev += evals
+    params = model.to_natural(np.where(np.isfinite(zs), zs, 0.0),
+                              np.where(np.isfinite(alphas), alphas, 0.0))
+    failed = ~ok | ~np.isfinite(cost) | ~np.all(np.isfinite(params), axis=1)
+    safe = np.where(failed[:, None], _placeholder_params(model, params), params)
+    r2_all = np.asarray(metrics.r2(power, model.predict(safe, gamma, theta)), float).reshape(b)
+    r2_all = np.where(failed | ~np.isfinite(r2_all), 0.0, r2_all)
+    return SubsetFits(params=np.where(failed[:, None], np.nan, params), r2_all=r2_all,
+                      cost=np.where(failed, np.inf, cost), failed=failed, nfev=nfev,
+                      converged=conv & ~failed)
+
+
+def _scan_subsets(model, geom, zb, ab, cost, conv, sw, y, max_iter, ftol, rounds=2):
+    """:func:`_coordinate_scan` for every subset of a batch, and Levenberg-Marquardt from
+    the best point found per subset; returns the updated (z, alpha, cost, converged, nfev)."""
+    blocks = _scan_blocks(model)
+    b = zb.shape[0]
+    nfev = 0
+    for _ in range(rounds):
+        cand = np.stack([_block_candidates(zb[i], blocks) for i in range(b)])  # (B, m, P)
+        m = cand.shape[1]
+        rep = lambda a: np.repeat(a, m, axis=0)  # noqa: E731
+        sc = _screen_costs(model, {k: rep(v) for k, v in geom.items()}, cand.reshape(b * m, -1),
+                           rep(sw), rep(sw * y)).reshape(b, m)
+        nfev += b * m
+        j = np.argmin(sc, axis=1)
+        improve = sc[np.arange(b), j] < cost * (1.0 - 1e-9)
+        if not improve.any():
+            break
+        rows = np.flatnonzero(improve)
+        sub = {k: v[rows] for k, v in geom.items()}
+        z2, st2, nf2, reason2 = _levenberg_marquardt(model, sub, cand[rows, j[rows]], sw[rows],
+                                                     sw[rows] * y[rows], max_iter=max_iter,
+                                                     ftol=ftol)
+        nfev += int(nf2.sum())
+        better = st2["cost"] < cost[rows]
+        upd = rows[better]
+        zb, ab, cost, conv = zb.copy(), ab.copy(), cost.copy(), conv.copy()
+        zb[upd], ab[upd], cost[upd] = z2[better], st2["alpha"][better], st2["cost"][better]
+        conv[upd] = np.isin(reason2[better], (STOP_FTOL, STOP_XTOL, STOP_STUCK))
+    return zb, ab, cost, conv, nfev
 
 
 def _placeholder_params(model_obj, params):

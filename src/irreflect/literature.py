@@ -655,7 +655,8 @@ def make_lafortune(n_lobes: int = 2) -> ReflectionModel:
         formula="K cos(theta) [(1-sum a_i)/pi + sum_i a_i (n_i+2)/2pi "
         "(Cx_i sin(gamma) sin(theta) + cos(gamma) cos(theta))^n_i]",
         reference="Lafortune, Foo, Torrance and Greenberg 1997 (the paper's ref. 20)",
-        options={"n_lobes": n_lobes},
+        options={"n_lobes": n_lobes,
+                 "groups": tuple((2 * i, 2 * i + 1) for i in range(n_lobes))},
         **_screen(np.tile([-1.2, np.log(1.0)], n_lobes), np.tile([0.5, np.log(3000.0)], n_lobes)),
     )
 

@@ -187,6 +187,17 @@ def apply_extension(base: ReflectionModel, ext: Extension) -> ReflectionModel:
         "extensions": applied_extensions(base) + (ext.name,),
         "extension": ext,
     }
+    if "validity" in base.options:  # checks on the wrapped model's (leading) parameters
+        options["validity"] = base.options["validity"]
+    if "batch_starts" in base.options:  # the wrapped model's starts, new coordinates neutral
+        base_batch = base.options["batch_starts"]
+
+        def batch_starts(gamma, theta, power, weights):
+            sb = np.asarray(base_batch(gamma, theta, power, weights), float)
+            tail = np.broadcast_to(ext_starts[0], sb.shape[:2] + (pe,))
+            return np.concatenate([sb, tail], axis=2)
+
+        options["batch_starts"] = batch_starts
     return ReflectionModel(
         name=f"{base.name}+{ext.name}",
         params=tuple(base.params) + tuple(ext.params),
@@ -202,6 +213,12 @@ def apply_extension(base: ReflectionModel, ext: Extension) -> ReflectionModel:
         formula=f"{base.formula}; {ext.name}: {ext.formula}",
         reference=ext.reference or base.reference,
         options=options,
+        # the wrapped model's screening box (chosen for its physics), and the new
+        # coordinates' bounds
+        screen_lower=np.concatenate([base.screen_box()[0],
+                                     np.maximum(np.asarray(ext.z_lower, float), -15.0)]),
+        screen_upper=np.concatenate([base.screen_box()[1],
+                                     np.minimum(np.asarray(ext.z_upper, float), 15.0)]),
     )
 
 

@@ -162,6 +162,22 @@ class RobustnessResult:
         }
 
 
+def _structural_reasons(model_obj, g0, t0, power, seed, reasons) -> list[str]:
+    """Coefficients the protocol's angles cannot determine whatever the noise: those in
+    a near-singular direction of the information matrix of the error-free fit (e.g. every
+    ``v`` of Eqs. 15-18 when all points share one angle of incidence). A Monte Carlo
+    alone can miss them: a degenerate coefficient may simply stay at its start."""
+    from ..errors import FitError
+
+    try:
+        nominal = fit(Measurements(g0, t0, power, name="protocol"), model_obj, seed=seed)
+    except (FitError, IrreflectError):
+        return []
+    named = {r.split(":")[0] for r in reasons}
+    return [f"{name}: not determined by these angles (near-singular information matrix)"
+            for name in nominal.ill_determined if name not in named]
+
+
 def protocol_robustness(protocol, reference, *, model=None, dense=None, n_trials: int = 200,
                         angle_error_deg: float = 1.0, power_noise: float = 0.01,
                         power_noise_abs: float = 0.0, seed: int = 0, max_iter: int = 100,
@@ -267,6 +283,7 @@ def protocol_robustness(protocol, reference, *, model=None, dense=None, n_trials
     spread = _robust_sd(ok)
     reasons = ill_determined(model_obj, scale, spread, corr, relative_limit=relative_limit,
                              correlation_limit=correlation_limit)
+    reasons += _structural_reasons(model_obj, g0, t0, nominal_power[0], seed, reasons)
     return RobustnessResult(
         protocol=protocol.name, model=model_obj.name, param_names=model_obj.param_names,
         reference=np.asarray(truth, float), nominal=nominal, samples=samples, r2=r2_trials,
