@@ -14,7 +14,38 @@ def _cmd_protocol(args) -> int:
     fmt = args.format or (format_from_path(args.out) if args.out else "csv")
     if fmt not in FORMATS:
         raise IrreflectError(f"--format must be one of {', '.join(FORMATS)}; found '{fmt}'")
-    if args.design_from:
+    if args.lobe_from:
+        from ..data import read_measurements
+        from .evaluate import glossy_protocol_for
+
+        if args.n is not None or args.gamma_settings is not None:
+            raise IrreflectError("--n and --gamma-settings apply to --design-from, not to "
+                                 "--lobe-from (which always gives 12 points)")
+        pilot = read_measurements(args.lobe_from, average_duplicates=args.average_duplicates)
+        protocol = glossy_protocol_for(pilot, theta_min=args.theta_min,
+                                       theta_max=args.theta_max, seed=args.seed,
+                                       wide_offset=args.wide_offset,
+                                       central_offset=args.central_offset)
+        print(f"irreflect: note: glossy-aware protocol designed from {pilot.name}: gammas "
+              f"{', '.join(f'{g:g}' for g in protocol.settings['gammas_deg'])} deg, layout "
+              f"{protocol.settings['layout']}, lobe offsets "
+              f"{', '.join(f'{w:g}' for w in protocol.settings['lobe_offsets_deg'].values())} "
+              f"deg, R^2 {protocol.settings['pilot_r2']:.4f} on the pilot's points",
+              file=sys.stderr)
+    elif args.specular_index is not None:
+        from .core import glossy_protocol
+
+        if args.n is not None or args.gamma_settings is not None:
+            raise IrreflectError("--n and --gamma-settings apply to --design-from, not to "
+                                 "--gammas")
+        protocol = glossy_protocol(
+            args.gammas,
+            -70.0 if args.theta_min is None else args.theta_min,
+            70.0 if args.theta_max is None else args.theta_max,
+            specular_index=args.specular_index, wide_offset=args.wide_offset,
+            central_offset=args.central_offset, layout=args.layout,
+        )
+    elif args.design_from:
         from ..data import read_measurements
         from .design import design_protocol
 
@@ -87,6 +118,17 @@ def register(sub) -> None:
                      help="three angles of incidence in degrees, e.g. -20 -40 -60 (or 20 40 60)")
     src.add_argument("--design-from", metavar="DENSE.csv",
                      help="design from a pilot dense scan of the material (CSV or Parquet)")
+    src.add_argument("--lobe-from", metavar="PILOT.csv",
+                     help="glossy-aware 12 points designed from a pilot scan: lobe-width "
+                          "offsets from its fitted specular lobe, points at its receiver "
+                          "angles, the layout that predicts it best")
+    p.add_argument("--specular-index", type=float, default=None, metavar="N",
+                   help="with --gammas: glossy-aware 12 points for a specular lobe index N "
+                        "(lobe-width points at its half width acos(2^(-1/N)) instead of "
+                        "--mirror-offset)")
+    p.add_argument("--layout", choices=("paper", "balanced"), default="paper",
+                   help="with --specular-index: 'paper' (5+2+5 points, default) or 'balanced' "
+                        "(4 per gamma: mirror, lobe width, two diffuse)")
     p.add_argument("--theta-min", type=float, default=None,
                    help="lowest receiver angle the tool can set (deg; default -70 for --gammas, "
                         "no limit for --design-from)")

@@ -441,3 +441,204 @@ def protocol_from_frame(df: pd.DataFrame, source: str = "protocol", *,
         requested_theta_deg=np.full(gamma.size, np.nan), adjustment=("",) * gamma.size,
         kind="file", rule=f"read from {source}", order="given", name=name or "protocol",
     )
+
+
+# ----------------------------------------------------------------------------- glossy materials
+#: The rule of :func:`glossy_protocol`, as written into exported protocols.
+GLOSSY_LAYOUTS = ("paper", "balanced")
+GLOSSY_RULE = (
+    "glossy-aware 12 points (the paper's section 4.3 with lobe-sized offsets), layout 'paper': "
+    "for the smallest and largest |gamma|, theta = -gamma (mirror), -gamma -/+ w(gamma) "
+    "(lobe_width, w = the specular lobe's half width at half maximum, acos(2^(-1/n_s)), between "
+    "min_lobe_offset and max_lobe_offset) and -gamma -/+ wide_offset (diffuse); for the middle "
+    "gamma, theta = -gamma (mirror) and gamma + central_offset (central); layout 'balanced': at "
+    "each gamma the mirror, -gamma + w toward the normal, and two diffuse angles (5-deg grid, "
+    "max(15, 5 w) deg from the mirror, 10 deg from the source: nearest -gamma - wide_offset, "
+    "and nearest the normal 30 deg from it). n_s(gamma) comes from "
+    "a pilot scan's two-lobe fit (u_ns cos^v_ns(gamma)) or is given. With a pilot scan, every "
+    "point is moved to the nearest angle the pilot measured at that gamma (a tool with fixed "
+    "receiver positions), distinct points kept distinct. Points outside the receiver range "
+    "are clamped as in the paper's rule."
+)
+
+
+def lobe_half_width_deg(index) -> np.ndarray:
+    """Half width at half maximum (degrees) of a lobe ``cos^n`` (Eq. 3 inverted):
+    ``acos(2^(-1/n))``. index : array-like, dimensionless, > 0."""
+    n = np.asarray(index, float)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return np.degrees(np.arccos(np.power(2.0, -1.0 / n)))
+
+
+def glossy_protocol(gammas_deg, theta_min: float = -70.0, theta_max: float = 70.0, *,
+                    specular_index, wide_offset: float = 60.0, central_offset: float = 20.0,
+                    min_lobe_offset: float = 0.25, max_lobe_offset: float = 10.0,
+                    layout: str = "paper", available: dict | None = None,
+                    name: str = "glossy-12pt") -> Protocol:
+    """12 points for a glossy material: the paper's plan with lobe-sized offsets.
+
+    The paper's lobe-width points sit 10 deg either side of the mirror (Eqs. 29-30); a gloss
+    paint's specular lobe is a degree wide or less, so they see only the diffuse floor and
+    the lobe is never measured. Here they sit at the lobe's half width at half maximum,
+    where the lobe's shape is best resolved, and the middle angle of incidence also gets a
+    mirror point (see :data:`GLOSSY_RULE`).
+
+    Parameters
+    ----------
+    gammas_deg : three numbers, degrees
+        Angles of incidence (<= 0, or magnitudes).
+    theta_min, theta_max : float, degrees
+        The receiver range of the tool.
+    specular_index : float or callable
+        The specular lobe index ``n_s``, or a function ``n_s(gamma_deg)`` (e.g. from a
+        pilot scan's fit: ``u_ns cos^v_ns(gamma)``).
+    wide_offset, central_offset : float, degrees
+        The paper's diffuse (60) and central (20) offsets.
+    min_lobe_offset, max_lobe_offset : float, degrees
+        Limits of the lobe-width offset (the goniometer's resolution; the paper's 10).
+    layout : ``"paper"`` or ``"balanced"``
+        ``"paper"``: the paper's 5 + 2 + 5 points (for the smallest and largest |gamma|:
+        mirror, mirror -/+ w, mirror -/+ wide_offset; for the middle one: mirror and
+        gamma + central_offset). ``"balanced"``: 4 points at each gamma (mirror, mirror - w
+        toward the normal, and two diffuse angles away from the lobe and the source), which
+        gives the lobe's height and width at all three angles.
+    available : dict, optional
+        ``gamma_deg -> measured theta_deg`` of a pilot scan: every point is moved to the
+        nearest of these (the tool can only stand there), keeping points distinct.
+    """
+    gammas = normalise_gammas(gammas_deg)
+    mags = np.abs(gammas)
+    if gammas.size != 3 or np.unique(mags).size != 3:
+        raise IrreflectError(
+            "the glossy protocol needs exactly three distinct angles of incidence; found "
+            f"{', '.join(f'{g:g}' for g in np.asarray(gammas_deg, float).ravel())}: "
+            "give three, e.g. --gammas -20 -40 -60"
+        )
+    lo, hi = check_limits(theta_min, theta_max)
+    if not (0 < min_lobe_offset <= max_lobe_offset < wide_offset):
+        raise IrreflectError(
+            "lobe offsets must satisfy 0 < min_lobe_offset <= max_lobe_offset < wide_offset; "
+            f"found {min_lobe_offset:g}, {max_lobe_offset:g}, {wide_offset:g}"
+        )
+    index_of = specular_index if callable(specular_index) else (lambda g: specular_index)
+    g1, g2, g3 = gammas[np.argsort(mags)]
+    offsets = {}
+    for g in (g1, g2, g3):
+        n = float(index_of(float(g)))
+        if not (np.isfinite(n) and n > 0):
+            raise IrreflectError(
+                f"the specular index at gamma {g:g} must be a positive number; found {n:g}: "
+                "give --specular-index N or a pilot scan with a specular lobe"
+            )
+        offsets[g] = float(np.clip(lobe_half_width_deg(n), min_lobe_offset, max_lobe_offset))
+    if layout not in GLOSSY_LAYOUTS:
+        from ..errors import unknown_name
+
+        raise unknown_name("glossy protocol layout", str(layout), GLOSSY_LAYOUTS)
+    plan = []
+    for g in (g1, g2, g3):
+        mirror = _clean(-g)
+        if not lo - _EPS <= mirror <= hi + _EPS:
+            raise IrreflectError(
+                f"gamma {g:g}: its mirror direction theta = {mirror:g} lies outside the tool's "
+                f"receiver range [{lo:g}, {hi:g}], so the specular peak cannot be measured: "
+                "choose |gamma| within the range or widen it"
+            )
+        w = offsets[g]
+        if layout == "balanced":
+            plan += [(g, mirror, "mirror"), (g, mirror - w, "lobe_width")]
+            plan += [(g, t, "diffuse") for t in _diffuse_angles(g, w, lo, hi, wide_offset)]
+        elif g == g2:
+            plan += [(g, mirror, "mirror"), (g, g + central_offset, "central")]
+        else:
+            plan += [(g, mirror, "mirror"), (g, mirror - w, "lobe_width"),
+                     (g, mirror + w, "lobe_width"), (g, mirror - wide_offset, "diffuse"),
+                     (g, mirror + wide_offset, "diffuse")]
+    order = {g1: 0, g2: 1, g3: 2}
+    plan.sort(key=lambda p: order[p[0]])
+    gamma_out, theta_out, purpose, requested, adjustment, notes = [], [], [], [], [], []
+    taken: dict[float, list[float]] = {}
+    for g, wanted, kind in plan:
+        wanted = _clean(wanted)
+        value = _clean(min(max(wanted, lo), hi))
+        adj = "clamped" if abs(value - wanted) > _EPS else ""
+        if adj:
+            notes.append(f"gamma {g:g}: {kind} theta {wanted:g} is outside the tool range, "
+                         f"clamped to {value:g}")
+        if available is not None:
+            value, moved = _nearest_free(available, g, value, taken.get(g, []), lo, hi)
+            if moved:
+                adj = "snapped"
+        taken.setdefault(g, []).append(value)
+        gamma_out.append(g)
+        theta_out.append(value)
+        purpose.append(kind)
+        requested.append(wanted)
+        adjustment.append(adj)
+    return Protocol(
+        gamma_deg=np.array(gamma_out, float),
+        theta_deg=np.array(theta_out, float),
+        purpose=tuple(purpose),
+        requested_theta_deg=np.array(requested, float),
+        adjustment=tuple(adjustment),
+        theta_min=lo,
+        theta_max=hi,
+        kind="glossy",
+        rule=GLOSSY_RULE,
+        settings={"gammas_deg": [float(g1), float(g2), float(g3)],
+                  "lobe_offsets_deg": {f"{g:g}": round(w, 4) for g, w in offsets.items()},
+                  "wide_offset": wide_offset, "central_offset": central_offset,
+                  "min_lobe_offset": min_lobe_offset, "max_lobe_offset": max_lobe_offset,
+                  "layout": layout, "snapped_to_pilot": available is not None},
+        order="paper",
+        notes=tuple(notes),
+        name=name,
+    )
+
+
+def _diffuse_angles(gamma: float, width: float, lo: float, hi: float,
+                    wide_offset: float) -> list[float]:
+    """Two receiver angles for the diffuse lobe at one angle of incidence, on a 5-deg grid,
+    far from the specular lobe (``max(15, 5 w)`` deg from the mirror) and at least 10 deg
+    from the source direction (``theta = gamma``): the one nearest the paper's
+    ``mirror - wide_offset``, and the one nearest the normal at least 30 deg from it."""
+    mirror = -gamma
+    grid = np.arange(np.ceil(lo / 5.0) * 5.0, hi + _EPS, 5.0)
+    keep = (np.abs(grid - mirror) >= max(15.0, 5.0 * width)) & (np.abs(grid - gamma) >= 10.0)
+    cand = grid[keep]
+    if cand.size < 2:
+        raise IrreflectError(
+            f"gamma {gamma:g}: the receiver range [{lo:g}, {hi:g}] leaves no room for two "
+            "diffuse points away from the specular lobe and the source: widen the range"
+        )
+    first = mirror - wide_offset
+    a = float(cand[np.argmin(np.abs(cand - first))])
+    # the second: nearest the normal (the diffuse lobe's axis) at least 30 deg from the
+    # first, ties away from the mirror
+    apart = cand[np.abs(cand - a) >= 30.0 - _EPS]
+    if not apart.size:
+        apart = cand[cand != a]
+    b = float(min(apart, key=lambda t: (abs(t), -abs(t - mirror))))
+    return sorted([a, b])
+
+
+def _nearest_free(available: dict, gamma: float, wanted: float, taken: list[float], lo: float,
+                  hi: float) -> tuple[float, bool]:
+    """The measured theta of ``gamma`` nearest to ``wanted`` that is not taken yet."""
+    thetas = None
+    for key, values in available.items():
+        if abs(float(key) - gamma) <= 1e-6:
+            thetas = np.asarray(values, float)
+            break
+    if thetas is None or not thetas.size:
+        raise IrreflectError(
+            f"the pilot scan has no measurement at gamma {gamma:g}: choose gammas it measured"
+        )
+    thetas = thetas[(thetas >= lo - _EPS) & (thetas <= hi + _EPS)]
+    free = np.array([t for t in thetas if all(abs(t - p) > _EPS for p in taken)])
+    if not free.size:
+        raise IrreflectError(
+            f"the pilot scan has too few angles at gamma {gamma:g} for a 12-point protocol"
+        )
+    best = _clean(free[np.argmin(np.abs(free - wanted))])
+    return best, abs(best - wanted) > _EPS

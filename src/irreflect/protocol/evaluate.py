@@ -14,6 +14,7 @@ interpolating across a wide gap (for instance across a specular peak) would inve
 
 from __future__ import annotations
 
+import warnings
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -21,7 +22,7 @@ import pandas as pd
 
 from .. import metrics
 from ..data import Measurements, as_measurements
-from ..errors import IrreflectError
+from ..errors import FitError, FitWarning, IrreflectError
 from ..fitting import FitResult, fit
 from ..model import get_model
 from .core import Protocol
@@ -97,6 +98,13 @@ class ProtocolEvaluation:
     ill_determined: tuple[str, ...]
     notes: tuple[str, ...] = ()
     fit: FitResult | None = field(default=None, repr=False, compare=False)
+    #: why the protocol fails this material ("" when its R^2 on all points is within
+    #: :data:`FAILURE_MARGIN` of the all-points fit's)
+    failure: str = ""
+
+    @property
+    def failed(self) -> bool:
+        return bool(self.failure)
 
     def summary(self) -> str:
         lines = [
@@ -129,6 +137,8 @@ class ProtocolEvaluation:
         if self.ill_determined:
             lines.append("ill-determined coefficients: " + "; ".join(self.ill_determined))
         lines += [f"note: {n}" for n in self.notes]
+        if self.failure:
+            lines.append(f"PROTOCOL FAILS: {self.failure}")
         return "\n".join(lines)
 
     def to_dict(self) -> dict:
@@ -145,6 +155,7 @@ class ProtocolEvaluation:
             "ill_determined": list(self.ill_determined),
             "points": self.points.to_dict(orient="records"),
             "notes": list(self.notes),
+            "failed": self.failed, "failure": self.failure,
         }
 
 
@@ -270,19 +281,170 @@ def evaluate_protocol(protocol, dense, model="two-lobe", *, tolerance_deg: float
         np.abs(dense.gamma_deg) <= mags.max() + 1e-9)
     r2_within = (float(metrics.r2(dense.power[within], predicted[within]))
                  if within.sum() >= 2 else float("nan"))
+    r2_all = float(metrics.r2(dense.power, predicted))
+    failure = protocol_failure(protocol, dense, frame, r2_all, float(reference.r2), r2_within,
+                               reference, reasons)
     return ProtocolEvaluation(
         protocol=protocol.name, dataset=dense.name, model=model_obj.name,
         n_protocol_points=protocol.n_points, n_dense_points=dense.n_points,
-        r2=float(metrics.r2(dense.power, predicted)),
+        r2=r2_all,
         rmse=float(metrics.rmse(dense.power, predicted)),
         mse=float(metrics.mse(dense.power, predicted)),
         polar_errors=polar, params=result.params, stderrs=result.stderrs,
         reference_r2=float(reference.r2), reference_rmse=float(reference.rmse),
         r2_within=r2_within, n_within=int(within.sum()), points=frame, n_interpolated=n_moved, method=method, tolerance_deg=float(tolerance_deg),
-        ill_determined=tuple(reasons), notes=tuple(notes), fit=result,
+        ill_determined=tuple(reasons), notes=tuple(notes), fit=result, failure=failure,
     )
 
 
+#: A protocol fails a material when its fit's R^2 on all points falls more than this below
+#: the all-points fit's (or more than 5 times the all-points fit's own 1 - R^2).
+FAILURE_MARGIN = 0.02
+
+
+def specular_half_widths(dense, reference: FitResult | None = None) -> dict[float, float]:
+    """Half width at half maximum (deg) of the specular lobe per angle of incidence of a
+    dense scan: from the reference's ``n_s(gamma) = u_ns cos^v_ns(gamma)`` when it is a
+    two-lobe fit, else from the per-angle decomposition of the data
+    (:func:`irreflect.model.lobe_profile`). Keys: gamma in degrees."""
+    from ..model import lobe_profile
+    from .core import lobe_half_width_deg
+
+    gammas = np.asarray(dense.gammas, float)
+    if reference is not None and {"u_ns", "v_ns"} <= set(reference.param_names):
+        p = reference.params
+        n = p["u_ns"] * np.cos(np.radians(gammas)) ** p["v_ns"]
+        return {float(g): float(w) for g, w in zip(gammas, lobe_half_width_deg(n), strict=True)}
+    prof = lobe_profile(np.radians(dense.gamma_deg), np.radians(dense.theta_deg), dense.power)
+    out = {}
+    for g, n, ok, spec in zip(np.degrees(prof.gamma), prof.specular_index[0], prof.ok[0],
+                              prof.specular[0], strict=True):
+        if ok and spec > 0:
+            out[float(np.round(g, 9))] = float(lobe_half_width_deg(n))
+    return out
+
+
+def protocol_failure(protocol, dense, frame, r2, reference_r2, r2_within, reference=None,
+                     ill=()) -> str:
+    """Why a protocol's fit predicts a material much worse than the all-points fit (empty
+    when it does not): the likely cause first.
+
+    * the mirror point was not measured (interpolated or snapped over a gap wider than the
+      specular lobe);
+    * the lobe-width points lie beyond the lobe (offset more than twice its half width);
+    * the fit extrapolates beyond the protocol's angles of incidence;
+    * the protocol leaves coefficients ill-determined.
+    """
+    margin = max(FAILURE_MARGIN, 5.0 * (1.0 - reference_r2))
+    if not (np.isfinite(r2) and r2 < reference_r2 - margin):
+        return ""
+    head = (f"its fit's R^2 on all points is {r2:.4g}, the all-points fit's {reference_r2:.4g}")
+    widths = specular_half_widths(dense, reference)
+    causes = []
+    for g in np.unique(protocol.gamma_deg):
+        w = next((v for k, v in widths.items() if abs(k - g) < 1e-6), None)
+        if w is None or not np.isfinite(w):
+            continue
+        rows = frame[np.abs(frame["gamma_deg"] - g) < 1e-6]
+        mirror = rows[rows["purpose"] == "mirror"]
+        if len(mirror) and float(mirror["gap_deg"].max()) > w:
+            causes.append(
+                f"at gamma {g:g} the mirror direction was not measured: "
+                f"{mirror['source'].iloc[0]} over {float(mirror['gap_deg'].max()):.2g} deg "
+                f"across a specular lobe {w:.2g} deg wide (half width at half maximum)")
+        lobe = rows[rows["purpose"] == "lobe_width"]
+        if len(lobe):
+            offset = float(np.min(np.abs(lobe["theta_deg"] + g)))
+            if offset > 2.0 * w:
+                causes.append(
+                    f"at gamma {g:g} the specular lobe (half width {w:.2g} deg) is narrower "
+                    f"than the protocol's lobe offsets ({offset:.3g} deg): use the glossy-aware "
+                    "protocol (irreflect protocol --specular-index N or --lobe-from PILOT)")
+    if not causes and np.isfinite(r2_within) and r2_within > r2 + margin:
+        mags = np.abs(protocol.gamma_deg)
+        causes.append(
+            f"the fit extrapolates beyond the protocol's angles of incidence "
+            f"(|gamma| {mags.min():g}-{mags.max():g} deg): R^2 {r2_within:.4g} within them")
+    if not causes and ill:
+        causes.append("the protocol's points leave coefficients ill-determined: "
+                      + "; ".join(ill))
+    return head + ": " + ("; ".join(causes) if causes else "cause not identified")
+
+
+def glossy_protocol_for(dense, reference: FitResult | None = None, *,
+                        preferred=(-20.0, -40.0, -60.0), theta_min=None, theta_max=None,
+                        seed: int = 0, n_triples: int = 3, lobe_factors=(0.5, 1.0, 2.0),
+                        layouts=("paper", "balanced"), **kwargs) -> Protocol:
+    """The glossy-aware protocol designed from a dense scan used as the pilot.
+
+    The specular index per angle of incidence comes from the two-lobe fit of the scan
+    (``reference``, fitted when not given), and every point is moved to the nearest angle
+    the scan measured (:func:`~.core.glossy_protocol` with ``available``: the tool stands
+    only where the pilot's receivers stood). Angle-of-incidence triples are tried as in
+    :func:`paper_protocol_for` (the paper's -20/-40/-60 if present, else the widest spread;
+    never below 5 deg, where the mirror is the source's direction), the first
+    ``n_triples`` that work, each in every layout with lobe offsets of ``lobe_factors``
+    times the half width; the variant whose 12-point fit predicts the pilot best (R^2 on
+    all its points) is returned, its score in ``settings["pilot_r2"]``. ``kwargs`` go to
+    :func:`~.core.glossy_protocol`.
+    """
+    import itertools
+
+    from .core import glossy_protocol
+
+    dense = as_measurements(dense)
+    if reference is None or not {"u_ns", "v_ns"} <= set(reference.param_names):
+        reference = fit(dense, "two-lobe", seed=seed)
+    p = reference.params
+    # the paper's tool reaches +-70 deg; grazing receivers see effects the model lacks
+    lo = max(float(np.min(dense.theta_deg)), -70.0) if theta_min is None else float(theta_min)
+    hi = min(float(np.max(dense.theta_deg)), 70.0) if theta_max is None else float(theta_max)
+    available = {float(g): dense.theta_deg[dense.gamma_deg == g] for g in dense.gammas}
+    levels = sorted({float(abs(g)) for g in dense.gammas if abs(g) <= hi})
+    triples = sorted(itertools.combinations(levels, 3),
+                     key=lambda t: (-(t[2] - t[0]), abs(t[1] - (t[0] + t[2]) / 2), t))
+    pref = tuple(sorted(abs(float(g)) for g in preferred)) if preferred is not None else None
+    if pref is not None and pref in triples:
+        triples.remove(pref)
+        triples.insert(0, pref)
+    errors, best, tried = [], None, 0
+    for triple in triples:
+        if tried >= n_triples:
+            break
+        ok = False
+        for layout, factor in itertools.product(layouts, lobe_factors):
+            def index(g, factor=factor):
+                # a lobe index giving ``factor`` times the half width of n_s(gamma)
+                n = p["u_ns"] * np.cos(np.radians(g)) ** p["v_ns"]
+                return -np.log(2.0) / np.log(np.cos(np.minimum(
+                    factor * np.arccos(2.0 ** (-1.0 / n)), np.pi / 2 - 1e-6)))
+            try:
+                proto = glossy_protocol(triple, lo, hi, specular_index=index, layout=layout,
+                                        available=available, **kwargs)
+                meas, _ = sample_protocol(proto, dense, tolerance_deg=0.0, method="snap")
+                with warnings.catch_warnings():  # trial fits of the design, not the user's
+                    warnings.simplefilter("ignore", FitWarning)
+                    trial = fit(meas, "two-lobe", seed=seed)
+                score = float(metrics.r2(dense.power,
+                                         trial.predict(dense.gamma_deg, dense.theta_deg)))
+            except (IrreflectError, FitError) as exc:
+                errors.append(str(exc))
+                continue
+            ok = True
+            if best is None or score > best[0]:
+                best = (score, proto, factor)
+        tried += ok
+    if best is None:
+        raise IrreflectError(
+            f"no triple of {dense.name}'s angles of incidence gives a glossy protocol (tried "
+            f"{len(triples)}; first problem: {errors[0] if errors else 'fewer than three angles'})"
+        )
+    score, proto, factor = best
+    settings = dict(proto.settings, pilot=dense.name, pilot_r2=round(score, 6),
+                    lobe_factor=factor)
+    from dataclasses import replace
+
+    return replace(proto, settings=settings)
 def evaluation_table(evaluations: dict[str, ProtocolEvaluation], digits: int = 4) -> pd.DataFrame:
     """One row per dataset: R^2, RMSE of the protocol fit and of the all-points fit."""
     rows = []

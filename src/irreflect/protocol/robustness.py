@@ -169,8 +169,14 @@ def _structural_reasons(model_obj, g0, t0, power, seed, reasons) -> list[str]:
     alone can miss them: a degenerate coefficient may simply stay at its start."""
     from ..errors import FitError
 
+    import warnings
+
+    from ..errors import FitWarning
+
     try:
-        nominal = fit(Measurements(g0, t0, power, name="protocol"), model_obj, seed=seed)
+        with warnings.catch_warnings():  # an internal check, not a fit the user asked for
+            warnings.simplefilter("ignore", FitWarning)
+            nominal = fit(Measurements(g0, t0, power, name="protocol"), model_obj, seed=seed)
     except (FitError, IrreflectError):
         return []
     named = {r.split(":")[0] for r in reasons}
