@@ -26,7 +26,7 @@ from .model import ReflectionModel, get_model, plane_geometry, take_geometry
 
 # ----------------------------------------------------------------------------- core solver
 _RIDGE = 1e-12
-_INVISIBLE = 1e-20  # squared: columns below 1e-10 of the largest column's norm
+_EXTREME = 1e8  # largest ratio of the sum of the linear coefficients to the residual one
 _EYES = [np.eye(k) for k in range(8)]
 
 
@@ -47,12 +47,22 @@ def _small_inverse(a):
     return np.linalg.inv(a)
 
 
-def _solve_linear(bw, yw, nonneg):
+def _solve_linear(bw, yw, nonneg, residual=None):
     """Weighted (non-negative) linear least squares for every problem of a batch.
 
     bw : (M, n, L) basis times sqrt(weight); yw : (M, n) data times sqrt(weight);
-    nonneg : (L,) bool. Returns alpha (M, L), the mask of free columns (M, L) and the
-    inverse of the (free-column) Gram matrix (M, L, L), reused for the Jacobian.
+    nonneg : (L,) bool; residual : index of the column whose natural coefficient is the
+    remainder of a sum (``K (1 - sum of shares)``, see ``options["residual_column"]``) or
+    None. Returns alpha (M, L), the mask of free columns (M, L) and the inverse of the
+    (free-column) Gram matrix (M, L, L), reused for the Jacobian.
+
+    Columns leave the active set (coefficient 0) when their coefficient would be negative
+    where it must not be (non-negative least squares by an active set, most negative
+    first), or when the residual column's coefficient would be below 10^-8 of the sum
+    of all (the largest leaves): only a column all but invisible in the data (a lobe
+    whose peak lies outside every measured direction) needs so large a coefficient, the
+    data cannot support it, and the natural coefficients of such a solution would lose
+    the residual one to rounding.
     """
     m, _, n_lin = bw.shape
     bwt = bw.swapaxes(1, 2)
@@ -61,11 +71,7 @@ def _solve_linear(bw, yw, nonneg):
     eye = _EYES[n_lin] if n_lin < len(_EYES) else np.eye(n_lin)
     diag = np.diagonal(gram, axis1=1, axis2=2)
     scale = np.maximum(diag, 1e-300)
-    # a column 10^10 times smaller than the largest is left out (coefficient 0): only an
-    # astronomically large coefficient could make it count, i.e. a lobe whose peak lies
-    # outside every measured direction, which the data cannot support (and whose natural
-    # coefficients would not survive floating point)
-    free = diag > _INVISIBLE * diag.max(axis=1, keepdims=True)
+    free = diag > 0
     if free.all():
         inv = _small_inverse(gram + eye * (_RIDGE * scale)[:, :, None])
         alpha = (inv @ rhs[:, :, None])[:, :, 0]
@@ -75,26 +81,30 @@ def _solve_linear(bw, yw, nonneg):
         inv = _small_inverse(g) * both
         alpha = (inv @ (rhs * free)[:, :, None])[:, :, 0]
     nonneg = np.asarray(nonneg, bool)
-    bad = (alpha < 0) & nonneg & free
-    if not bad.any():
-        return np.where(free, alpha, 0.0), free, inv
-    # active set: drop the most negative coefficient of each offending problem and re-solve
-    rows = np.nonzero(bad.any(axis=1))[0]
+    rows = np.arange(m)
     for _ in range(n_lin):
-        rel = np.where(bad[rows], alpha[rows] * np.sqrt(scale[rows]), np.inf)
-        free[rows, np.argmin(rel, axis=1)] = False
+        a = alpha[rows]
         fr = free[rows]
-        g = gram[rows] * (fr[:, :, None] & fr[:, None, :])
-        g = g + eye * np.where(fr, _RIDGE * scale[rows], 1.0)[:, :, None]
-        inv_r = _small_inverse(g) * (fr[:, :, None] & fr[:, None, :])
-        alpha_r = (inv_r @ (rhs[rows] * fr)[:, :, None])[:, :, 0]
-        inv[rows] = inv_r
-        alpha[rows] = alpha_r
-        still = ((alpha_r < 0) & nonneg & fr).any(axis=1)
-        if not still.any():
+        negative = (a < 0) & nonneg & fr
+        mag = np.abs(np.where(fr, a, 0.0))
+        if residual is None:
+            extreme = np.zeros(len(rows), bool)
+        else:
+            extreme = (mag[:, residual] > 0) & (mag[:, residual] < mag.sum(axis=1) / _EXTREME)
+        offend = negative.any(axis=1) | extreme
+        if not offend.any():
             break
-        rows = rows[still]
-        bad = (alpha < 0) & nonneg & free
+        rows, a, fr, negative = rows[offend], a[offend], fr[offend], negative[offend]
+        drop = np.where(negative.any(axis=1),
+                        np.argmin(np.where(negative, a * np.sqrt(scale[rows]), np.inf), axis=1),
+                        np.argmax(np.abs(np.where(fr, a, 0.0)), axis=1))
+        free[rows, drop] = False
+        fr = free[rows]
+        both = fr[:, :, None] & fr[:, None, :]
+        g = gram[rows] * both + eye * np.where(fr, _RIDGE * scale[rows], 1.0)[:, :, None]
+        inv_r = _small_inverse(g) * both
+        inv[rows] = inv_r
+        alpha[rows] = (inv_r @ (rhs[rows] * fr)[:, :, None])[:, :, 0]
     alpha = np.where(free, alpha, 0.0)
     return alpha, free, inv
 
@@ -103,7 +113,8 @@ def _evaluate(model, geom, z, sw, yw):
     """Basis, optimal linear coefficients, residuals and cost for a batch of ``z``."""
     basis, dbasis = model.basis(geom, z, True)
     bw = basis * sw[:, :, None]
-    alpha, free, inv = _solve_linear(bw, yw, model.alpha_nonneg)
+    alpha, free, inv = _solve_linear(bw, yw, model.alpha_nonneg,
+                                     model.options.get("residual_column"))
     resid = yw - (bw @ alpha[:, :, None])[:, :, 0]
     cost = 0.5 * np.einsum("ij,ij->i", resid, resid)
     cost[~np.isfinite(cost)] = np.inf
@@ -135,7 +146,7 @@ def _levenberg_marquardt(model, geom, z0, sw, yw, max_iter=200, ftol=1e-10, xtol
 
 
 #: Why the Levenberg-Marquardt iteration of one start ended (``_lm_loop``'s reason codes).
-STOP_FTOL, STOP_XTOL, STOP_STUCK, STOP_MAXITER, STOP_NONFINITE = 1, 2, 3, 4, 5
+STOP_FTOL, STOP_XTOL, STOP_STUCK, STOP_MAXITER, STOP_NONFINITE, STOP_POLISHED = 1, 2, 3, 4, 5, 6
 
 
 def _lm_loop(model, geom, z0, sw, yw, max_iter, ftol, xtol):
@@ -211,6 +222,40 @@ def _lm_loop(model, geom, z0, sw, yw, max_iter, ftol, xtol):
             active[idx[done]] = False
     reason[active] = STOP_MAXITER
     return z, state, nfev, reason
+
+
+def _polish(model, geom, z0, sw1, yw1, max_nfev=400):
+    """Finish a local search that crawled (iteration limit, no step lowering the cost) with
+    scipy's trust-region reflective least squares on the same projected residual and
+    Kaufman Jacobian: its steps respect the bounds (Coleman-Li scaling), which a damped
+    Gauss-Newton step along a poorly determined coordinate toward a bound does not.
+    Returns ``(z, alpha, cost, n_evaluations, converged)``."""
+    from scipy.optimize import least_squares
+
+    cache = {}
+
+    def state(z):
+        if cache.get("z") is None or not np.array_equal(cache["z"], z):
+            with np.errstate(over="ignore", under="ignore", invalid="ignore", divide="ignore"):
+                cache["state"] = _evaluate(model, geom, z[None], sw1, yw1)
+            cache["z"] = z.copy()
+        return cache["state"]
+
+    def residual(z):
+        return np.nan_to_num(-state(z)["resid"][0], nan=1e150, posinf=1e150, neginf=-1e150)
+
+    def jacobian(z):
+        with np.errstate(over="ignore", under="ignore", invalid="ignore", divide="ignore"):
+            return np.nan_to_num(-_kaufman_jacobian(state(z), sw1)[0])
+
+    z0 = np.clip(z0, model.z_lower, model.z_upper)
+    lo, hi = model.z_lower, model.z_upper
+    inside = np.where(z0 <= lo, lo + 1e-10 * (hi - lo), np.where(z0 >= hi, hi - 1e-10 * (hi - lo),
+                                                                   z0))
+    res = least_squares(residual, inside, jac=jacobian, bounds=(lo, hi), method="trf",
+                        x_scale="jac", ftol=1e-12, xtol=1e-12, gtol=1e-12, max_nfev=max_nfev)
+    st = state(res.x)
+    return res.x, st["alpha"][0], float(st["cost"][0]), int(res.nfev), res.status > 0
 
 
 def _gauss_newton_decrease(model, geom, z, sw, yw):
@@ -367,7 +412,8 @@ def _covariance(model, z, alpha, gamma, theta, weights, absolute_sigma, cost, n_
     jz = np.einsum("mnlp,ml->mnp", dbasis, alpha[None])[0]
     jfull = np.concatenate([jz, basis[0]], axis=1) * np.sqrt(weights)[:, None]
     # scale the columns so that the singularity test does not depend on units
-    col = np.sqrt(np.maximum(np.sum(jfull * jfull, axis=0), 1e-300))
+    col = np.sqrt(np.sum(jfull * jfull, axis=0))
+    col = np.where(col > 0, col, 1.0)  # a coordinate the data do not see: left unscaled
     info = (jfull / col).T @ (jfull / col)
     dof = max(n_points - model.n_params, 1)
     s2 = 1.0 if absolute_sigma else 2.0 * cost / dof
@@ -457,7 +503,8 @@ def _projected_cost(model, basis, sw, yw):
     """Cost after eliminating the linear coefficients, for basis values ``(M, n, L)``."""
     with np.errstate(over="ignore", under="ignore", invalid="ignore", divide="ignore"):
         bw = basis * sw[:, :, None]
-        alpha, _, _ = _solve_linear(bw, yw, model.alpha_nonneg)
+        alpha, _, _ = _solve_linear(bw, yw, model.alpha_nonneg,
+                                    model.options.get("residual_column"))
         resid = yw - (bw @ alpha[:, :, None])[:, :, 0]
         cost = 0.5 * np.einsum("ij,ij->i", resid, resid)
     cost[~np.isfinite(cost)] = np.inf
@@ -617,19 +664,40 @@ _STOP_MESSAGES = {
     STOP_STUCK: "converged: no step lowers the cost further",
     STOP_MAXITER: "iteration limit ({max_iter}) reached",
     STOP_NONFINITE: "the cost is not finite at the start",
+    STOP_POLISHED: "converged: Levenberg-Marquardt crawled, a trust-region least-squares "
+                   "polish met its tolerance (1e-12)",
 }
 
 
-def _global_search(model_obj, gamma, theta, power, weights, *, seed, n_random_starts=2,
-                   n_screen=None, n_keep=None, n_data_starts=2, max_iter=200, max_rounds=3):
+def _global_search(model_obj, gamma, theta, power, weights, **options):
     """The global search of :func:`fit` on one table (radians, power, weights): returns
     ``(z, alpha, cost, converged, message, n_starts, n_evals)``, or None when no start
-    reaches a finite cost."""
+    reaches a finite cost.
+
+    The power is divided by its weighted root mean square first (and the linear
+    coefficients and the cost scaled back), so that the search sees the same numbers
+    whatever the unit of power: the shape coefficients do not depend on it."""
+    power = np.asarray(power, float)
+    scale = float(np.sqrt(np.mean(weights * power * power)))
+    if not (np.isfinite(scale) and scale > 0):
+        scale = 1.0
+    out = _global_search_unit(model_obj, gamma, theta, power / scale, weights, **options)
+    if out is None:
+        return None
+    z, alpha, cost, *rest = out
+    return (z, alpha * scale, cost * scale * scale, *rest)
+
+
+def _global_search_unit(model_obj, gamma, theta, power, weights, *, seed, n_random_starts=2,
+                        n_screen=None, n_keep=None, n_data_starts=None, max_iter=200,
+                        max_rounds=3, polish=True):
     geom = plane_geometry(gamma[None], theta[None])
     sw1 = np.sqrt(weights)[None]
     yw1 = sw1 * power
     n_screen = default_screen(model_obj) if n_screen is None else int(n_screen)
     n_keep = default_keep(model_obj) if n_keep is None else int(n_keep)
+    if n_data_starts is None:
+        n_data_starts = int(model_obj.options.get("n_data_starts", 2))
     lo, hi = model_obj.screen_box()
     # every candidate is scored by its projected cost in one batch; Levenberg-Marquardt
     # starts from the best data-driven ones and from the best in different basins
@@ -679,7 +747,13 @@ def _global_search(model_obj, gamma, theta, power, weights, *, seed, n_random_st
         if not st2["cost"][j] < cb * (1.0 - 1e-12):
             break
         zb, ab, cb, rb = z2[j], st2["alpha"][j], float(st2["cost"][j]), int(reason2[j])
-    converged = rb in (STOP_FTOL, STOP_XTOL)
+    if polish and rb in (STOP_STUCK, STOP_MAXITER) and model_obj.n_nonlinear:
+        polished = _polish(model_obj, geom, zb, sw1, yw1)
+        n_evals += polished[3]
+        if polished[2] < cb:
+            zb, ab, cb = polished[:3]
+            rb = STOP_POLISHED if polished[4] else rb
+    converged = rb in (STOP_FTOL, STOP_XTOL, STOP_POLISHED)
     if rb == STOP_STUCK or rb == STOP_MAXITER:
         decrease, _ = _gauss_newton_decrease(model_obj, geom, zb[None], sw1, yw1)
         converged = bool(decrease[0] <= 1e-6 * max(cb, 1e-300)) or cb == 0.0
@@ -692,8 +766,9 @@ def _global_search(model_obj, gamma, theta, power, weights, *, seed, n_random_st
 
 
 def fit(measurements, model="two-lobe", *, seed: int = 0, n_random_starts: int = 2,
-        n_screen: int | None = None, n_keep: int | None = None, n_data_starts: int = 2,
-        use_sigma: bool = True, max_iter: int = 200, max_rounds: int = 3) -> FitResult:
+        n_screen: int | None = None, n_keep: int | None = None,
+        n_data_starts: int | None = None, use_sigma: bool = True, max_iter: int = 200,
+        max_rounds: int = 3, polish: bool = True) -> FitResult:
     """Fit a reflection model to a measurement table by global least squares.
 
     The search: (1) the model's data-driven starts (for the paper's models, from the
@@ -726,6 +801,8 @@ def fit(measurements, model="two-lobe", *, seed: int = 0, n_random_starts: int =
         Weight by ``1 / sigma^2`` when the table has ``sigma``.
     max_iter, max_rounds : int
         Iteration limit of each local search; rounds of coordinate scans.
+    polish : bool
+        Finish a local search that crawled with scipy's trust-region least squares.
 
     Returns
     -------
@@ -760,7 +837,8 @@ def fit(measurements, model="two-lobe", *, seed: int = 0, n_random_starts: int =
     weights = np.ones_like(power) if sigma is None else 1.0 / sigma**2
     out = _global_search(model_obj, gamma, theta, power, weights, seed=seed,
                          n_random_starts=n_random_starts, n_screen=n_screen, n_keep=n_keep,
-                         n_data_starts=n_data_starts, max_iter=max_iter, max_rounds=max_rounds)
+                         n_data_starts=n_data_starts, max_iter=max_iter, max_rounds=max_rounds,
+                         polish=polish)
     if out is None:
         raise FitError(
             f"fit of '{model_obj.name}' to {source} failed: no start reached a finite cost; "
@@ -1002,9 +1080,9 @@ def _scan_subsets(model, geom, zb, ab, cost, conv, sw, y, max_iter, ftol, rounds
     for _ in range(rounds):
         cand = np.stack([_block_candidates(zb[i], blocks) for i in range(b)])  # (B, m, P)
         m = cand.shape[1]
-        rep = lambda a: np.repeat(a, m, axis=0)  # noqa: E731
-        sc = _screen_costs(model, {k: rep(v) for k, v in geom.items()}, cand.reshape(b * m, -1),
-                           rep(sw), rep(sw * y)).reshape(b, m)
+        sc = _screen_costs(model, {k: np.repeat(v, m, axis=0) for k, v in geom.items()},
+                           cand.reshape(b * m, -1), np.repeat(sw, m, axis=0),
+                           np.repeat(sw * y, m, axis=0)).reshape(b, m)
         nfev += b * m
         j = np.argmin(sc, axis=1)
         improve = sc[np.arange(b), j] < cost * (1.0 - 1e-9)

@@ -37,14 +37,19 @@ import numpy as np
 
 from .errors import IrreflectError, unknown_name
 from .model import (
+    MAX_LOBE_INDEX,
     Parameter,
     ReflectionModel,
     _col,
     estimate_specular_index,
+    peak_directions,
     register_model,
 )
 
 INV_PI = 1.0 / np.pi
+#: The narrowest Gaussian-type lobe: RMS slope 1 / sqrt(2 n) at the cosine-lobe mirror
+#: limit ``n = MAX_LOBE_INDEX`` (10^6, a half width of 0.07 deg).
+MIN_SLOPE = 7.0e-4
 TS_DISTRIBUTIONS = ("beckmann", "gaussian")
 
 
@@ -449,7 +454,7 @@ def _n_guess(gamma, theta, power):
 
 def make_blinn_phong() -> ReflectionModel:
     """Blinn-Phong (ref. 19): see :func:`blinn_phong_power`."""
-    lo, hi = np.log(0.1), np.log(4.0e4)
+    lo, hi = np.log(0.1), np.log(4.0 * MAX_LOBE_INDEX)
 
     def starts(gamma, theta, power):
         n = 4.0 * _n_guess(gamma, theta, power)  # cos^4n(phi/2) ~ cos^n(phi) near the peak
@@ -457,7 +462,7 @@ def make_blinn_phong() -> ReflectionModel:
 
     return ReflectionModel(
         name="blinn-phong",
-        params=(_KS, Parameter("n", "1", 0.1, 4.0e4, "exponent of the half-vector lobe"), _K),
+        params=(_KS, Parameter("n", "1", 0.1, 4.0 * MAX_LOBE_INDEX, "exponent of the half-vector lobe"), _K),
         nonlinear_names=("ln_n",),
         z_lower=np.array([lo]),
         z_upper=np.array([hi]),
@@ -467,9 +472,10 @@ def make_blinn_phong() -> ReflectionModel:
         from_natural=_ks_from_natural(lambda q: np.log(q[:, [0]])),
         starts=starts,
         alpha_nonneg=(True, True),
+        options={"residual_column": 0},
         formula="K cos(theta) [(1-k_s)/pi + k_s (n+8)/8pi cos^n(theta_h)], theta_h=(gamma+theta)/2",
         reference="Blinn 1977 (the paper's ref. 19)",
-        **_screen([np.log(1.0)], [np.log(5000.0)]),
+        **_screen([np.log(1.0)], [np.log(4.0 * MAX_LOBE_INDEX)]),
     )
 
 
@@ -482,9 +488,9 @@ def make_ward() -> ReflectionModel:
 
     return ReflectionModel(
         name="ward",
-        params=(_KS, Parameter("alpha", "1", 0.005, 2.0, "RMS surface slope (lobe width)"), _K),
+        params=(_KS, Parameter("alpha", "1", MIN_SLOPE, 2.0, "RMS surface slope (lobe width)"), _K),
         nonlinear_names=("ln_alpha",),
-        z_lower=np.log([0.005]),
+        z_lower=np.log([MIN_SLOPE]),
         z_upper=np.log([2.0]),
         n_linear=2,
         basis=_ward_basis,
@@ -492,10 +498,11 @@ def make_ward() -> ReflectionModel:
         from_natural=_ks_from_natural(lambda q: np.log(q[:, [0]])),
         starts=starts,
         alpha_nonneg=(True, True),
+        options={"residual_column": 0},
         formula="K cos(theta) [(1-k_s)/pi + k_s exp(-tan^2(theta_h)/alpha^2) / "
         "(4 pi alpha^2 sqrt(cos(gamma) cos(theta)))]",
         reference="Ward 1992 (Gaussian-lobe family, the paper's refs. 21, 26)",
-        **_screen([np.log(0.01)], [np.log(1.0)]),
+        **_screen([np.log(MIN_SLOPE)], [np.log(1.0)]),
     )
 
 
@@ -515,10 +522,10 @@ def make_torrance_sparrow(distribution: str = "beckmann") -> ReflectionModel:
     name = "torrance-sparrow" if distribution == "beckmann" else f"torrance-sparrow-{distribution}"
     return ReflectionModel(
         name=name,
-        params=(_KS, Parameter("m", m_unit, 0.005, 2.0, m_desc),
+        params=(_KS, Parameter("m", m_unit, MIN_SLOPE, 2.0, m_desc),
                 Parameter("eta", "1", 1.05, 10.0, "refractive index in the Fresnel factor"), _K),
         nonlinear_names=("ln_m", "eta"),
-        z_lower=np.array([np.log(0.005), 1.05]),
+        z_lower=np.array([np.log(MIN_SLOPE), 1.05]),
         z_upper=np.array([np.log(2.0), 10.0]),
         n_linear=2,
         basis=_make_ts_basis(distribution),
@@ -529,8 +536,8 @@ def make_torrance_sparrow(distribution: str = "beckmann") -> ReflectionModel:
         formula=f"K cos(theta) [(1-k_s)/pi + k_s F(beta,eta)/F(0,eta) D_{distribution}"
         "(theta_h; m) G / (4 cos(gamma) cos(theta))]",
         reference="Torrance and Sparrow 1967 (ref. 26); Cook and Torrance 1981 (ref. 25)",
-        options={"distribution": distribution},
-        **_screen([np.log(0.01), 1.1], [np.log(1.0), 5.0]),
+        options={"distribution": distribution, "residual_column": 0},
+        **_screen([np.log(MIN_SLOPE), 1.1], [np.log(1.0), 5.0]),
     )
 
 
@@ -544,21 +551,22 @@ def make_oren_nayar() -> ReflectionModel:
     return ReflectionModel(
         name="oren-nayar",
         params=(_KS, Parameter("sigma", "rad", 0.0, 1.5, "facet slope-angle standard deviation"),
-                Parameter("n", "1", 0.1, 1.0e4, "exponent of the Phong lobe about the mirror"),
+                Parameter("n", "1", 0.1, MAX_LOBE_INDEX, "exponent of the Phong lobe about the mirror"),
                 _K),
         nonlinear_names=("sigma", "ln_n"),
         z_lower=np.array([0.0, np.log(0.1)]),
-        z_upper=np.array([1.5, np.log(1.0e4)]),
+        z_upper=np.array([1.5, np.log(MAX_LOBE_INDEX)]),
         n_linear=2,
         basis=_oren_nayar_basis,
         to_natural=_ks_to_natural(lambda z: np.column_stack([z[:, 0], np.exp(z[:, 1])])),
         from_natural=_ks_from_natural(lambda q: np.column_stack([q[:, 0], np.log(q[:, 1])])),
         starts=starts,
         alpha_nonneg=(True, True),
+        options={"residual_column": 0},
         formula="K cos(theta) [(1-k_s)(A + B max(0,cos dphi) sin a tan b)/pi "
         "+ k_s (n+2)/2pi cos^n(phi)]",
         reference="Oren and Nayar 1994 (the paper's ref. 23) + Phong 1975 (ref. 18)",
-        **_screen([0.0, np.log(1.0)], [1.0, np.log(3000.0)]),
+        **_screen([0.0, np.log(1.0)], [1.0, np.log(MAX_LOBE_INDEX)]),
     )
 
 
@@ -571,7 +579,7 @@ def make_lafortune(n_lobes: int = 2) -> ReflectionModel:
             f"lafortune needs between 1 and 4 lobes, got {n_lobes}: use e.g. 'lafortune:2'"
         )
     c_lo, c_hi = -1.3, 1.3
-    n_lo, n_hi = 0.1, 1.0e4
+    n_lo, n_hi = 0.1, MAX_LOBE_INDEX
     params = []
     for i in range(1, n_lobes + 1):
         params += [
@@ -638,6 +646,21 @@ def make_lafortune(n_lobes: int = 2) -> ReflectionModel:
                     c, v = others[(i + shift) % len(others)]
                     row += [c, np.log(v)]
                 out.append(row)
+        # ... or narrow lobes aimed at the brightest receivers, one per lobe: s^n peaks
+        # where tan(theta) = Cx tan(gamma), so Cx = tan(theta) / tan(gamma)
+        peaks = [float(np.clip(np.tan(tp) / np.tan(g), c_lo, c_hi))
+                 for g, tp in peak_directions(gamma, theta, power, k=6)
+                 if abs(np.tan(g)) > 1e-6]
+        for width in (n, 1e3, 1e4, 1e5):
+            ln_n = np.log(min(max(width, n_lo), n_hi))
+            for first in range(len(peaks)):
+                aimed = (peaks[first:] + peaks[:first])[:n_lobes]
+                row = []
+                for cx in aimed:
+                    row += [cx, ln_n]
+                while len(row) < 2 * n_lobes:
+                    row += [0.0, np.log(5.0)]
+                out.append(row)
         return np.array(out)
 
     return ReflectionModel(
@@ -655,9 +678,9 @@ def make_lafortune(n_lobes: int = 2) -> ReflectionModel:
         formula="K cos(theta) [(1-sum a_i)/pi + sum_i a_i (n_i+2)/2pi "
         "(Cx_i sin(gamma) sin(theta) + cos(gamma) cos(theta))^n_i]",
         reference="Lafortune, Foo, Torrance and Greenberg 1997 (the paper's ref. 20)",
-        options={"n_lobes": n_lobes,
+        options={"n_lobes": n_lobes, "n_data_starts": 6, "residual_column": 0,
                  "groups": tuple((2 * i, 2 * i + 1) for i in range(n_lobes))},
-        **_screen(np.tile([-1.2, np.log(1.0)], n_lobes), np.tile([0.5, np.log(3000.0)], n_lobes)),
+        **_screen(np.tile([-1.2, np.log(1.0)], n_lobes), np.tile([0.5, np.log(1.0e5)], n_lobes)),
     )
 
 

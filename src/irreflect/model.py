@@ -261,6 +261,9 @@ class ReflectionModel:
     formula: str = ""
     reference: str = ""
     options: dict = field(default_factory=dict)
+    #: ``options`` the fitter reads: ``residual_column`` (the linear coefficient that is
+    #: ``K (1 - shares)`` in natural terms), ``batch_starts``, ``validity``, ``groups``,
+    #: ``n_screen``, ``n_keep``, ``n_data_starts`` (see :mod:`irreflect.fitting`).
     #: Box of plausible ``z`` sampled by the fitter's global screening (default: the
     #: bounds, clipped to [-15, 15] on each coordinate).
     screen_lower: np.ndarray | None = None
@@ -479,6 +482,22 @@ def _median_specular_index(prof: LobeProfile) -> float:
     return float(np.median(prof.specular_index[0][found]))
 
 
+def peak_directions(gamma, theta, power, k: int = 4) -> list[tuple[float, float]]:
+    """``(gamma, theta)`` in radians of the brightest point of each angle of incidence,
+    for the ``k`` angles with the highest peaks: where a narrow lobe must point (lobes
+    whose axis is free, as in Eq. 7, aim at a measured receiver, not at the mirror)."""
+    gamma = np.asarray(gamma, float).ravel()
+    theta = np.asarray(theta, float).ravel()
+    power = np.asarray(power, float).ravel()
+    out = []
+    for g in np.unique(np.round(gamma, 9)):
+        idx = np.flatnonzero(np.abs(gamma - g) < 1e-9)
+        j = idx[np.argmax(power[idx])]
+        out.append((power[j], float(gamma[j]), float(theta[j])))
+    out.sort(key=lambda r: -r[0])
+    return [(g, t) for _, g, t in out[:k]]
+
+
 def two_lobe_profile_starts(profile: LobeProfile) -> np.ndarray:
     """Two-lobe starts ``z (B, S, 5)`` from a :class:`LobeProfile`: the straight lines
     ``ln n(gamma) = ln u + v ln cos(gamma)`` through the per-angle indices and specular
@@ -633,6 +652,7 @@ def make_two_lobe() -> ReflectionModel:
         # its data-driven starts carry the search on glossy tables; a lighter screening
         # suffices (300 of 300 generated materials, see tests/test_global_fit.py)
         options={"validity": _two_lobe_validity, "batch_starts": _two_lobe_batch_starts,
+                 "residual_column": 0,
                  "n_screen": 160, "n_keep": 3, "groups": ((0,), (1, 2), (3, 4))},
         screen_lower=np.array([-6.0, np.log(0.3), -3.0, np.log(1.0), -3.0]),
         screen_upper=np.array([2.0, np.log(20.0), 6.0, np.log(1.0e5), 3.0]),
@@ -742,6 +762,21 @@ def make_n_lobe(n_lobes: int = 3) -> ReflectionModel:
                 n = 1.0 if t == 0.0 else n_est * scale / (1 + i)
                 row += [t, np.log(max(n, 0.1))]
             out.append(row)
+        # narrow lobes aimed at the brightest receivers (axis theta = -t gamma through the
+        # receiver: a goniometer's receivers seldom sit exactly on the mirror), one per lobe
+        # but the last, which stays broad about the normal
+        peaks = [float(np.clip(-tp / g, -1.5, 1.5))
+                 for g, tp in peak_directions(gamma, theta, power, k=6) if abs(g) > 1e-6]
+        for n in (n_est, 1e3, 1e4, 1e5):
+            ln_n = np.log(min(max(n, 1.0), MAX_LOBE_INDEX))
+            for first in range(len(peaks)):
+                aimed = (peaks[first:] + peaks[:first])[: max(n_lobes - 1, 1)]
+                row = []
+                for axis in aimed:
+                    row += [axis, ln_n]
+                while len(row) < 2 * n_lobes:
+                    row += [0.0, np.log(2.0)]
+                out.append(row[: 2 * n_lobes])
         return np.array(out)
 
     lo = np.tile([-1.5, np.log(0.05)], n_lobes)
@@ -760,7 +795,7 @@ def make_n_lobe(n_lobes: int = 3) -> ReflectionModel:
         alpha_nonneg=(True,) * n_lobes,
         formula="K sum_i a_i (n_i+1)/2pi cos^n_i(theta + t_i gamma)",
         reference="the paper, Eqs. 7-8",
-        options={"n_lobes": n_lobes,
+        options={"n_lobes": n_lobes, "n_data_starts": 6,
                  "groups": tuple((2 * i, 2 * i + 1) for i in range(n_lobes))},
     )
 
@@ -810,6 +845,7 @@ def make_phong() -> ReflectionModel:
         alpha_nonneg=(True, True),
         formula="K ((1-k_s) cos(theta) + k_s cos^n(phi))",
         reference="Phong 1975 (the paper's ref. 18)",
+        options={"residual_column": 0},
     )
 
 

@@ -12,7 +12,8 @@ Materials (two-lobe coefficients of Eqs. 15-22, drawn per seed):
 ``glossy``
     Specular index ``u_ns`` from 10^2 to 10^4.7 (gloss paint, glazed tile, lacquer;
     half width at half maximum 6 deg down to 0.3 deg), specular share ``u_as`` from 1 %
-    to 50 %: peak-to-median power ratios of 10^2 to 10^4.
+    to 50 %: peak-to-median power ratios from about 10 to 10^4 (median 130, 90th
+    percentile 3000 over seeds 0-299; lower where the grid misses the peak).
 ``matte``
     ``u_ns`` from 6 to 160, ``u_as`` from 0.3 % to 10 % (the paper's three materials lie
     in this range).

@@ -187,8 +187,9 @@ def apply_extension(base: ReflectionModel, ext: Extension) -> ReflectionModel:
         "extensions": applied_extensions(base) + (ext.name,),
         "extension": ext,
     }
-    if "validity" in base.options:  # checks on the wrapped model's (leading) parameters
-        options["validity"] = base.options["validity"]
+    for key in ("validity", "residual_column"):  # about the wrapped model's leading part
+        if key in base.options:
+            options[key] = base.options[key]
     if "batch_starts" in base.options:  # the wrapped model's starts, new coordinates neutral
         base_batch = base.options["batch_starts"]
 

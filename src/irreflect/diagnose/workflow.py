@@ -28,6 +28,7 @@ from __future__ import annotations
 
 import dataclasses
 import time
+import warnings
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
@@ -35,7 +36,7 @@ import numpy as np
 from scipy import stats
 
 from ..data import Measurements, as_measurements
-from ..errors import IrreflectError
+from ..errors import FitError, FitWarning, IrreflectError
 from ..fitting import FitResult, fit
 from ..model import ReflectionModel
 from .extensions import (
@@ -601,12 +602,12 @@ def diagnose(measurements, model="two-lobe", *, extensions: Sequence[str] | None
             say(f"trying {name} on {current.model_name}")
             extended = get_extension(name)(current.fit.model_object)
             try:
-                result = _fit_candidate(meas, extended, current.fit, seed)
-            except Exception as exc:  # a candidate that cannot be fitted is not evidence
-                if isinstance(exc, KeyboardInterrupt):
-                    raise
+                with warnings.catch_warnings():  # candidates are trials: warn for the result
+                    warnings.simplefilter("ignore", FitWarning)
+                    result = _fit_candidate(meas, extended, current.fit, seed)
+            except (FitError, IrreflectError) as exc:  # a candidate that cannot be fitted
                 row.append(Candidate(name, None, float("inf"), 0.0, 0.0, False,
-                                     f"fit failed ({type(exc).__name__})"))
+                                     f"fit failed: {exc}"))
                 continue
             a = assess(result, noise)
             rss_b = float(np.sum(current.fit.residuals ** 2))
@@ -650,6 +651,10 @@ def diagnose(measurements, model="two-lobe", *, extensions: Sequence[str] | None
                 steps = [assess(a.fit, noise) for a in steps]
         current = steps[-1]
     verdict, summary, where = _verdict(steps, effects, alpha)
+    if len(steps) > 1:  # the extended model is a result too: say what is doubtful about it
+        for text in steps[-1].fit.warnings:
+            warnings.warn(FitWarning(f"{meas.name}, {steps[-1].fit.model}: {text}"),
+                          stacklevel=2)
     return Diagnosis(
         name=meas.name, n_points=meas.n_points, base_model=base_model.name, noise=noise,
         steps=tuple(steps), candidates=tuple(rounds), effects=tuple(effects), verdict=verdict,

@@ -356,10 +356,13 @@ def protocol_failure(protocol, dense, frame, r2, reference_r2, r2_within, refere
         if len(lobe):
             offset = float(np.min(np.abs(lobe["theta_deg"] + g)))
             if offset > 2.0 * w:
+                fix = ("the receiver positions cannot resolve it: measure with a finer receiver "
+                       "step near the mirror" if protocol.kind == "glossy" else
+                       "use the glossy-aware protocol (irreflect protocol --specular-index N "
+                       "or --lobe-from PILOT)")
                 causes.append(
                     f"at gamma {g:g} the specular lobe (half width {w:.2g} deg) is narrower "
-                    f"than the protocol's lobe offsets ({offset:.3g} deg): use the glossy-aware "
-                    "protocol (irreflect protocol --specular-index N or --lobe-from PILOT)")
+                    f"than the protocol's lobe offsets ({offset:.3g} deg): {fix}")
     if not causes and np.isfinite(r2_within) and r2_within > r2 + margin:
         mags = np.abs(protocol.gamma_deg)
         causes.append(

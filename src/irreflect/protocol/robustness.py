@@ -167,11 +167,9 @@ def _structural_reasons(model_obj, g0, t0, power, seed, reasons) -> list[str]:
     a near-singular direction of the information matrix of the error-free fit (e.g. every
     ``v`` of Eqs. 15-18 when all points share one angle of incidence). A Monte Carlo
     alone can miss them: a degenerate coefficient may simply stay at its start."""
-    from ..errors import FitError
-
     import warnings
 
-    from ..errors import FitWarning
+    from ..errors import FitError, FitWarning
 
     try:
         with warnings.catch_warnings():  # an internal check, not a fit the user asked for

@@ -1,0 +1,291 @@
+"""The fitter is global on glossy and matte materials, for every model, and honest about it.
+
+Generated materials (``irreflect.synthetic``) carry their generating curve, so a global
+fit must reach at least its R^2 on the noisy table; the real sets are held to the best of
+50 random-start ``scipy.optimize.least_squares`` runs (``tests/helpers.py``).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+
+from irreflect import fit, fit_subsets
+from irreflect.cli import main
+from irreflect.data import Measurements, read_measurements
+from irreflect.errors import DataError, FitError, FitWarning
+from irreflect.model import get_model, model_names, two_lobe_power
+from irreflect.synthetic import GRIDS, KINDS, synthetic_for_model, synthetic_material
+from tests.helpers import least_squares_reference
+
+SEEDS_PER_CASE = 30  # 2 kinds x 5 grids x 30 seeds = 300 generated materials
+
+
+@pytest.mark.parametrize("grid", GRIDS)
+@pytest.mark.parametrize("kind", KINDS)
+def test_two_lobe_reaches_the_generating_curve_on_300_generated_materials(kind, grid):
+    shortfalls = []
+    for seed in range(SEEDS_PER_CASE):
+        case = synthetic_material(seed, kind, grid)
+        result = fit(case.measurements)
+        if result.r2 < case.r2_truth - 1e-4:
+            shortfalls.append((seed, result.r2, case.r2_truth))
+    assert not shortfalls, f"{kind}/{grid}: fit below the generating curve: {shortfalls}"
+
+
+def test_generated_glossy_materials_are_glossy():
+    """The generator's glossy tables have the dynamic range the fitter must cope with."""
+    ratios = []
+    for seed in range(100):
+        p = synthetic_material(seed, "glossy").measurements.power
+        ratios.append(np.max(p) / np.median(p))
+    assert np.median(ratios) > 50 and np.percentile(ratios, 90) > 1e3
+
+
+@pytest.mark.parametrize("name", [m for m in model_names() if m != "two-lobe"])
+def test_every_model_reaches_its_own_generating_curve(name):
+    seeds = range(8) if name.startswith("n-lobe") else range(20)
+    shortfalls = []
+    for seed in seeds:
+        case = synthetic_for_model(name, seed)
+        result = fit(case.measurements, name)
+        if result.r2 < case.r2_truth - 1e-4:
+            shortfalls.append((seed, result.r2, case.r2_truth))
+    assert not shortfalls, f"{name}: fit below the generating curve: {shortfalls}"
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_scale_of_power_does_not_change_the_shape(seed):
+    case = synthetic_material(seed, "glossy")
+    fits = [fit(dataclasses.replace(case.measurements, power=case.measurements.power * s))
+            for s in (1e-6, 1.0, 1e6)]
+    shape = [np.delete(f.values, 6) for f in fits]  # all but K
+    np.testing.assert_allclose(shape[0], shape[1], rtol=1e-6)
+    np.testing.assert_allclose(shape[2], shape[1], rtol=1e-6)
+    np.testing.assert_allclose([f.values[6] for f in fits], fits[1].values[6] * np.array(
+        [1e-6, 1.0, 1e6]), rtol=1e-5)
+    assert max(f.r2 for f in fits) - min(f.r2 for f in fits) < 1e-9
+
+
+def test_a_narrow_lobe_seen_by_one_point_is_not_fitted_as_zero():
+    """The K = 0 failure: a specular lobe of index 6000 on a grid with one point at the
+    mirror and one 1.5 deg off; the old linear coefficients (K, K u_as) allowed K = 0 with a
+    nonzero specular term, which mapped back to a zero model (R^2 < 0)."""
+    params = (0.047, -2.243, 0.697, -0.125, 6203.0, -0.808, 10.54)
+    g, t = [], []
+    for gamma in (-15.0, -35.0, -55.0, -70.0):
+        theta = np.unique(np.r_[np.arange(-80.0, 81.0, 10.0), -gamma, -gamma + 1.5])
+        g += [gamma] * theta.size
+        t += list(theta)
+    g, t = np.array(g), np.array(t)
+    clean = two_lobe_power(np.radians(g), np.radians(t), *params)
+    rng = np.random.default_rng(5)
+    meas = Measurements(g, t, clean * (1 + 0.01 * rng.standard_normal(clean.size)))
+    result = fit(meas)
+    truth_r2 = 1 - np.sum((meas.power - clean) ** 2) / np.sum((meas.power - meas.power.mean()) ** 2)
+    assert result.values[6] > 0 and result.values[0] > 0
+    assert result.r2 >= truth_r2 - 1e-4
+
+
+# ----------------------------------------------------------------------------- honest results
+def test_convergence_is_reported_not_assumed():
+    case = synthetic_material(3, "glossy")
+    good = fit(case.measurements)
+    assert good.converged and good.message.startswith("converged")
+    with pytest.warns(FitWarning, match="not converged: iteration limit"):
+        short = fit(case.measurements, max_iter=1, max_rounds=0, polish=False)
+    assert not short.converged and "iteration limit (1)" in short.message
+    assert any(w.startswith("not converged") for w in short.warnings)
+
+
+def test_a_coefficient_at_its_bound_is_listed_and_warned():
+    """Phong on a purely diffuse (cos theta) table: no specular lobe to find, so the fit
+    spends its specular term on the broadest lobe it is allowed, n at its lower bound."""
+    g = np.repeat([-20.0, -40.0, -60.0], 17)
+    t = np.tile(np.linspace(-80, 80, 17), 3)
+    power = np.cos(np.radians(t)) * (1 + 0.01 * np.random.default_rng(2).standard_normal(t.size))
+    with pytest.warns(FitWarning, match="at a bound"):
+        result = fit(Measurements(g, t, power), "phong")
+    assert result.at_bound == ("n",)
+    assert result.params["n"] == pytest.approx(get_model("phong").params[1].lower)
+
+
+def test_ill_determined_coefficients_are_listed():
+    # one angle of incidence: how the lobes change with gamma cannot be seen
+    g = np.full(25, -30.0)
+    t = np.linspace(-80, 80, 25)
+    power = two_lobe_power(np.radians(g), np.radians(t), 0.1, -1.0, 1.2, 0.5, 60.0, 0.3, 2.0)
+    power = power * (1 + 0.01 * np.random.default_rng(1).standard_normal(t.size))
+    result = fit(Measurements(g, t, power))
+    assert {"v_as", "v_nd", "v_ns"} <= set(result.ill_determined)
+    assert any("ill-determined" in w for w in result.warnings)
+
+
+@pytest.mark.parametrize("power, message", [
+    (np.zeros(30), "power is constant"),
+    (np.full(30, 2.5), "power is constant"),
+])
+def test_degenerate_power_is_refused(power, message):
+    g = np.repeat([-20.0, -40.0, -60.0], 10)
+    t = np.tile(np.linspace(-60, 60, 10), 3)
+    with pytest.raises(DataError, match=message):
+        fit(Measurements(g, t, power))
+
+
+def test_no_degree_of_freedom_is_refused(make_synthetic):
+    meas = make_synthetic().subset(np.arange(7))
+    with pytest.raises(DataError, match="found 7 points while at least 8 are needed"):
+        fit(meas)
+
+
+def test_a_fit_worse_than_a_constant_is_an_error():
+    g = np.repeat([-20.0, -40.0, -60.0], 15)
+    t = np.tile(np.linspace(-70, 70, 15), 3)
+    retro = np.exp(-((t - g) / 8.0) ** 2) + 0.01  # a peak back at the source
+    with pytest.raises(FitError, match="cannot beat a constant"):
+        fit(Measurements(g, t, retro), "single-lobe")
+
+
+@pytest.mark.parametrize("command", ["fit", "diagnose", "compare"])
+def test_degenerate_tables_give_one_line_errors_on_the_cli(tmp_path, capsys, command):
+    path = tmp_path / "flat.csv"
+    path.write_text("gamma_deg,theta_deg,power\n" + "".join(
+        f"{g},{t},0\n" for g in (-20, -40) for t in range(-60, 61, 10)))
+    out = tmp_path / "out"
+    argv = [command, str(path)] + (["--out", str(out)] if command != "fit" else [])
+    assert main(argv) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "power is constant" in err[0] and "Traceback" not in err[0]
+    assert not out.exists()
+
+
+def test_fit_cli_prints_warnings_on_stderr(tmp_path, capsys):
+    g = np.full(25, -30.0)
+    t = np.linspace(-80, 80, 25)
+    power = two_lobe_power(np.radians(g), np.radians(t), 0.1, -1.0, 1.2, 0.5, 60.0, 0.3, 2.0)
+    path = tmp_path / "one_gamma.csv"
+    Measurements(g, t, power * (1 + 0.01 * np.random.default_rng(0).standard_normal(25)))\
+        .to_frame().to_csv(path, index=False)
+    assert main(["fit", str(path)]) == 0
+    captured = capsys.readouterr()
+    warning_lines = [x for x in captured.err.splitlines() if x.startswith("irreflect: warning:")]
+    assert warning_lines and all("ill-determined" in x or "bound" in x for x in warning_lines)
+    assert "R^2 =" in captured.out
+
+
+# ----------------------------------------------------------------------------- subsets
+def test_exhaustive_subset_fits_equal_fit_on_the_subset():
+    case = synthetic_material(11, "glossy", "uneven")
+    meas = case.measurements
+    rng = np.random.default_rng(0)
+    masks = np.zeros((6, meas.n_points), bool)
+    for row in masks:
+        row[rng.choice(meas.n_points, 20, replace=False)] = True
+    res = fit_subsets(meas.gamma_deg, meas.theta_deg, meas.power, masks, exhaustive=True)
+    for i, mask in enumerate(masks):
+        alone = fit(meas.subset(mask))
+        assert res.cost[i] == pytest.approx(alone.cost, rel=1e-9)
+        np.testing.assert_allclose(res.params[i], alone.values, rtol=1e-9)
+
+
+def test_batched_subset_fits_find_the_lobe_on_glossy_subsets():
+    """The search's light subset fits (as ``select`` runs them) on 25-40-point subsets of
+    glossy tables: most reach the exhaustive fit's cost; none is more than 10x worse on
+    average (the data-driven starts of each subset carry them)."""
+    gaps = []
+    for seed in range(6):
+        meas = synthetic_material(seed, "glossy", "uneven").measurements
+        rng = np.random.default_rng(seed)
+        masks = np.zeros((10, meas.n_points), bool)
+        for row in masks:
+            row[rng.choice(meas.n_points, min(meas.n_points, int(rng.integers(25, 41))),
+                           replace=False)] = True
+        ref = fit_subsets(meas.gamma_deg, meas.theta_deg, meas.power, masks, exhaustive=True)
+        fast = fit_subsets(meas.gamma_deg, meas.theta_deg, meas.power, masks, n_screen=32,
+                           n_keep=2, max_iter=25, ftol=1e-6)
+        gaps += list(fast.cost / ref.cost - 1)
+    gaps = np.array(gaps)
+    assert np.mean(gaps < 0.01) > 0.75
+    # the exhaustive fit is the better one (or as good) on nearly every subset: 7-parameter
+    # fits of 25-40 points of a glossy table are rugged, and once in a while a search
+    # start of the light fit lands in a basin the full search did not try
+    assert np.mean(gaps > -1e-9) >= 0.95
+
+
+# ----------------------------------------------------------------------------- real data
+@pytest.mark.real
+def test_phong_on_krylon_is_the_global_optimum(real_dir):
+    meas = read_measurements(real_dir / "cornell" / "cornell_krylon_blue.csv")
+    result = fit(meas, "phong")
+    assert result.r2 >= 0.3232  # a 300-start least_squares found 0.3232 (k_s 0.95, n 1190)
+    assert result.params["n"] > 1000
+
+
+@pytest.mark.real
+def test_cayman_fit_says_what_is_doubtful(real_dir):
+    meas = read_measurements(real_dir / "cornell" / "cornell_cayman.csv")
+    with pytest.warns(FitWarning):
+        result = fit(meas)
+    assert result.r2 > 0.99
+    assert result.at_bound or result.ill_determined
+    assert "u_ns" in result.ill_determined + result.at_bound
+
+
+@pytest.mark.real
+def test_paper_protocol_failure_on_cayman_is_named_and_the_glossy_protocol_does_better(real_dir):
+    from irreflect.protocol.evaluate import (
+        evaluate_protocol,
+        glossy_protocol_for,
+        paper_protocol_for,
+    )
+
+    meas = read_measurements(real_dir / "cornell" / "cornell_cayman.csv")
+    reference = fit(meas)
+    paper = evaluate_protocol(paper_protocol_for(meas), meas, reference=reference)
+    assert paper.failed and "specular lobe" in paper.failure
+    glossy = evaluate_protocol(glossy_protocol_for(meas, reference), meas, reference=reference)
+    assert glossy.r2 > paper.r2 + 0.3
+
+
+def _real_cases():
+    from irreflect.data import real_datasets
+
+    return sorted(real_datasets())
+
+
+@pytest.mark.slow
+@pytest.mark.real
+@pytest.mark.parametrize("dataset", _real_cases() or ["(no real data)"])
+def test_every_model_beats_50_least_squares_starts_on_real_data(real_dir, dataset):
+    """Every model on every real set: irreflect's cost is at most the best of 50 random-start
+    bounded least_squares runs (n-lobe, whose reference takes minutes on the 1261-point
+    sets, only on the sets of at most 200 points here; experiments/check_global_fits.py runs
+    the whole matrix). A model that cannot beat a constant must also fail to for the
+    reference."""
+    from irreflect.data import real_datasets
+
+    meas = read_measurements(real_datasets()[dataset])
+    worse = []
+    for name in model_names():
+        if name.startswith("n-lobe") and meas.n_points > 200:
+            continue
+        reference = least_squares_reference(name, meas, n_starts=50, seed=1)
+        try:
+            ours = fit(meas, name, use_sigma=False).cost
+        except FitError as exc:
+            assert "cannot beat a constant" in str(exc)
+            ss_tot = 0.5 * np.sum((meas.power - meas.power.mean()) ** 2)
+            assert reference >= ss_tot * (1 - 1e-9), f"{name}: reference beats a constant"
+            continue
+        if ours > reference * (1 + 1e-6):
+            worse.append((name, ours, reference))
+    assert not worse, f"{dataset}: irreflect worse than least_squares: {worse}"
+
+
+def test_every_registered_model_has_a_screening_box_inside_its_bounds():
+    for name in model_names():
+        model = get_model(name)
+        lo, hi = model.screen_box()
+        assert np.all(lo >= model.z_lower - 1e-12) and np.all(hi <= model.z_upper + 1e-12)
