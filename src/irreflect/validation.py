@@ -167,18 +167,18 @@ MAX_FILE_BYTES = 256 * 2**20
 #: Rows any command reads. Above, the parsed text alone takes gigabytes.
 MAX_TABLE_ROWS = 2_000_000
 #: Measured points per command, chosen so that each stays under about 2 GB of memory
-#: (``experiments/bench_memory.py`` measures them). ``select`` scores subsets of up to
-#: ``--max-points`` points; its limit applies to the table (every subset's mask and cache
-#: key grows with it) and, separately, to the largest subset size searched.
+#: (``experiments/bench_memory.py`` measures them; README, "Bad input"). ``diagnose``
+#: grows faster than linearly (1.6 GB at 10,000 points, 5.9 GB at 20,000); ``reproduce``
+#: diagnoses every table; ``protocol --design-from`` searches subsets of every size.
 POINT_BUDGET = {
     "fit": 200_000,
     "plot": 200_000,
     "evaluate-protocol": 200_000,
-    "compare": 50_000,
-    "diagnose": 20_000,
+    "compare": 200_000,
+    "diagnose": 10_000,
     "select": 50_000,
-    "protocol": 50_000,
-    "reproduce": 50_000,
+    "protocol": 2_000,
+    "reproduce": 10_000,
 }
 #: ``select``: largest subset size searched on a table of more than
 #: :data:`SELECT_FULL_SEARCH_POINTS` points (``--max-points`` must be at most this).
@@ -191,6 +191,13 @@ _SUBSAMPLE = ("subsample the table (e.g. every 10th theta of each gamma, or fewe
               "incidence)")
 
 
+_OTHERWISE = {
+    "protocol": " (or choose points with 'irreflect select DATA --max-points 30')",
+    "reproduce": " (or run the commands one by one: fit, compare and select accept more)",
+    "diagnose": " (or fit and compare, which accept more points)",
+}
+
+
 def check_points_budget(n_points: int, command: str, source: str = "") -> None:
     """Refuse up front a table too large for ``command`` (see :data:`POINT_BUDGET`)."""
     limit = POINT_BUDGET.get(command)
@@ -198,7 +205,7 @@ def check_points_budget(n_points: int, command: str, source: str = "") -> None:
         where = f"{source}: " if source else ""
         raise DataError(
             f"{where}{n_points} measured points is more than '{command}' handles within its "
-            f"memory budget ({limit} points): {_SUBSAMPLE}"
+            f"memory budget ({limit} points): {_SUBSAMPLE}{_OTHERWISE.get(command, '')}"
         )
 
 
