@@ -29,6 +29,9 @@ OPTIONAL = ("sigma", "material")
 #: A negative power is accepted as noise around zero only down to this fraction of the
 #: table's maximum power (or 4 sigma, when sigma is given).
 NEGATIVE_POWER_TOLERANCE = 0.02
+#: The largest |power| of a table must lie in this range (squares and sums of squares of
+#: the fit stay finite and above underflow); any unit can be rescaled into it.
+POWER_RANGE = (1e-100, 1e100)
 
 
 class DataNotice(UserWarning):
@@ -242,6 +245,19 @@ def validate_table(df: pd.DataFrame, source: str = "table", *,
             f"{rows(i)}: give that row's uncertainty, or delete the sigma column to fit "
             "unweighted"
         )
+    peak = float(np.max(np.abs(power)))
+    if peak == 0:
+        _fail(f"{source}: power is 0 in every row: nothing to fit; check the detector and the "
+              "column")
+    if not POWER_RANGE[0] <= peak <= POWER_RANGE[1]:
+        _fail(f"{source}: the largest |power| is {peak:g}, outside what the fitter handles "
+              f"({POWER_RANGE[0]:g} to {POWER_RANGE[1]:g}): rescale the column (any consistent "
+              "unit works, e.g. divide by its maximum)")
+    if sigma is not None and np.min(sigma) < 1e-12 * peak:
+        i = int(np.argmin(sigma))
+        _fail(f"{source}: sigma {sigma[i]:g} in {rows(i)} is below 1e-12 of the largest power "
+              f"({peak:g}): weights 1/sigma^2 that large cannot be fitted; give a realistic "
+              "uncertainty or delete the sigma column")
     positive, negative = np.any(gamma > 0), np.any(gamma < 0)
     if positive and negative:
         _fail(
@@ -369,16 +385,14 @@ def _read_parquet(path: Path) -> pd.DataFrame:
 def _decode(raw: bytes, path: Path) -> str:
     """The file's text, or a one-line error saying which encoding it seems to have."""
     head = raw[:4096]
-    if head.startswith((b"\xff\xfe", b"\xfe\xff")) or (
-            len(head) >= 4 and head.count(b"\x00") * 3 >= len(head) and
-            (head[1::2].count(b"\x00") > len(head) // 3 or head[0::2].count(b"\x00") > len(head) // 3)):
-        _fail(f"{path}: the file is UTF-16 (or UTF-32) text; expected UTF-8: save it as "
-              "'CSV UTF-8' (comma-delimited)")
     if head.startswith(b"PAR1"):
         _fail(f"{path}: the file is Parquet, not CSV: rename it to end in .parquet")
     if head.startswith((b"PK\x03\x04", b"\xd0\xcf\x11\xe0")):
         _fail(f"{path}: the file is a spreadsheet or archive (binary), not CSV text: export "
               "it as 'CSV UTF-8' (comma-delimited)")
+    if head.startswith((b"\xff\xfe", b"\xfe\xff")) or _looks_utf16(head):
+        _fail(f"{path}: the file is UTF-16 (or UTF-32) text; expected UTF-8: save it as "
+              "'CSV UTF-8' (comma-delimited)")
     if b"\x00" in head:
         _fail(f"{path}: the file is binary, not CSV text: expected a UTF-8 text table with "
               "the header gamma_deg,theta_deg,power")
@@ -394,6 +408,21 @@ def _decode(raw: bytes, path: Path) -> str:
         _fail(f"{path}: the file has {control} control characters in its first lines: it is "
               "not a CSV text table (expected UTF-8 text with the header gamma_deg,theta_deg,power)")
     return text
+
+
+def _looks_utf16(head: bytes) -> bool:
+    """UTF-16/32 text without a byte-order mark: decodes to printable text."""
+    if b"\x00" not in head:
+        return False
+    for codec in ("utf-16-le", "utf-16-be", "utf-32-le", "utf-32-be"):
+        try:
+            text = head[: len(head) // 4 * 4].decode(codec)
+        except UnicodeDecodeError:
+            continue
+        printable = sum(c.isprintable() or c in "\r\n\t" for c in text)
+        if text and printable >= 0.95 * len(text) and any(c.isalnum() for c in text):
+            return True
+    return False
 
 
 def _read_csv(path: Path) -> tuple[pd.DataFrame, list[int]]:
