@@ -48,7 +48,8 @@ def _cmd_diagnose(args: argparse.Namespace) -> int:
     from .._atomic import claim_output
 
     if not 0.0 < args.alpha < 1.0:
-        raise IrreflectError(f"--alpha must lie between 0 and 1, found {args.alpha:g}")
+        raise IrreflectError(f"--alpha must lie strictly between 0 and 1 (e.g. 0.01), found "
+                             f"{args.alpha:g}")
     extensions = None
     if args.extensions is not None:
         extensions = [e.strip() for e in args.extensions.split(",") if e.strip()]

@@ -27,6 +27,9 @@ def _cmd_protocol(args) -> int:
     from .._atomic import claim_output
 
     fmt = args.format
+    if args.out and Path(args.out).is_dir():
+        raise IrreflectError(f"--out {args.out}: is a folder; expected a file name ending in "
+                             ".csv, .json or .md")
     if args.out and fmt is None:
         suffix = Path(args.out).suffix.lower()
         if suffix not in SUFFIXES:

@@ -98,8 +98,12 @@ def load_checkpoint(path, fingerprint: str, n_points: int) -> dict:
     except IrreflectError:
         raise
     except ValueError as exc:  # pickles are refused here, before anything is unpickled
-        reason = ("a pickle, which irreflect never loads" if "pickled" in str(exc)
-                  else "not a NumPy archive")
+        with open(path, "rb") as fh:
+            head = fh.read(4)
+        if head.startswith(b"\x80") or "Object arrays" in str(exc):
+            reason = "a pickle, which irreflect never loads"
+        else:
+            reason = "not a NumPy archive"
         _refuse(path, f"not an irreflect selection checkpoint ({reason})")
     except (OSError, EOFError, zipfile.BadZipFile, KeyError) as exc:
         _refuse(path, f"cannot be read as an irreflect selection checkpoint "
