@@ -276,6 +276,18 @@ def test_a_rerun_replaces_the_previous_runs_output_and_keeps_foreign_files(tmp_p
 PROTOCOL = ["protocol", "--gammas", "-20", "-40", "-60", "--out"]
 
 
+def test_a_folder_holding_only_irreflect_outputs_is_taken_and_they_are_kept(tmp_path):
+    """The README's tour: select --out out/select, then reproduce (here compare) --out out."""
+    out = tmp_path / "out"
+    assert _run(["compare", TERRAZZO, "--models", "phong", "--out", str(out / "cmp")])[0] == 0
+    assert _run(["compare", TERRAZZO, "--models", "ward", "--out", str(out)])[0] == 0
+    assert (out / "cmp" / "comparison.csv").exists() and (out / "comparison.csv").exists()
+    (tmp_path / "other").mkdir()
+    (tmp_path / "other" / "mine.txt").write_text("x")
+    line = _one_error(["compare", TERRAZZO, "--out", str(tmp_path)])
+    assert "holds files irreflect did not write (other" in line
+
+
 @pytest.mark.parametrize("kind", ["file", "dir"])
 def test_a_second_run_into_the_same_output_refuses_while_the_first_runs(tmp_path, kind):
     out = tmp_path / ("p.csv" if kind == "file" else "out")

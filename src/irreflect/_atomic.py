@@ -186,10 +186,14 @@ def claim_output(path, kind: str = "dir", option: str = "--out", suffixes=None):
 
 
 def _check_owned(path: Path, option: str) -> None:
-    """A folder a run may replace: absent, empty, or written by irreflect (manifest)."""
+    """A folder a run may replace: absent, empty, written by irreflect (manifest), or
+    holding only other irreflect output folders (e.g. ``out/select`` before
+    ``reproduce --out out``), which the run keeps."""
     if not path.is_dir() or (path / MANIFEST).exists():
         return
-    entries = [e.name for e in path.iterdir()]
+    entries = [e.name for e in path.iterdir()
+               if not (e.is_dir() and (e / MANIFEST).exists())
+               and not re.fullmatch(rf"\..+\.({_TMP}|{_OLD}|{_LOCK}).*", e.name)]
     if entries:
         from .validation import short_list
 
