@@ -38,7 +38,7 @@ def test_plot_writes_a_png(tmp_path):
     [
         (["fit", "missing.csv"], "no such file"),
         (["fit", "{data}", "--model", "phong2"], "unknown model 'phong2'"),
-        (["plot", "{data}", "--out", "{tmp}/x.txt"], "--out must end in"),
+        (["plot", "{data}", "--out", "{tmp}/x.txt"], "expected a file name ending in .png"),
     ],
 )
 def test_user_errors_exit_2_with_one_line_and_no_file(tmp_path, capsys, args, message):

@@ -153,8 +153,9 @@ def test_cli_table_and_out_dir(tmp_path, capsys):
         assert (out_dir / name).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     saved = json.loads((out_dir / "comparison.json").read_text())
     assert set(saved["models"]) == {"two-lobe", "phong@20", "ward"}
-    assert sorted(p.name for p in out_dir.iterdir()) == [
-        "comparison.csv", "comparison.json", "comparison_errors.png", "comparison_polar.png"]
+    files = ["comparison.csv", "comparison.json", "comparison_errors.png", "comparison_polar.png"]
+    assert sorted(p.name for p in out_dir.iterdir()) == [".irreflect-manifest.json", *files]
+    assert json.loads((out_dir / ".irreflect-manifest.json").read_text())["files"] == files
 
 
 @pytest.mark.parametrize("args, message", [

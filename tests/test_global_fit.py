@@ -148,16 +148,19 @@ def test_a_fit_worse_than_a_constant_is_an_error():
         fit(Measurements(g, t, retro), "single-lobe")
 
 
+@pytest.mark.parametrize("value, message", [(0.0, "power is 0 in every row"),
+                                            (2.5, "power is constant")])
 @pytest.mark.parametrize("command", ["fit", "diagnose", "compare"])
-def test_degenerate_tables_give_one_line_errors_on_the_cli(tmp_path, capsys, command):
+def test_degenerate_tables_give_one_line_errors_on_the_cli(tmp_path, capsys, command, value,
+                                                           message):
     path = tmp_path / "flat.csv"
     path.write_text("gamma_deg,theta_deg,power\n" + "".join(
-        f"{g},{t},0\n" for g in (-20, -40) for t in range(-60, 61, 10)))
+        f"{g},{t},{value}\n" for g in (-20, -40) for t in range(-60, 61, 10)))
     out = tmp_path / "out"
     argv = [command, str(path)] + (["--out", str(out)] if command != "fit" else [])
     assert main(argv) == 2
     err = capsys.readouterr().err.strip().splitlines()
-    assert len(err) == 1 and "power is constant" in err[0] and "Traceback" not in err[0]
+    assert len(err) == 1 and message in err[0] and "Traceback" not in err[0]
     assert not out.exists()
 
 

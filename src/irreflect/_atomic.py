@@ -1,48 +1,307 @@
-"""Atomic output: a file or a folder of files appears whole or not at all."""
+"""Output that appears whole or not at all, and that one run owns.
+
+A run *claims* its output path before it computes anything (:func:`claim_output`): the
+path is checked (:func:`irreflect.validation.check_output_path`), a lock is taken so that a
+second run into the same path at the same time refuses with one line, and what killed runs
+left behind (hidden temporary folders and files beside the path) is removed. Files are
+written into a temporary sibling and renamed into place (:func:`atomic_path`). An output
+folder is written whole into a temporary sibling folder and swapped into place
+(:func:`atomic_directory`); the folder carries a manifest (:data:`MANIFEST`) listing what
+the run wrote, so a rerun replaces everything the previous run wrote (no stale figures or
+run folders survive) and keeps only files that no irreflect run wrote there (for example
+another command's output folder nested inside it). A non-empty folder without a manifest
+is refused: irreflect never deletes files it did not write.
+
+Locks are ``fcntl.flock`` locks on a hidden file beside the path
+(``.<name>.irreflect-lock``): the system releases them when a process dies, so a killed run
+never blocks the next one, and the lock file is removed when the run ends.
+"""
 
 from __future__ import annotations
 
 import contextlib
+import ctypes
+import ctypes.util
+import json
 import os
+import re
 import shutil
-import tempfile
+import threading
+import time
 from pathlib import Path
 
+from .errors import IrreflectError
+
+try:  # POSIX; elsewhere runs are not locked against each other
+    import fcntl
+except ImportError:  # pragma: no cover
+    fcntl = None
+
+#: The manifest every output folder carries (hidden), listing the entries the run wrote.
+MANIFEST = ".irreflect-manifest.json"
+_TMP = "irreflect-tmp"
+_OLD = "irreflect-old"
+_LOCK = "irreflect-lock"
+#: Leftovers of runs killed before this module had its own names: ``tempfile`` names with
+#: the output's name as prefix (``.out.k2j4_x9a`` folders, ``.run.ckpt.k2j4_x9a.tmp`` files).
+_LEGACY = r"\.{name}\.[a-z0-9_]{{8}}(\.tmp)?"
+
+_held: dict[Path, _Claim] = {}
+_held_lock = threading.Lock()
+
+
+def _key(path: Path) -> Path:
+    return Path(os.path.abspath(path))
+
+
+class _Claim:
+    """A locked output path (one per path and process; re-entrant)."""
+
+    def __init__(self, path: Path, kind: str, option: str):
+        self.path = path
+        self.kind = kind
+        self.option = option
+        self.depth = 0
+        self.fd: int | None = None
+        self.lock_path = path.parent / f".{path.name}.{_LOCK}"
+        self.created: list[Path] = []  # folders made for the lock, deepest first
+
+    # -- lock
+    def acquire(self) -> None:
+        folder = self.path.absolute().parent
+        while not folder.exists():
+            self.created.append(folder)
+            folder = folder.parent
+        self.path.parent.mkdir(parents=True, exist_ok=True)
+        if fcntl is None:  # pragma: no cover
+            return
+        for _attempt in range(20):
+            fd = os.open(self.lock_path, os.O_RDWR | os.O_CREAT, 0o644)
+            try:
+                fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            except OSError:
+                pid = _read_pid(fd)
+                os.close(fd)
+                raise IrreflectError(
+                    f"{self.option} {self.path}: another irreflect run"
+                    f"{f' (pid {pid})' if pid else ''} is writing there now: wait for it to "
+                    "finish or choose another path"
+                ) from None
+            # the previous holder may have removed the file between our open and flock:
+            # then we hold a lock on a deleted file; try again on the new one
+            try:
+                same = os.path.samestat(os.fstat(fd), os.stat(self.lock_path))
+            except FileNotFoundError:
+                same = False
+            if same:
+                os.ftruncate(fd, 0)
+                os.write(fd, f"{os.getpid()}\n".encode())
+                self.fd = fd
+                return
+            os.close(fd)
+        raise IrreflectError(f"{self.option} {self.path}: could not take the lock "  # pragma: no cover
+                             f"{self.lock_path}: try again")
+
+    def release(self) -> None:
+        if self.fd is not None:
+            with contextlib.suppress(OSError):
+                os.unlink(self.lock_path)
+            os.close(self.fd)
+            self.fd = None
+        for folder in self.created:  # a run that wrote nothing leaves no empty folders
+            with contextlib.suppress(OSError):
+                folder.rmdir()
+
+    # -- leftovers of killed runs
+    def clean_leftovers(self) -> None:
+        """Remove the hidden temporary entries that runs into this path left when killed
+        (safe: we hold the lock, so no live run uses them)."""
+        name = self.path.name
+        pattern = re.compile(rf"\.{re.escape(name)}\.({_TMP}|{_OLD})-.*|"
+                             + _LEGACY.format(name=re.escape(name)))
+        with contextlib.suppress(OSError):
+            for entry in self.path.parent.iterdir():
+                if pattern.fullmatch(entry.name):
+                    _remove(entry)
+        if self.kind == "checkpoint-dir" and self.path.is_dir():
+            # per-run checkpoint files are written atomically inside the folder
+            inner = re.compile(rf"\..+\.({_TMP}|{_OLD})-.*|\..+\.ckpt\.[a-z0-9_]{{8}}\.tmp")
+            for entry in self.path.iterdir():
+                if inner.fullmatch(entry.name):
+                    _remove(entry)
+
+
+def _read_pid(fd: int) -> int | None:
+    with contextlib.suppress(OSError, ValueError):
+        os.lseek(fd, 0, os.SEEK_SET)
+        return int(os.read(fd, 32).decode().strip() or "0") or None
+    return None
+
+
+def _remove(entry: Path) -> None:
+    if entry.is_dir() and not entry.is_symlink():
+        shutil.rmtree(entry, ignore_errors=True)
+    else:
+        with contextlib.suppress(OSError):
+            entry.unlink()
+
 
 @contextlib.contextmanager
-def atomic_path(path):
-    """Yield a temporary path beside ``path``; move it into place only if the block succeeds."""
+def claim_output(path, kind: str = "dir", option: str = "--out", suffixes=None):
+    """Check ``path`` and lock it for this run, before any work (see the module docstring).
+
+    ``kind``: ``"file"``, ``"dir"`` (a folder the run owns and replaces) or
+    ``"checkpoint-dir"`` (a folder of per-run checkpoint files, kept between runs).
+    Re-entrant within a process: :func:`atomic_path` and :func:`atomic_directory` reuse a
+    claim the caller holds. Yields the path.
+    """
+    from .validation import check_output_path
+
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    os.close(fd)
-    tmp = Path(tmp)
+    key = _key(path)
+    with _held_lock:
+        claim = _held.get(key)
+        new = claim is None
+        if new:
+            check_output_path(path, "file" if kind == "file" else "dir", option, suffixes)
+            if kind == "dir":
+                _check_owned(path, option)
+            claim = _Claim(path, kind, option)
+            try:
+                claim.acquire()
+                claim.clean_leftovers()
+            except BaseException:
+                claim.release()
+                raise
+            _held[key] = claim
+        claim.depth += 1
     try:
-        yield tmp
-        # mkstemp makes 0600 files; give the result the usual permissions (umask applied)
-        umask = os.umask(0)
-        os.umask(umask)
-        os.chmod(tmp, 0o666 & ~umask)
-        os.replace(tmp, path)
+        yield path
     finally:
-        if tmp.exists():
-            tmp.unlink()
+        with _held_lock:
+            claim.depth -= 1
+            if claim.depth == 0:
+                _held.pop(key, None)
+                claim.release()
+
+
+def _check_owned(path: Path, option: str) -> None:
+    """A folder a run may replace: absent, empty, written by irreflect (manifest), or
+    holding only other irreflect output folders (e.g. ``out/select`` before
+    ``reproduce --out out``), which the run keeps."""
+    if not path.is_dir() or (path / MANIFEST).exists():
+        return
+    entries = [e.name for e in path.iterdir()
+               if not (e.is_dir() and (e / MANIFEST).exists())
+               and not re.fullmatch(rf"\..+\.({_TMP}|{_OLD}|{_LOCK}).*", e.name)]
+    if entries:
+        from .validation import short_list
+
+        raise IrreflectError(
+            f"{option} {path}: the folder exists and holds files irreflect did not write "
+            f"({short_list(sorted(entries), 3)}; no {MANIFEST}): choose a new or empty folder, "
+            "or delete it"
+        )
+
+
+# ----------------------------------------------------------------------------- files
+def _permissions(path: Path) -> None:
+    """``mkstemp``/``mkdtemp`` make owner-only entries; give the usual ones (umask)."""
+    umask = os.umask(0)
+    os.umask(umask)
+    os.chmod(path, (0o777 if path.is_dir() else 0o666) & ~umask)
 
 
 @contextlib.contextmanager
-def atomic_directory(path):
-    """Yield a temporary folder; on success its files are moved into ``path`` (created if
-    needed), replacing files of the same name. On failure nothing in ``path`` changes."""
+def atomic_path(path, option: str = "output"):
+    """Yield a temporary path beside ``path``; move it into place only if the block
+    succeeds. The path is claimed (locked) for the duration unless the caller holds it."""
+    import tempfile
+
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = Path(tempfile.mkdtemp(prefix=f".{path.name}.", dir=path.parent))
+    with claim_output(path, "file", option):
+        fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.{_TMP}-", dir=path.parent)
+        os.close(fd)
+        tmp = Path(tmp)
+        try:
+            yield tmp
+            _permissions(tmp)
+            os.replace(tmp, path)
+        finally:
+            if tmp.exists():
+                tmp.unlink()
+
+
+# ----------------------------------------------------------------------------- folders
+@contextlib.contextmanager
+def atomic_directory(path, option: str = "--out", command: str = "irreflect"):
+    """Yield a fresh temporary folder beside ``path``; on success it replaces ``path``
+    whole (with a manifest of what was written), keeping only entries of the old folder
+    that no irreflect run wrote. On failure nothing at ``path`` changes."""
+    import tempfile
+
+    path = Path(path)
+    with claim_output(path, "dir", option):
+        tmp = Path(tempfile.mkdtemp(prefix=f".{path.name}.{_TMP}-", dir=path.parent))
+        try:
+            yield tmp
+            written = sorted(p.relative_to(tmp).as_posix() for p in tmp.rglob("*")
+                             if p.is_file())
+            manifest = {"written_by": "irreflect", "command": command,
+                        "time": time.strftime("%Y-%m-%dT%H:%M:%S%z"), "files": written}
+            (tmp / MANIFEST).write_text(json.dumps(manifest, indent=1) + "\n")
+            _permissions(tmp)
+            _swap_in(tmp, path)
+        finally:
+            if tmp.exists():
+                shutil.rmtree(tmp, ignore_errors=True)
+
+
+def _swap_in(new: Path, path: Path) -> None:
+    """Put folder ``new`` at ``path``. An existing folder is exchanged with it atomically
+    where the system allows (Linux ``renameat2``), after its foreign entries (not in its
+    manifest) have been moved into ``new``; the old folder is then deleted."""
+    if not path.exists():
+        os.rename(new, path)
+        return
+    owned = _manifest_entries(path)
+    for entry in path.iterdir():
+        if entry.name == MANIFEST or entry.name in owned:
+            continue
+        target = new / entry.name
+        if not target.exists():  # this run's output of the same name wins
+            os.rename(entry, target)
+    old = path.parent / f".{path.name}.{_OLD}-{os.getpid()}"
+    if _exchange(new, path):
+        _remove(new)  # now holds the previous run's output
+        return
+    os.rename(path, old)  # pragma: no cover - systems without renameat2
+    os.rename(new, path)  # pragma: no cover
+    _remove(old)  # pragma: no cover
+
+
+def _manifest_entries(path: Path) -> set[str]:
+    """Top-level names of the entries a previous run recorded in its manifest."""
     try:
-        yield tmp
-        path.mkdir(parents=True, exist_ok=True)
-        for item in sorted(tmp.rglob("*")):
-            if item.is_file():
-                target = path / item.relative_to(tmp)
-                target.parent.mkdir(parents=True, exist_ok=True)
-                os.replace(item, target)
-    finally:
-        shutil.rmtree(tmp, ignore_errors=True)
+        doc = json.loads((path / MANIFEST).read_text())
+        return {str(f).split("/")[0] for f in doc.get("files", [])}
+    except (OSError, ValueError, AttributeError):
+        return set()
+
+
+_RENAME_EXCHANGE = 2
+_AT_FDCWD = -100
+
+
+def _exchange(a: Path, b: Path) -> bool:
+    """Atomically exchange two paths (Linux ``renameat2(RENAME_EXCHANGE)``); False when
+    the system or file system cannot."""
+    try:
+        libc = ctypes.CDLL(ctypes.util.find_library("c") or "libc.so.6", use_errno=True)
+        renameat2 = libc.renameat2
+    except (OSError, AttributeError):
+        return False
+    renameat2.argtypes = [ctypes.c_int, ctypes.c_char_p, ctypes.c_int, ctypes.c_char_p,
+                          ctypes.c_uint]
+    rc = renameat2(_AT_FDCWD, os.fsencode(a), _AT_FDCWD, os.fsencode(b), _RENAME_EXCHANGE)
+    return rc == 0

@@ -40,6 +40,56 @@ COMMANDS = {
 }
 
 
+# ----------------------------------------------------------------------------- parsing
+class OneLineParser(argparse.ArgumentParser):
+    """An argument parser whose errors are one line (no usage block), exit code 2."""
+
+    def error(self, message):
+        self.exit(2, f"irreflect: error: {self.prog}: {message} (see '{self.prog} --help')\n")
+
+
+def _argument_type(check, label: str):
+    """An argparse ``type`` from a ``validation.check_*`` helper; its name shows in errors."""
+
+    def convert(text: str):
+        try:
+            return check(text)
+        except (IrreflectError, ValueError) as exc:
+            raise argparse.ArgumentTypeError(f"expected {label}, found '{text}'") from exc
+
+    convert.__name__ = label
+    return convert
+
+
+def _int(text, minimum):
+    from .validation import check_int
+
+    return check_int(int(text), "value", minimum)
+
+
+def _float(text, **bounds):
+    from .validation import check_number
+
+    return check_number(text, "value", **bounds)
+
+
+def int_at_least(minimum: int):
+    """argparse type: an integer >= ``minimum``."""
+    return _argument_type(lambda t: _int(t, minimum), f"an integer >= {minimum}")
+
+
+#: argparse types: a seed (integer >= 0), integers >= 1 / >= 0, finite numbers
+SEED = _argument_type(lambda t: _int(t, 0), "a seed (an integer >= 0)")
+POSITIVE_INT = _argument_type(lambda t: _int(t, 1), "an integer >= 1")
+NON_NEGATIVE_INT = _argument_type(lambda t: _int(t, 0), "an integer >= 0")
+FINITE = _argument_type(lambda t: _float(t), "a finite number")
+NON_NEGATIVE = _argument_type(lambda t: _float(t, low=0.0), "a finite number >= 0")
+POSITIVE = _argument_type(lambda t: _float(t, low=0.0, low_open=True), "a number > 0")
+ANGLE = _argument_type(lambda t: _float(t, low=-90.0, high=90.0, low_open=True,
+                                         high_open=True),
+                       "an angle in degrees strictly between -90 and 90")
+
+
 # ----------------------------------------------------------------------------- shared helpers
 def add_data_argument(parser: argparse.ArgumentParser) -> None:
     """The DATA positional and the options every command that reads a table shares."""
@@ -55,10 +105,16 @@ def add_model_argument(parser: argparse.ArgumentParser, default: str = "two-lobe
                         help=f"reflection model (default {default}; see 'irreflect models')")
 
 
-def load_data(args):
+def load_data(args, command: str | None = None, path=None):
+    """Read the DATA table of a command and refuse it up front when it is larger than the
+    command's memory budget (:data:`irreflect.validation.POINT_BUDGET`)."""
     from .data import read_measurements
+    from .validation import check_points_budget
 
-    return read_measurements(args.data, average_duplicates=args.average_duplicates)
+    path = args.data if path is None else path
+    meas = read_measurements(path, average_duplicates=args.average_duplicates)
+    check_points_budget(meas.n_points, command or args.command, str(path))
+    return meas
 
 
 def print_json(obj) -> None:
@@ -82,8 +138,9 @@ def _cmd_fit(args) -> int:
     from .fitting import fit
     from .model import get_model
 
+    model = get_model(args.model)
     meas = load_data(args)
-    result = fit(meas, get_model(args.model), seed=args.seed)
+    result = fit(meas, model, seed=args.seed)
     if args.json:
         d = result.to_dict()
         print_json({k: d[k] for k in ("model", "params", "stderr", "r2", "rmse", "mse",
@@ -98,19 +155,21 @@ def _cmd_fit(args) -> int:
 
 
 def _cmd_plot(args) -> int:
+    from ._atomic import claim_output
     from .fitting import fit
+    from .model import get_model
     from .plots import plot_polar, save_figure
 
-    meas = load_data(args)
-    if not str(args.out).lower().endswith((".png", ".svg", ".pdf")):
-        raise IrreflectError(f"--out must end in .png, .svg or .pdf; found '{args.out}'")
-    predict, title = None, meas.name
-    if args.fit:
-        result = fit(meas, args.model, seed=args.seed)
-        predict = result.predict
-        title = f"{meas.name}: {result.model} fit, R^2 = {result.r2:.4f}"
-    ax = plot_polar(meas, predict, title=title)
-    save_figure(ax.figure, args.out)
+    model = get_model(args.model)
+    with claim_output(args.out, "file", "--out", suffixes=(".png", ".svg", ".pdf")):
+        meas = load_data(args)
+        predict, title = None, meas.name
+        if args.fit:
+            result = fit(meas, model, seed=args.seed)
+            predict = result.predict
+            title = f"{meas.name}: {result.model} fit, R^2 = {result.r2:.4f}"
+        ax = plot_polar(meas, predict, title=title)
+        save_figure(ax.figure, args.out)
     print(f"wrote {args.out}")
     return 0
 
@@ -130,7 +189,7 @@ def register(sub) -> None:
                                    "errors, R^2, RMSE, MSE and the per-gamma polar-area error.")
     add_data_argument(p)
     add_model_argument(p)
-    p.add_argument("--seed", type=int, default=0, help="seed of the random extra starts")
+    p.add_argument("--seed", type=SEED, default=0, help="seed of the random extra starts")
     p.add_argument("--json", action="store_true", help="one JSON object on stdout")
     p.set_defaults(handler=_cmd_fit)
 
@@ -138,8 +197,9 @@ def register(sub) -> None:
     add_data_argument(p)
     add_model_argument(p)
     p.add_argument("--fit", action="store_true", help="draw the fitted model over the markers")
-    p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--out", required=True, metavar="FILE.png")
+    p.add_argument("--seed", type=SEED, default=0)
+    p.add_argument("--out", required=True, metavar="FILE.png",
+                   help="figure file (.png, .svg or .pdf)")
     p.set_defaults(handler=_cmd_plot)
 
     p = sub.add_parser("models", help="list the reflection models")
@@ -149,12 +209,12 @@ def register(sub) -> None:
 # ----------------------------------------------------------------------------- entry point
 def build_parser(command: str | None = None) -> argparse.ArgumentParser:
     """The parser with every command, or only ``command``'s module when it is known."""
-    parser = argparse.ArgumentParser(
+    parser = OneLineParser(
         prog="irreflect",
         description="Reflection models for infrared / visible-light indoor multipath.",
     )
     parser.add_argument("--version", action="version", version=f"irreflect {__version__}")
-    sub = parser.add_subparsers(dest="command", metavar="COMMAND")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=OneLineParser)
     modules = (COMMANDS[command],) if command in COMMANDS else COMMAND_MODULES
     for name in modules:
         if name == __name__:
@@ -174,7 +234,10 @@ def main(argv=None) -> int:
     argv = sys.argv[1:] if argv is None else list(argv)
     command = next((a for a in argv if not a.startswith("-")), None)
     parser = build_parser(command)
-    args = parser.parse_args(argv)
+    try:
+        args = parser.parse_args(argv)
+    except SystemExit as exc:  # --help, --version, or a one-line usage error
+        return exc.code if isinstance(exc.code, int) else 2
     if not getattr(args, "handler", None):
         parser.print_help(sys.stderr)
         return 2
@@ -184,17 +247,31 @@ def main(argv=None) -> int:
             code = args.handler(args)
         except IrreflectError as exc:
             _print_notes(caught)
-            print(f"irreflect: error: {exc}", file=sys.stderr)
+            print(f"irreflect: error: {_one_line(exc)}", file=sys.stderr)
             return 2
         except FitError as exc:
             _print_notes(caught)
-            print(f"irreflect: fit failed: {exc}", file=sys.stderr)
+            print(f"irreflect: fit failed: {_one_line(exc)}", file=sys.stderr)
+            return 1
+        except MemoryError:
+            print("irreflect: error: out of memory: subsample the table or lower the budget "
+                  "options (see 'Bad input' in the README for each command's limit)",
+                  file=sys.stderr)
+            return 1
+        except OSError as exc:  # a full disk, a file removed under us: the system's reason
+            where = f" {exc.filename}" if exc.filename else ""
+            print(f"irreflect: error: cannot read or write{where}: "
+                  f"{exc.strerror or _one_line(exc)}", file=sys.stderr)
             return 1
         except KeyboardInterrupt:
             print("irreflect: interrupted", file=sys.stderr)
             return 130
     _print_notes(caught)
     return int(code or 0)
+
+
+def _one_line(exc: BaseException) -> str:
+    return " ".join(str(exc).split("\n")).strip() or type(exc).__name__
 
 
 def _print_notes(caught) -> None:

@@ -31,6 +31,7 @@ import pandas as pd
 
 from . import metrics
 from .errors import IrreflectError, unknown_name
+from .validation import check_seed, short_list
 
 #: Models compared by default; ``phong@{G}`` takes the ``phong_at_deg`` of the call.
 DEFAULT_MODELS = ("two-lobe", "phong@{G}", "phong", "blinn-phong", "lafortune", "ward",
@@ -230,7 +231,8 @@ def fit_at_incidence(meas, model, gamma_abs_deg: float, *, seed: int = 0):
         raise IrreflectError(
             f"{meas.name}: no measurements at |gamma| = {gamma_abs_deg:g} deg to fit "
             f"'{model}@{gamma_abs_deg:g}'; found |gamma| = "
-            f"{', '.join(f'{g:g}' for g in available)}: pass --phong-at-deg with one of them"
+            f"{short_list(available, fmt=lambda g: f'{g:g}')}: pass --phong-at-deg with one of "
+            "them"
         )
     return fit(meas.subset(sel), model, seed=seed), int(sel.sum())
 
@@ -293,6 +295,7 @@ def compare_models(measurements, models=None, *, phong_at_deg: float = 10.0, see
     from .errors import FitError
     from .fitting import fit
 
+    seed = check_seed(seed)
     meas = as_measurements(measurements)
     text = ",".join(models) if isinstance(models, list | tuple) else models
     labels = parse_model_list(text, phong_at_deg)
@@ -398,7 +401,7 @@ def write_outputs(comparison: Comparison, out_dir) -> list[Path]:
     out_dir = Path(out_dir)
     names = ["comparison_polar.png", "comparison_errors.png", "comparison.csv",
              "comparison.json"]
-    with atomic_directory(out_dir) as tmp:
+    with atomic_directory(out_dir, command="compare") as tmp:
         save_figure(plot_comparison_polar(comparison), tmp / names[0])
         save_figure(plot_errors_per_gamma(comparison), tmp / names[1])
         comparison.table().to_csv(tmp / names[2], float_format="%.6g")
@@ -415,11 +418,17 @@ def _cmd_compare(args) -> int:
         raise IrreflectError(
             f"--phong-at-deg must lie between 0 and 90 degrees, found {args.phong_at_deg:g}"
         )
+    import contextlib
+
+    from ._atomic import claim_output
+
     labels = parse_model_list(args.models, abs(args.phong_at_deg))
-    meas = load_data(args)
-    comparison = compare_models(meas, labels, phong_at_deg=abs(args.phong_at_deg),
-                                seed=args.seed, progress=None)
-    written = write_outputs(comparison, args.out) if args.out else []
+    claim = claim_output(args.out, "dir", "--out") if args.out else contextlib.nullcontext()
+    with claim:
+        meas = load_data(args)
+        comparison = compare_models(meas, labels, phong_at_deg=abs(args.phong_at_deg),
+                                    seed=args.seed, progress=None)
+        written = write_outputs(comparison, args.out) if args.out else []
     if args.json:
         print_json(comparison.to_dict() | {"written": [str(p) for p in written]})
     else:
@@ -430,7 +439,7 @@ def _cmd_compare(args) -> int:
 
 
 def register(sub) -> None:
-    from .cli import add_data_argument
+    from .cli import FINITE, SEED, add_data_argument
 
     p = sub.add_parser(
         "compare", help="compare reflection models on the same data (section 5.3, Table 6)",
@@ -443,9 +452,9 @@ def register(sub) -> None:
                    help="comma-separated models (default: "
                         + ",".join(DEFAULT_MODELS).replace("{G}", "<G>")
                         + "); see 'irreflect models'")
-    p.add_argument("--phong-at-deg", type=float, default=10.0, metavar="G",
+    p.add_argument("--phong-at-deg", type=FINITE, default=10.0, metavar="G",
                    help="angle of incidence (deg) at which phong@ is fitted (default 10)")
-    p.add_argument("--seed", type=int, default=0, help="seed of every fit")
+    p.add_argument("--seed", type=SEED, default=0, help="seed of every fit")
     p.add_argument("--json", action="store_true", help="one JSON object on stdout")
     p.add_argument("--out", default=None, metavar="DIR",
                    help="write polar plots per angle of incidence (Fig. 25), a bar chart of "

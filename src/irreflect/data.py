@@ -10,6 +10,7 @@ expected, what was found and how to fix it.
 
 from __future__ import annotations
 
+import csv
 import difflib
 import os
 import warnings
@@ -21,12 +22,16 @@ import pandas as pd
 
 from ._atomic import atomic_path
 from .errors import DataError
+from .validation import MAX_FILE_BYTES, MAX_TABLE_ROWS, check_real_array, short_list
 
 REQUIRED = ("gamma_deg", "theta_deg", "power")
 OPTIONAL = ("sigma", "material")
 #: A negative power is accepted as noise around zero only down to this fraction of the
 #: table's maximum power (or 4 sigma, when sigma is given).
 NEGATIVE_POWER_TOLERANCE = 0.02
+#: The largest |power| of a table must lie in this range (squares and sums of squares of
+#: the fit stay finite and above underflow); any unit can be rescaled into it.
+POWER_RANGE = (1e-100, 1e100)
 
 
 class DataNotice(UserWarning):
@@ -44,6 +49,20 @@ class Measurements:
     material: str | None = None
     name: str = "measurements"
     notes: tuple[str, ...] = field(default=())
+
+    def __post_init__(self):
+        # arrays of real, finite numbers, one per point (lists are converted)
+        source = f"Measurements '{self.name}'"
+        arrays = {k: check_real_array(getattr(self, k), k, source=source)
+                  for k in ("gamma_deg", "theta_deg", "power")}
+        if self.sigma is not None:
+            arrays["sigma"] = check_real_array(self.sigma, "sigma", source=source)
+        sizes = {k: v.size for k, v in arrays.items()}
+        if len(set(sizes.values())) > 1:
+            _fail(f"{source}: gamma_deg, theta_deg, power (and sigma) need one value per "
+                  f"point; found lengths {', '.join(f'{k} {n}' for k, n in sizes.items())}")
+        for k, v in arrays.items():
+            object.__setattr__(self, k, v)
 
     @property
     def n_points(self) -> int:
@@ -79,11 +98,35 @@ def _fail(msg: str):
     raise DataError(msg)
 
 
+# ----------------------------------------------------------------------------- row labels
+class _Rows:
+    """How a message names data row ``i`` (0-based): with the file line for a CSV."""
+
+    def __init__(self, lines=None):
+        self.lines = lines
+
+    def __call__(self, i: int) -> str:
+        if self.lines is None:
+            return f"data row {i + 1}"
+        return f"data row {i + 1} (line {self.lines[i]})"
+
+
+_MISSING = {"", "nan", "na", "n/a", "null", "none"}
+
+
 def _check_columns(df: pd.DataFrame, source: str) -> pd.DataFrame:
-    cols = [str(c) for c in df.columns]
-    stripped = {c: c.strip() for c in cols}
-    df = df.rename(columns=stripped)
-    cols = list(df.columns)
+    if isinstance(df.columns, pd.MultiIndex):
+        _fail(f"{source}: the table has multi-level column names "
+              f"({short_list(df.columns[:3].tolist(), 3)}); expected one header row: flatten "
+              "them to gamma_deg, theta_deg, power")
+    cols = [str(c).strip() for c in df.columns]
+    seen: dict[str, int] = {}
+    for i, c in enumerate(cols):
+        if c in seen and c:
+            _fail(f"{source}: column '{c}' appears twice (columns {seen[c] + 1} and {i + 1}): "
+                  "keep one, or rename the other")
+        seen[c] = i
+    df = df.set_axis(cols, axis=1)
     for need in REQUIRED:
         if need in cols:
             continue
@@ -93,46 +136,94 @@ def _check_columns(df: pd.DataFrame, source: str) -> pd.DataFrame:
         if need in lower:
             close = [lower[need]]
         hint = f"; found '{close[0]}': rename it to '{need}'" if close else ""
+        if len(cols) == 1 and _separator_hint(cols[0]):
+            hint = _separator_hint(cols[0])
+        if not hint and cols and all(_looks_numeric(c) for c in cols if c):
+            hint = ("; the first line holds numbers, not names: add the header line "
+                    "gamma_deg,theta_deg,power")
         _fail(
             f"{source}: missing column '{need}': expected columns gamma_deg, theta_deg, power "
-            f"(optional sigma, material), found {', '.join(cols) or 'none'}{hint}"
+            f"(optional sigma, material), found {short_list(cols) or 'none'}{hint}"
         )
     return df
 
 
-def _numeric(df: pd.DataFrame, col: str, source: str) -> np.ndarray:
+def _looks_numeric(text: str) -> bool:
+    try:
+        float(text)
+    except ValueError:
+        return False
+    return True
+
+
+def _clip(text: str, width: int = 60) -> str:
+    text = text.replace("\t", "\\t")
+    return text if len(text) <= width else text[: width - 3] + "..."
+
+
+def _separator_hint(header: str) -> str:
+    for sep, name in ((";", "';'"), ("\t", "tabs"), ("|", "'|'")):
+        if sep in header:
+            return (f"; the file is separated by {name}, expected commas: save it with commas "
+                    "between columns (and '.' as the decimal point)")
+    return ""
+
+
+def _numeric(df: pd.DataFrame, col: str, source: str, rows: _Rows) -> np.ndarray:
     raw = df[col]
-    values = pd.to_numeric(raw, errors="coerce")
-    bad = values.isna() & raw.notna() & (raw.astype(str).str.strip().str.lower() != "nan")
-    if bad.any():
-        i = int(np.nonzero(bad.to_numpy())[0][0])
-        _fail(
-            f"{source}: column '{col}' must be numeric; found '{raw.iloc[i]}' in data row {i + 1} "
-            f"(line {i + 2} of a CSV with a header): fix or remove that row"
-        )
-    arr = values.to_numpy(dtype=float)
+    kind = pd.api.types.infer_dtype(raw, skipna=True)
+    if kind == "boolean" or raw.dtype == bool:
+        _fail(f"{source}: column '{col}' holds true/false values; expected numbers "
+              f"({'power in the detector unit' if col == 'power' else 'degrees'})")
+    if kind == "complex" or np.iscomplexobj(raw.to_numpy()):
+        _fail(f"{source}: column '{col}' holds complex numbers; expected real numbers: store "
+              "the magnitude (abs) or the real part")
+    if kind.startswith(("datetime", "timedelta", "date", "time", "period", "interval")):
+        _fail(f"{source}: column '{col}' holds {kind} values; expected numbers")
+    if raw.dtype.kind in "iuf":
+        arr = raw.to_numpy(dtype=float)
+    else:
+        text = raw.astype(str).str.strip()
+        missing = raw.isna().to_numpy() | text.str.lower().isin(_MISSING).to_numpy()
+        values = pd.to_numeric(text.where(~missing, "nan"), errors="coerce")
+        bad = values.isna().to_numpy() & ~missing
+        if bad.any():
+            i = int(np.nonzero(bad)[0][0])
+            found = str(raw.iloc[i])
+            hint = "fix or remove that row"
+            if "," in found and _looks_numeric(found.replace(",", ".")):
+                hint = "use '.' as the decimal point (found a decimal comma)"
+            _fail(
+                f"{source}: column '{col}' must be numeric; found '{found}' in {rows(i)}: {hint}"
+            )
+        arr = values.to_numpy(dtype=float)
     nonfinite = ~np.isfinite(arr)
     if nonfinite.any():
         i = int(np.nonzero(nonfinite)[0][0])
         _fail(
             f"{source}: column '{col}' has {int(nonfinite.sum())} empty, NaN or infinite value(s), "
-            f"first in data row {i + 1} (line {i + 2}): measure it again or remove the row"
+            f"first in {rows(i)}: measure it again or remove the row"
         )
     return arr
 
 
 def validate_table(df: pd.DataFrame, source: str = "table", *,
-                   average_duplicates: bool = False, name: str | None = None) -> Measurements:
+                   average_duplicates: bool = False, name: str | None = None,
+                   _row_lines=None) -> Measurements:
     """Check a table and convert it to :class:`Measurements` (see the module docstring)."""
     if not isinstance(df, pd.DataFrame):
         _fail(f"{source}: expected a table (pandas DataFrame), found {type(df).__name__}")
+    rows = _Rows(_row_lines)
     df = _check_columns(df, source)
     if len(df) == 0:
         _fail(f"{source}: the table has no rows: expected at least one measurement")
-    gamma = _numeric(df, "gamma_deg", source)
-    theta = _numeric(df, "theta_deg", source)
-    power = _numeric(df, "power", source)
-    sigma = _numeric(df, "sigma", source) if "sigma" in df.columns else None
+    if len(df) > MAX_TABLE_ROWS:
+        _fail(f"{source}: {len(df)} rows is more than irreflect reads ({MAX_TABLE_ROWS}): "
+              "subsample the table")
+    gamma = _numeric(df, "gamma_deg", source, rows)
+    theta = _numeric(df, "theta_deg", source, rows)
+    power = _numeric(df, "power", source, rows)
+    sigma = _numeric(df, "sigma", source, rows) if "sigma" in df.columns else None
     notes = []
     for col, arr in (("gamma_deg", gamma), ("theta_deg", theta)):
         out = np.abs(arr) >= 90
@@ -140,14 +231,33 @@ def validate_table(df: pd.DataFrame, source: str = "table", *,
             i = int(np.nonzero(out)[0][0])
             _fail(
                 f"{source}: {col} must lie strictly between -90 and 90 degrees; found {arr[i]:g} "
-                f"in data row {i + 1}: angles are in degrees from the surface normal"
+                f"in {rows(i)}: angles are in degrees from the surface normal"
             )
-    if sigma is not None and np.any(sigma < 0):
-        i = int(np.nonzero(sigma < 0)[0][0])
+    if sigma is not None and np.any(sigma <= 0):
+        i = int(np.nonzero(sigma <= 0)[0][0])
+        if sigma[i] < 0:
+            _fail(
+                f"{source}: sigma is a 1-sigma uncertainty and must be >= 0; found {sigma[i]:g} "
+                f"in {rows(i)}"
+            )
         _fail(
-            f"{source}: sigma is a 1-sigma uncertainty and must be >= 0; found {sigma[i]:g} "
-            f"in data row {i + 1}"
+            f"{source}: sigma must be > 0 (fits are weighted by 1/sigma^2); found 0 in "
+            f"{rows(i)}: give that row's uncertainty, or delete the sigma column to fit "
+            "unweighted"
         )
+    peak = float(np.max(np.abs(power)))
+    if peak == 0:
+        _fail(f"{source}: power is 0 in every row: nothing to fit; check the detector and the "
+              "column")
+    if not POWER_RANGE[0] <= peak <= POWER_RANGE[1]:
+        _fail(f"{source}: the largest |power| is {peak:g}, outside what the fitter handles "
+              f"({POWER_RANGE[0]:g} to {POWER_RANGE[1]:g}): rescale the column (any consistent "
+              "unit works, e.g. divide by its maximum)")
+    if sigma is not None and np.min(sigma) < 1e-12 * peak:
+        i = int(np.argmin(sigma))
+        _fail(f"{source}: sigma {sigma[i]:g} in {rows(i)} is below 1e-12 of the largest power "
+              f"({peak:g}): weights 1/sigma^2 that large cannot be fitted; give a realistic "
+              "uncertainty or delete the sigma column")
     positive, negative = np.any(gamma > 0), np.any(gamma < 0)
     if positive and negative:
         _fail(
@@ -171,7 +281,7 @@ def validate_table(df: pd.DataFrame, source: str = "table", *,
             i = int(np.nonzero(dup)[0][0])
             _fail(
                 f"{source}: {int(key.duplicated().sum())} duplicated (gamma_deg, theta_deg) rows, "
-                f"first ({gamma[i]:g}, {theta[i]:g}) at data row {i + 1}: remove them or pass "
+                f"first ({gamma[i]:g}, {theta[i]:g}) at {rows(i)}: remove them or pass "
                 "--average-duplicates to average their power"
             )
         frame = pd.DataFrame({"g": gamma, "t": theta, "p": power})
@@ -187,6 +297,7 @@ def validate_table(df: pd.DataFrame, source: str = "table", *,
         power = agg["p"].to_numpy(float)
         sigma = agg["s"].to_numpy(float) if sigma is not None else None
         notes.append(f"{source}: averaged {n_merged} duplicated (gamma, theta) row(s)")
+        rows = _Rows()  # row numbers no longer match the file
     # negative powers: only small noise around zero
     neg = power < 0
     if neg.any():
@@ -197,7 +308,7 @@ def validate_table(df: pd.DataFrame, source: str = "table", *,
         if too_neg.any():
             i = int(np.nonzero(too_neg)[0][0])
             _fail(
-                f"{source}: power must be >= 0 up to noise; found {power[i]:g} at data row {i + 1}, "
+                f"{source}: power must be >= 0 up to noise; found {power[i]:g} at {rows(i)}, "
                 f"below the noise allowance {-np.broadcast_to(limit, power.shape)[i]:g}: check the "
                 "detector offset or the sign of the column"
             )
@@ -211,33 +322,166 @@ def validate_table(df: pd.DataFrame, source: str = "table", *,
     )
 
 
+# ----------------------------------------------------------------------------- files
+_SUFFIXES = (".csv", ".txt", "", ".parquet", ".pq")
+
+
 def read_measurements(path, *, average_duplicates: bool = False) -> Measurements:
-    """Read and validate a CSV or Parquet measurement table."""
+    """Read and validate a CSV or Parquet measurement table.
+
+    CSV: UTF-8 text (a byte-order mark is allowed), a header line, commas between fields,
+    ``.`` as decimal point, ``#`` starts a comment. Every row must have as many fields as
+    the header. Raises :class:`DataError` with one line for anything else.
+    """
+    if isinstance(path, pd.DataFrame):
+        _fail("read_measurements reads a file; for a DataFrame use validate_table(df) "
+              "(or pass the DataFrame to irreflect.fit directly)")
+    if not isinstance(path, str | os.PathLike):
+        _fail(f"expected a path to a CSV or Parquet table, found {type(path).__name__}")
     path = Path(path)
     if not path.exists():
         _fail(f"{path}: no such file: expected a CSV or Parquet measurement table")
+    if path.is_dir():
+        _fail(f"{path}: is a folder; expected a CSV or Parquet measurement table")
     suffix = path.suffix.lower()
+    if suffix not in _SUFFIXES:
+        _fail(f"{path}: unknown file type '{suffix}': expected .csv or .parquet")
+    size = path.stat().st_size
+    if size > MAX_FILE_BYTES:
+        _fail(f"{path}: {size / 2**20:.0f} MB is more than irreflect reads "
+              f"({MAX_FILE_BYTES // 2**20} MB): subsample the table")
+    if suffix in (".parquet", ".pq"):
+        df = _read_parquet(path)
+        lines = None
+    else:
+        df, lines = _read_csv(path)
+    return validate_table(df, str(path), average_duplicates=average_duplicates, name=path.stem,
+                          _row_lines=lines)
+
+
+def _read_parquet(path: Path) -> pd.DataFrame:
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
     try:
-        if suffix in (".parquet", ".pq"):
-            df = pd.read_parquet(path)
-        elif suffix in (".csv", ".txt", ""):
-            df = pd.read_csv(path, dtype=str, comment="#", skipinitialspace=True,
-                             keep_default_na=False, na_values=["", "nan", "NaN", "NA"])
-        else:
-            _fail(f"{path}: unknown file type '{suffix}': expected .csv or .parquet")
-    except (pd.errors.ParserError, pd.errors.EmptyDataError, UnicodeDecodeError, OSError) as exc:
-        first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
-        _fail(f"{path}: cannot be read as a {suffix.lstrip('.') or 'CSV'} table ({first})")
-    except Exception as exc:  # pyarrow raises its own error types for corrupt files
-        if type(exc).__module__.startswith("pyarrow"):
-            _fail(f"{path}: cannot be read as Parquet ({str(exc).splitlines()[0]})")
-        raise
-    return validate_table(df, str(path), average_duplicates=average_duplicates, name=path.stem)
+        pf = pq.ParquetFile(path)
+        names = pf.schema_arrow.names
+        dup = sorted({n for n in names if names.count(n) > 1})
+        if dup:
+            _fail(f"{path}: column '{dup[0]}' appears more than once: keep one, or rename "
+                  "the others")
+        if pf.metadata.num_rows > MAX_TABLE_ROWS:
+            _fail(f"{path}: {pf.metadata.num_rows} rows is more than irreflect reads "
+                  f"({MAX_TABLE_ROWS}): subsample the table")
+        return pf.read().to_pandas()
+    except (OSError, pa.ArrowException, ValueError, TypeError) as exc:
+        if isinstance(exc, DataError):
+            raise
+        first = (str(exc).strip().splitlines() or [type(exc).__name__])[0]
+        _fail(f"{path}: cannot be read as Parquet ({first}): write it again with pandas or "
+              "pyarrow, or export the table as CSV")
+
+
+def _decode(raw: bytes, path: Path) -> str:
+    """The file's text, or a one-line error saying which encoding it seems to have."""
+    head = raw[:4096]
+    if head.startswith(b"PAR1"):
+        _fail(f"{path}: the file is Parquet, not CSV: rename it to end in .parquet")
+    if head.startswith((b"PK\x03\x04", b"\xd0\xcf\x11\xe0")):
+        _fail(f"{path}: the file is a spreadsheet or archive (binary), not CSV text: export "
+              "it as 'CSV UTF-8' (comma-delimited)")
+    if head.startswith((b"\xff\xfe", b"\xfe\xff")) or _looks_utf16(head):
+        _fail(f"{path}: the file is UTF-16 (or UTF-32) text; expected UTF-8: save it as "
+              "'CSV UTF-8' (comma-delimited)")
+    if b"\x00" in head:
+        _fail(f"{path}: the file is binary, not CSV text: expected a UTF-8 text table with "
+              "the header gamma_deg,theta_deg,power")
+    try:
+        text = raw.decode("utf-8-sig")
+    except UnicodeDecodeError as exc:
+        line = raw[: exc.start].count(b"\n") + 1
+        _fail(f"{path}: the file is not UTF-8 text (byte 0x{raw[exc.start]:02x} on line "
+              f"{line}; Latin-1 or Windows-1252?): save it as UTF-8 ('CSV UTF-8' in a "
+              "spreadsheet)")
+    control = sum(text[:4096].count(c) for c in map(chr, (*range(1, 9), 11, 12, *range(14, 32))))
+    if control > 8:
+        _fail(f"{path}: the file has {control} control characters in its first lines: it is "
+              "not a CSV text table (expected UTF-8 text with the header gamma_deg,theta_deg,power)")
+    return text
+
+
+def _looks_utf16(head: bytes) -> bool:
+    """UTF-16/32 text without a byte-order mark: decodes to printable text."""
+    if b"\x00" not in head:
+        return False
+    for codec in ("utf-16-le", "utf-16-be", "utf-32-le", "utf-32-be"):
+        try:
+            text = head[: len(head) // 4 * 4].decode(codec)
+        except UnicodeDecodeError:
+            continue
+        printable = sum(c.isprintable() or c in "\r\n\t" for c in text)
+        if text and printable >= 0.95 * len(text) and any(c.isalnum() for c in text):
+            return True
+    return False
+
+
+def _read_csv(path: Path) -> tuple[pd.DataFrame, list[int]]:
+    """Parse a CSV strictly: every row has as many fields as the header (pandas would take
+    an extra leading field as the index and shift every column silently)."""
+    text = _decode(path.read_bytes(), path)
+    numbers, kept = [], []
+    for no, line in enumerate(text.splitlines(), 1):
+        cut = line.find("#")
+        if cut >= 0:
+            line = line[:cut]
+        if line.strip():
+            numbers.append(no)
+            kept.append(line)
+    if not kept:
+        _fail(f"{path}: the file is empty: expected a header line gamma_deg,theta_deg,power "
+              "and one line per measurement")
+    if len(kept) - 1 > MAX_TABLE_ROWS:
+        _fail(f"{path}: {len(kept) - 1} rows is more than irreflect reads ({MAX_TABLE_ROWS}): "
+              "subsample the table")
+    try:
+        records = list(csv.reader(kept, skipinitialspace=True))
+    except csv.Error as exc:
+        _fail(f"{path}: cannot be read as CSV ({exc}): check the quotes")
+    header = [h.strip() for h in records[0]]
+    width = len(header)
+    if width == 1 and _separator_hint(header[0]):
+        _fail(f"{path}: the header '{_clip(header[0])}' is one field{_separator_hint(header[0])}")
+    for i, fields in enumerate(records[1:]):
+        if len(fields) != width:
+            more = len(fields) > width
+            hint = ("remove the extra field (or quote a value that contains a comma; a decimal "
+                    "comma must be '.')" if more else "fill in the missing value or remove the row")
+            _fail(f"{path}: line {numbers[i + 1]} (data row {i + 1}) has {len(fields)} fields, "
+                  f"the header {width}: {hint}")
+    columns = list(zip(*records[1:], strict=True)) if len(records) > 1 else [()] * width
+    data = {i: pd.Series(col, dtype=object) for i, col in enumerate(columns)}
+    df = pd.DataFrame(data)
+    if df.shape[1] != width:  # no data rows
+        df = pd.DataFrame(columns=range(width))
+    df.columns = header
+    return df, numbers[1:]
 
 
 def write_measurements(meas: Measurements, path) -> Path:
     """Write a table as CSV or Parquet (by extension), atomically and losslessly."""
+    if isinstance(meas, pd.DataFrame):
+        meas = validate_table(meas)
+    if not isinstance(meas, Measurements):
+        _fail(f"write_measurements expects Measurements (or a DataFrame); found "
+              f"{type(meas).__name__}")
+    if not isinstance(path, str | os.PathLike):
+        _fail(f"expected a file path ending in .csv or .parquet, found {type(path).__name__}")
     path = Path(path)
+    if path.is_dir():
+        _fail(f"{path}: is a folder; expected a file path ending in .csv or .parquet")
+    if path.suffix.lower() not in (".csv", ".parquet", ".pq"):
+        _fail(f"{path}: expected a file name ending in .csv or .parquet; found "
+              f"'{path.suffix or 'no suffix'}'")
     df = meas.to_frame()
     with atomic_path(path) as tmp:
         if path.suffix.lower() in (".parquet", ".pq"):

@@ -23,6 +23,7 @@ import numpy as np
 from . import metrics
 from .errors import FitError, FitWarning, IrreflectError
 from .model import ReflectionModel, get_model, plane_geometry, take_geometry
+from .validation import check_angles_deg, check_seed, check_subset_inputs
 
 # ----------------------------------------------------------------------------- core solver
 _RIDGE = 1e-12
@@ -349,6 +350,7 @@ class FitResult:
     def predict(self, gamma_deg, theta_deg) -> np.ndarray:
         """Model power at the given angles (degrees, paper convention)."""
         model = self.model_object or get_model(self.model)
+        gamma_deg, theta_deg = check_angles_deg(gamma_deg, theta_deg)
         return model.predict_deg(self.values, gamma_deg, theta_deg)
 
     def polar_errors(self) -> dict[float, float]:
@@ -820,6 +822,7 @@ def fit(measurements, model="two-lobe", *, seed: int = 0, n_random_starts: int =
     from .data import as_measurements
 
     t0 = time.perf_counter()
+    seed = check_seed(seed)
     meas = as_measurements(measurements)
     model_obj = get_model(model)
     source = getattr(meas, "name", None) or "table"
@@ -963,10 +966,11 @@ def fit_subsets(gamma_deg, theta_deg, power, masks, model="two-lobe", *, sigma=N
     then exactly ``fit`` on the subset's table, for the final check of reported subsets.
     """
     model_obj = get_model(model)
-    gamma = np.radians(np.asarray(gamma_deg, float))
-    theta = np.radians(np.asarray(theta_deg, float))
-    power = np.asarray(power, float)
-    masks = np.atleast_2d(np.asarray(masks, bool))
+    seed = check_seed(seed)
+    gamma_deg, theta_deg, power, masks, sigma = check_subset_inputs(gamma_deg, theta_deg, power,
+                                                                    masks, sigma)
+    gamma = np.radians(gamma_deg)
+    theta = np.radians(theta_deg)
     b, n = masks.shape
     p_dim = model_obj.n_nonlinear
     weights_all = np.ones(n) if sigma is None else 1.0 / np.asarray(sigma, float) ** 2

@@ -23,11 +23,12 @@ import pandas as pd
 from tqdm import tqdm
 
 from . import __version__, metrics
-from ._atomic import atomic_directory, atomic_path
+from ._atomic import atomic_directory, atomic_path, claim_output
 from .data import BUNDLED, Measurements, load_bundled, read_measurements
 from .errors import FitWarning, IrreflectError
 from .fitting import fit
 from .reporting import ReportContext, Section
+from .validation import check_points_budget, check_seed, short_list
 
 #: (key, title, "module:function") in report order; the first is this module's own.
 PROVIDERS = (
@@ -275,6 +276,8 @@ def _provider(spec: str):
 
 
 def load_datasets(data_dir=None) -> dict[str, Measurements]:
+    """The bundled datasets, or every table of ``data_dir``, each refused up front when it
+    is larger than the report's budget (:data:`irreflect.validation.POINT_BUDGET`)."""
     if data_dir is None:
         return {name: load_bundled(name) for name in BUNDLED}
     data_dir = Path(data_dir)
@@ -284,7 +287,16 @@ def load_datasets(data_dir=None) -> dict[str, Measurements]:
     files = sorted([*data_dir.glob("*.csv"), *data_dir.glob("*.parquet")])
     if not files:
         raise IrreflectError(f"--data-dir {data_dir}: no .csv or .parquet tables found")
-    return {p.stem: read_measurements(p) for p in files}
+    stems = [p.stem for p in files]
+    if len(set(stems)) < len(stems):
+        twice = sorted({s for s in stems if stems.count(s) > 1})
+        raise IrreflectError(f"--data-dir {data_dir}: tables {short_list(twice)} exist as both "
+                             ".csv and .parquet: keep one of each")
+    out = {}
+    for p in files:
+        out[p.stem] = read_measurements(p)
+        check_points_budget(out[p.stem].n_points, "reproduce", str(p))
+    return out
 
 
 def paper_tables_dir() -> Path | None:
@@ -300,8 +312,14 @@ def paper_tables_dir() -> Path | None:
 def reproduce(out_dir="out", data_dir=None, quick=False, seed=0, progress=True) -> dict:
     """Run every capability and write the report; returns a summary dict."""
     t_start = time.perf_counter()
-    datasets = load_datasets(data_dir)
+    seed = check_seed(seed)
     out_dir = Path(out_dir)
+    with claim_output(out_dir, "dir", "--out"):  # checked and locked before any work
+        return _reproduce(out_dir, data_dir, quick, seed, progress, t_start)
+
+
+def _reproduce(out_dir: Path, data_dir, quick, seed, progress, t_start) -> dict:
+    datasets = load_datasets(data_dir)
     steps = len(datasets) * (1 + 1) + len(PROVIDERS) * (1 + len(datasets))
     bar = tqdm(total=steps, desc="reproduce", unit="step", disable=not progress,
                file=sys.stderr, dynamic_ncols=True)
@@ -315,8 +333,8 @@ def reproduce(out_dir="out", data_dir=None, quick=False, seed=0, progress=True) 
     caught = caught_warnings.__enter__()
     warnings.simplefilter("always")
     try:
-        return _reproduce(out_dir, datasets, quick, seed, data_dir, t_start, bar, advance,
-                          sections, caught)
+        return _run_report(out_dir, datasets, quick, seed, data_dir, t_start, bar, advance,
+                           sections, caught)
     finally:
         caught_warnings.__exit__(None, None, None)
         for w in caught:  # reader notes go on to the caller; fit warnings are in the report
@@ -324,9 +342,9 @@ def reproduce(out_dir="out", data_dir=None, quick=False, seed=0, progress=True) 
                 warnings.warn(w.message, w.category, stacklevel=2)
 
 
-def _reproduce(out_dir, datasets, quick, seed, data_dir, t_start, bar, advance, sections,
-               caught) -> dict:
-    with atomic_directory(out_dir) as tmp:
+def _run_report(out_dir, datasets, quick, seed, data_dir, t_start, bar, advance, sections,
+                caught) -> dict:
+    with atomic_directory(out_dir, command="reproduce") as tmp:
         fits = {}
         for name, meas in datasets.items():
             advance(f"fit {name}")
@@ -425,14 +443,14 @@ def _html(md: str, root: Path) -> str:
 
 # ----------------------------------------------------------------------------- CLI
 def _cmd_reproduce(args) -> int:
-    if args.out is None or str(args.out).strip() == "":
-        raise IrreflectError("--out must name a folder")
     reproduce(out_dir=args.out, data_dir=args.data_dir, quick=args.quick, seed=args.seed,
               progress=not args.no_progress)
     return 0
 
 
 def register(sub) -> None:
+    from .cli import SEED
+
     p = sub.add_parser("reproduce", help="reproduce the paper's tables and figures beside its numbers",
                        description="Run every capability on the bundled datasets (or every table "
                                    "of --data-dir) and write report.md, report.html, tables/*.csv "
@@ -440,7 +458,7 @@ def register(sub) -> None:
     p.add_argument("--data-dir", default=None, help="folder of measurement tables (default: bundled)")
     p.add_argument("--out", default="out", help="output folder (default out/)")
     p.add_argument("--quick", action="store_true", help="small optimiser budgets (about a minute)")
-    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--seed", type=SEED, default=0)
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.set_defaults(handler=_cmd_reproduce)
 

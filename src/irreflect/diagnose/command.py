@@ -8,11 +8,12 @@ import sys
 
 from ..cli import json_default
 from ..errors import IrreflectError
+from .extensions import get_extension, parse_model
 
 
 def register(sub) -> None:
     """Add the ``diagnose`` subcommand to the CLI's subparsers."""
-    from ..cli import add_data_argument
+    from ..cli import FINITE, NON_NEGATIVE_INT, SEED, add_data_argument
     from .extensions import EXTENSIONS
 
     p = sub.add_parser(
@@ -33,25 +34,37 @@ def register(sub) -> None:
                    help="write residual maps before/after, polar fits and diagnosis.json here")
     p.add_argument("--extensions", metavar="A,B",
                    help="candidate extensions, comma-separated (default: all registered)")
-    p.add_argument("--max-effects", type=int, default=3, metavar="N",
+    p.add_argument("--max-effects", type=NON_NEGATIVE_INT, default=3, metavar="N",
                    help="add at most N effects (default 3)")
-    p.add_argument("--alpha", type=float, default=0.01,
+    p.add_argument("--alpha", type=FINITE, default=0.01,
                    help="significance level of the lack-of-fit and structure tests (default 0.01)")
-    p.add_argument("--seed", type=int, default=0, help="seed of the fits' random starts")
+    p.add_argument("--seed", type=SEED, default=0, help="seed of the fits' random starts")
     p.set_defaults(handler=_cmd_diagnose)
 
 
 def _cmd_diagnose(args: argparse.Namespace) -> int:
-    from ..cli import load_data, print_json
-    from .workflow import diagnose
+    import contextlib
+
+    from .._atomic import claim_output
 
     if not 0.0 < args.alpha < 1.0:
-        raise IrreflectError(f"--alpha must lie between 0 and 1, found {args.alpha:g}")
-    if args.max_effects < 0:
-        raise IrreflectError(f"--max-effects must be >= 0, found {args.max_effects}")
+        raise IrreflectError(f"--alpha must lie strictly between 0 and 1 (e.g. 0.01), found "
+                             f"{args.alpha:g}")
     extensions = None
     if args.extensions is not None:
         extensions = [e.strip() for e in args.extensions.split(",") if e.strip()]
+        for name in extensions:
+            get_extension(name)
+    parse_model(args.model)
+    claim = claim_output(args.out, "dir", "--out") if args.out else contextlib.nullcontext()
+    with claim:
+        return _diagnose(args, extensions)
+
+
+def _diagnose(args, extensions) -> int:
+    from ..cli import load_data, print_json
+    from .workflow import diagnose
+
     meas = load_data(args)
     bar = _progress()
     try:
@@ -95,10 +108,8 @@ def write_outputs(result, measurements, out_dir) -> list:
     from .figures import plot_diagnosis_polar, plot_residual_map
 
     out = Path(out_dir)
-    if out.exists() and not out.is_dir():
-        raise IrreflectError(f"--out must be a folder, found the file '{out}'")
     names = []
-    with atomic_directory(out) as tmp:
+    with atomic_directory(out, command="diagnose") as tmp:
         for label, a in (("before", result.before), ("after", result.after)):
             fig, ax = plt.subplots(figsize=(6.4, 3.8))
             plot_residual_map(a.fit.gamma_deg, a.fit.theta_deg, a.residuals_z, ax=ax,

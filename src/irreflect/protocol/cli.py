@@ -3,25 +3,59 @@
 from __future__ import annotations
 
 import sys
+from pathlib import Path
 
+from ..cli import (
+    ANGLE,
+    FINITE,
+    NON_NEGATIVE,
+    NON_NEGATIVE_INT,
+    POSITIVE,
+    POSITIVE_INT,
+    SEED,
+    int_at_least,
+)
 from ..errors import IrreflectError
+
+#: ``--out`` extensions and the format each one means
+SUFFIXES = {".csv": "csv", ".json": "json", ".md": "md", ".markdown": "md"}
 
 
 def _cmd_protocol(args) -> int:
-    from .core import paper_protocol
-    from .export import FORMATS, format_from_path, render, write_protocol
+    import contextlib
 
-    fmt = args.format or (format_from_path(args.out) if args.out else "csv")
-    if fmt not in FORMATS:
-        raise IrreflectError(f"--format must be one of {', '.join(FORMATS)}; found '{fmt}'")
+    from .._atomic import claim_output
+
+    fmt = args.format
+    if args.out and Path(args.out).is_dir():
+        raise IrreflectError(f"--out {args.out}: is a folder; expected a file name ending in "
+                             ".csv, .json or .md")
+    if args.out and fmt is None:
+        suffix = Path(args.out).suffix.lower()
+        if suffix not in SUFFIXES:
+            raise IrreflectError(
+                f"--out {args.out}: unknown extension '{suffix or 'none'}': name the file "
+                ".csv, .json or .md, or pass --format csv|json|md"
+            )
+        fmt = SUFFIXES[suffix]
+    fmt = fmt or "csv"
+    claim = claim_output(args.out, "file", "--out") if args.out else contextlib.nullcontext()
+    with claim:
+        return _protocol(args, fmt)
+
+
+def _protocol(args, fmt: str) -> int:
+    from .core import paper_protocol
+    from .export import render, write_protocol
+
     if args.lobe_from:
-        from ..data import read_measurements
+        from ..cli import load_data
         from .evaluate import glossy_protocol_for
 
         if args.n is not None or args.gamma_settings is not None:
             raise IrreflectError("--n and --gamma-settings apply to --design-from, not to "
                                  "--lobe-from (which always gives 12 points)")
-        pilot = read_measurements(args.lobe_from, average_duplicates=args.average_duplicates)
+        pilot = load_data(args, "protocol", args.lobe_from)
         protocol = glossy_protocol_for(pilot, theta_min=args.theta_min,
                                        theta_max=args.theta_max, seed=args.seed,
                                        wide_offset=args.wide_offset,
@@ -46,10 +80,10 @@ def _cmd_protocol(args) -> int:
             central_offset=args.central_offset, layout=args.layout,
         )
     elif args.design_from:
-        from ..data import read_measurements
+        from ..cli import load_data
         from .design import design_protocol
 
-        dense = read_measurements(args.design_from, average_duplicates=args.average_duplicates)
+        dense = load_data(args, "protocol", args.design_from)
         protocol = design_protocol(
             dense, args.n, args.model, theta_min=args.theta_min, theta_max=args.theta_max,
             n_gamma_settings=args.gamma_settings, selector=args.selector, seed=args.seed,
@@ -77,13 +111,14 @@ def _cmd_protocol(args) -> int:
 
 
 def _cmd_evaluate(args) -> int:
-    from ..cli import print_json
-    from ..data import read_measurements
+    from ..cli import load_data, print_json
+    from ..model import get_model
     from .evaluate import evaluate_protocol
     from .export import read_protocol
 
+    get_model(args.model)
     protocol = read_protocol(args.protocol)
-    dense = read_measurements(args.dense, average_duplicates=args.average_duplicates)
+    dense = load_data(args, "evaluate-protocol", args.dense)
     ev = evaluate_protocol(protocol, dense, args.model, tolerance_deg=args.tolerance,
                            method="snap" if args.snap else "interpolate", seed=args.seed)
     rob = None
@@ -114,7 +149,7 @@ def register(sub) -> None:
                     "picks from a pilot dense scan (--design-from). Angles in degrees; gamma "
                     "negative on the source side (magnitudes also accepted).")
     src = p.add_mutually_exclusive_group(required=True)
-    src.add_argument("--gammas", nargs="+", type=float, metavar="G",
+    src.add_argument("--gammas", nargs="+", type=ANGLE, metavar="G",
                      help="three angles of incidence in degrees, e.g. -20 -40 -60 (or 20 40 60)")
     src.add_argument("--design-from", metavar="DENSE.csv",
                      help="design from a pilot dense scan of the material (CSV or Parquet)")
@@ -122,40 +157,41 @@ def register(sub) -> None:
                      help="glossy-aware 12 points designed from a pilot scan: lobe-width "
                           "offsets from its fitted specular lobe, points at its receiver "
                           "angles, the layout that predicts it best")
-    p.add_argument("--specular-index", type=float, default=None, metavar="N",
+    p.add_argument("--specular-index", type=POSITIVE, default=None, metavar="N",
                    help="with --gammas: glossy-aware 12 points for a specular lobe index N "
                         "(lobe-width points at its half width acos(2^(-1/N)) instead of "
                         "--mirror-offset)")
     p.add_argument("--layout", choices=("paper", "balanced"), default="paper",
                    help="with --specular-index: 'paper' (5+2+5 points, default) or 'balanced' "
                         "(4 per gamma: mirror, lobe width, two diffuse)")
-    p.add_argument("--theta-min", type=float, default=None,
+    p.add_argument("--theta-min", type=ANGLE, default=None,
                    help="lowest receiver angle the tool can set (deg; default -70 for --gammas, "
                         "no limit for --design-from)")
-    p.add_argument("--theta-max", type=float, default=None,
+    p.add_argument("--theta-max", type=ANGLE, default=None,
                    help="highest receiver angle (deg; default 70 for --gammas)")
-    p.add_argument("--mirror-offset", type=float, default=10.0,
+    p.add_argument("--mirror-offset", type=POSITIVE, default=10.0,
                    help="lobe-width points around the mirror angle (deg, Eqs. 29-30; default 10)")
-    p.add_argument("--wide-offset", type=float, default=60.0,
+    p.add_argument("--wide-offset", type=POSITIVE, default=60.0,
                    help="diffuse points from the mirror angle (deg, Eqs. 31-32; default 60)")
-    p.add_argument("--central-offset", type=float, default=20.0,
+    p.add_argument("--central-offset", type=FINITE, default=20.0,
                    help="offset of the central gamma's points (deg, Eqs. 33-34; default 20)")
-    p.add_argument("--min-separation", type=float, default=None,
+    p.add_argument("--min-separation", type=POSITIVE, default=None,
                    help="points of one gamma closer than this coincide (deg; default "
                         "mirror-offset / 2)")
-    p.add_argument("--n", type=int, default=None,
+    p.add_argument("--n", type=POSITIVE_INT, default=None,
                    help="--design-from: number of points (default: the knee of the front)")
-    p.add_argument("--gamma-settings", type=int, default=None, metavar="K",
+    p.add_argument("--gamma-settings", type=POSITIVE_INT, default=None, metavar="K",
                    help="--design-from: use only K angle-of-incidence settings")
     p.add_argument("--model", default="two-lobe", help="--design-from: model (default two-lobe)")
     p.add_argument("--selector", default="nsga2", help="--design-from: optimiser (default nsga2)")
-    p.add_argument("--pop-size", type=int, default=100)
-    p.add_argument("--generations", type=int, default=200)
-    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--pop-size", type=int_at_least(2), default=100)
+    p.add_argument("--generations", type=POSITIVE_INT, default=200)
+    p.add_argument("--seed", type=SEED, default=0)
     p.add_argument("--average-duplicates", action="store_true",
                    help="--design-from: average duplicated (gamma, theta) rows")
     p.add_argument("--format", choices=("csv", "json", "md"), default=None,
-                   help="output format (default: from --out's extension, else csv)")
+                   help="output format (default: from --out's extension .csv, .json or .md; "
+                        "csv on stdout)")
     p.add_argument("--out", metavar="FILE", help="write here (atomically) instead of stdout")
     p.set_defaults(handler=_cmd_protocol)
 
@@ -168,17 +204,17 @@ def register(sub) -> None:
     p.add_argument("protocol", metavar="PROTOCOL", help="protocol CSV or JSON")
     p.add_argument("dense", metavar="DENSE", help="dense measurement table (CSV or Parquet)")
     p.add_argument("--model", default="two-lobe")
-    p.add_argument("--tolerance", type=float, default=5.0,
+    p.add_argument("--tolerance", type=NON_NEGATIVE, default=5.0,
                    help="largest gap (deg) to the nearest measured theta that may be bridged")
     p.add_argument("--snap", action="store_true",
                    help="use the nearest measured angle instead of interpolating")
-    p.add_argument("--monte-carlo", type=int, default=0, metavar="TRIALS",
+    p.add_argument("--monte-carlo", type=NON_NEGATIVE_INT, default=0, metavar="TRIALS",
                    help="also run a Monte Carlo of goniometer errors with this many trials")
-    p.add_argument("--angle-error", type=float, default=1.0,
+    p.add_argument("--angle-error", type=NON_NEGATIVE, default=1.0,
                    help="Monte Carlo: half-width of the uniform angle error (deg, default 1)")
-    p.add_argument("--power-noise", type=float, default=0.01,
+    p.add_argument("--power-noise", type=NON_NEGATIVE, default=0.01,
                    help="Monte Carlo: relative power noise, 1-sigma (default 0.01)")
-    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--seed", type=SEED, default=0)
     p.add_argument("--average-duplicates", action="store_true")
     p.add_argument("--json", action="store_true", help="one JSON object on stdout")
     p.set_defaults(handler=_cmd_evaluate)

@@ -15,6 +15,7 @@ import numpy as np
 import pandas as pd
 
 from ..errors import IrreflectError
+from ..validation import short_list
 
 #: What each point of a protocol is for.
 PURPOSES = ("mirror", "lobe_width", "diffuse", "central", "optimised", "custom")
@@ -295,7 +296,7 @@ def paper_protocol(gammas_deg, theta_min: float = -70.0, theta_max: float = 70.0
     if gammas.size != 3 or np.unique(mags).size != 3:
         raise IrreflectError(
             "the paper's protocol needs exactly three distinct angles of incidence (Eq. 23); "
-            f"found {', '.join(f'{g:g}' for g in np.asarray(gammas_deg, float).ravel())}: "
+            f"found {short_list(np.asarray(gammas_deg, float).ravel(), fmt=lambda g: f'{g:g}')}: "
             "give three, e.g. --gammas -20 -40 -60"
         )
     lo, hi = check_limits(theta_min, theta_max)
@@ -401,7 +402,7 @@ def protocol_from_frame(df: pd.DataFrame, source: str = "protocol", *,
     if missing:
         raise IrreflectError(
             f"{source}: missing column '{missing[0]}': a protocol needs columns gamma_deg, "
-            f"theta_deg (optional purpose); found {', '.join(map(str, df.columns)) or 'none'}"
+            f"theta_deg (optional purpose); found {short_list(map(str, df.columns)) or 'none'}"
         )
     if len(df) == 0:
         raise IrreflectError(f"{source}: the protocol has no rows: expected at least one point")

@@ -15,14 +15,14 @@ with ``--scheduler``) and write one such folder per run, ``DIR/<name>/seed<S>/``
 
 from __future__ import annotations
 
-import argparse
+import contextlib
 import json
 from pathlib import Path
 
 import pandas as pd
 
 from .._atomic import atomic_directory
-from ..cli import json_default
+from ..cli import POSITIVE_INT, SEED, int_at_least, json_default
 from ..errors import IrreflectError
 from .run import PAPER_N, SelectionResult
 from .selectors import SELECTORS, get_selector
@@ -97,24 +97,48 @@ def _print_run(result: SelectionResult, methods: dict | None) -> None:
 
 
 def _cmd_select(args) -> int:
-    from ..data import read_measurements
-    from .parallel import run_many
-    from .run import compare_methods, run_selection
+    from .._atomic import claim_output
+    from ..cli import load_data
+    from ..model import get_model
+    from ..validation import check_selection_budget, short_list
+    from .parallel import check_scheduler_address
 
+    # everything that can be checked before any work: names, seeds, the scheduler's
+    # address, output and checkpoint paths (claimed: checked and locked), table sizes
     get_selector(args.selector)
-    tables = [read_measurements(p, average_duplicates=args.average_duplicates)
-              for p in args.data]
+    get_model(args.model)
     seeds = args.seeds if args.seeds else [args.seed]
+    if len(set(seeds)) != len(seeds):
+        raise IrreflectError(f"--seeds must be distinct; found {short_list(seeds)}")
+    if args.scheduler is not None:
+        check_scheduler_address(args.scheduler)
+    flat = len(args.data) == 1 and len(seeds) == 1
     kwargs = dict(model=args.model, selector=args.selector, pop_size=args.pop_size,
                   generations=args.generations, max_points=args.max_points,
                   checkpoint_every=args.checkpoint_every)
     out = Path(args.out)
-    flat = len(tables) == 1 and len(seeds) == 1
+    with contextlib.ExitStack() as stack:
+        stack.enter_context(claim_output(out, "dir", "--out"))
+        if args.checkpoint is not None:
+            kind = "file" if flat and args.scheduler is None else "checkpoint-dir"
+            stack.enter_context(claim_output(args.checkpoint, kind, "--checkpoint"))
+        tables = []
+        for path in args.data:
+            meas = load_data(args, "select", path)
+            check_selection_budget(meas.n_points, args.max_points, str(path))
+            tables.append(meas)
+        return _run_and_write(args, tables, seeds, kwargs, out, flat)
+
+
+def _run_and_write(args, tables, seeds, kwargs, out: Path, flat: bool) -> int:
+    from .parallel import run_many
+    from .run import compare_methods, run_selection
+
     if flat and args.scheduler is None:
         res = run_selection(tables[0], seed=seeds[0], progress=not args.quiet,
                             checkpoint=args.checkpoint, **kwargs)
         methods = compare_methods(tables[0], res, model=args.model, seed=seeds[0])
-        with atomic_directory(out) as tmp:
+        with atomic_directory(out, command="select") as tmp:
             write_selection(res, methods, tmp)
         _print_run(res, methods)
         print(f"wrote {out}/pareto.csv, optimal_points.csv, summary.json, pareto.png, "
@@ -125,7 +149,7 @@ def _cmd_select(args) -> int:
                                      checkpoint_dir=args.checkpoint, **kwargs)
     if flat and outcomes:
         o = outcomes[0]
-        with atomic_directory(out) as tmp:
+        with atomic_directory(out, command="select") as tmp:
             write_selection(o.result, o.methods, tmp)
         _print_run(o.result, o.methods)
         print(f"wrote {out}/pareto.csv, optimal_points.csv, summary.json, pareto.png, "
@@ -134,7 +158,7 @@ def _cmd_select(args) -> int:
     if not outcomes:
         raise IrreflectError("interrupted before any run finished: nothing written")
     rows, summaries = [], []
-    with atomic_directory(out) as tmp:
+    with atomic_directory(out, command="select") as tmp:
         for o in outcomes:
             write_selection(o.result, o.methods, tmp / o.dataset / f"seed{o.seed}")
             s = summary_dict(o.result, o.methods)
@@ -159,16 +183,6 @@ def _cmd_select(args) -> int:
     return 130 if interrupted else 0
 
 
-def _positive(text: str) -> int:
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a positive integer, found '{text}'") from None
-    if value < 1:
-        raise argparse.ArgumentTypeError(f"expected a positive integer, found {value}")
-    return value
-
-
 def register(sub) -> None:
     p = sub.add_parser(
         "select",
@@ -186,23 +200,24 @@ def register(sub) -> None:
     p.add_argument("--model", default="two-lobe", help="reflection model (default two-lobe)")
     p.add_argument("--selector", default="nsga2",
                    help=f"search strategy: {', '.join(SELECTORS)} (default nsga2)")
-    p.add_argument("--pop-size", type=_positive, default=100, help="population (default 100)")
-    p.add_argument("--generations", type=_positive, default=200,
+    p.add_argument("--pop-size", type=int_at_least(2), default=100,
+                   help="population (default 100)")
+    p.add_argument("--generations", type=POSITIVE_INT, default=200,
                    help="generations (default 200); other selectors spend pop-size x "
                         "generations fits")
-    p.add_argument("--seed", type=int, default=0, help="seed (default 0)")
-    p.add_argument("--seeds", type=int, nargs="+", metavar="S",
+    p.add_argument("--seed", type=SEED, default=0, help="seed (default 0)")
+    p.add_argument("--seeds", type=SEED, nargs="+", metavar="S",
                    help="several seeds: one run per DATA and seed")
-    p.add_argument("--max-points", type=_positive, default=None,
+    p.add_argument("--max-points", type=POSITIVE_INT, default=None,
                    help="largest number of points considered (default: all)")
     p.add_argument("--checkpoint", metavar="FILE",
                    help="save the search every few generations and resume from it if it "
                         "exists (with several runs or --scheduler: a folder of per-run files)")
-    p.add_argument("--checkpoint-every", type=_positive, default=10, metavar="G",
+    p.add_argument("--checkpoint-every", type=POSITIVE_INT, default=10, metavar="G",
                    help="generations between checkpoints (default 10)")
     p.add_argument("--scheduler", metavar="ADDRESS",
                    help="dask.distributed scheduler (e.g. tcp://host:8786) for the runs")
-    p.add_argument("--workers", type=_positive, default=None,
+    p.add_argument("--workers", type=POSITIVE_INT, default=None,
                    help="local worker processes for several runs (default: CPU count)")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.add_argument("--out", required=True, metavar="DIR", help="output folder")

@@ -14,12 +14,14 @@ from __future__ import annotations
 import concurrent.futures as cf
 import multiprocessing as mp
 import os
+import re
 import sys
 from dataclasses import dataclass
 from pathlib import Path
 
 from ..data import Measurements, as_measurements
 from ..errors import IrreflectError
+from ..validation import check_seed, short_list
 from .run import SelectionResult, compare_methods, run_selection
 
 
@@ -57,13 +59,14 @@ def _tasks(datasets, seeds, kwargs, with_methods, checkpoint_dir) -> list[_Task]
     names = [t.name for t in tables]
     if len(set(names)) != len(names):
         raise IrreflectError(
-            f"datasets must have distinct names (file stems) in one run; found {names}"
+            "datasets must have distinct names (file stems) in one run; found "
+            f"{short_list(names)}: rename the files"
         )
-    seeds = [int(s) for s in seeds]
+    seeds = [check_seed(s, "seeds") for s in seeds]
     if not tables or not seeds:
         raise IrreflectError("run_many needs at least one dataset and one seed")
     if len(set(seeds)) != len(seeds):
-        raise IrreflectError(f"seeds must be distinct; found {seeds}")
+        raise IrreflectError(f"seeds must be distinct; found {short_list(seeds)}")
     out = []
     for t in tables:
         for s in seeds:
@@ -165,6 +168,24 @@ def _run_pool(tasks, n_workers, bar):
     return _collect(futures, results)
 
 
+_ADDRESS = re.compile(r"(?:(tcp|tls|inproc|ucx|ws|wss)://)?(\[[0-9a-fA-F:]+\]|[\w.-]+)"
+                      r"(?::(\d{1,5}))?")
+
+
+def check_scheduler_address(address) -> str:
+    """A ``dask.distributed`` scheduler address (``tcp://host:8786``, ``host:8786``),
+    checked before any work."""
+    match = _ADDRESS.fullmatch(str(address).strip()) if isinstance(address, str) else None
+    if match is None or (match.group(3) is None and match.group(1) != "inproc") or (
+            match.group(3) is not None and not 0 < int(match.group(3)) < 65536):
+        raise IrreflectError(
+            f"--scheduler '{address}' is not a scheduler address: expected e.g. "
+            "tcp://host:8786 (start one with 'dask scheduler'), or leave out --scheduler to "
+            "use local processes"
+        )
+    return str(address).strip()
+
+
 def _run_dask(tasks, scheduler, bar):
     try:
         from distributed import Client, as_completed
@@ -172,12 +193,15 @@ def _run_dask(tasks, scheduler, bar):
         raise IrreflectError("--scheduler needs dask.distributed: pip install distributed") from exc
     own = not isinstance(scheduler, Client)
     try:
-        client = Client(scheduler, timeout="10s") if own else scheduler
-    except OSError as exc:
+        client = Client(check_scheduler_address(scheduler), timeout="10s") if own else scheduler
+    except IrreflectError:
+        raise
+    except (OSError, ValueError, TypeError, TimeoutError) as exc:
+        first = (str(exc).strip().splitlines() or [type(exc).__name__])[0]
         raise IrreflectError(
-            f"cannot reach the Dask scheduler at '{scheduler}' ({exc}): start one with "
+            f"cannot reach the Dask scheduler at '{scheduler}' ({first}): start one with "
             "'dask scheduler' or leave out --scheduler to use local processes"
-        ) from exc
+        ) from None
     results: dict[int, RunOutcome] = {}
     futures = client.map(_run_task, tasks, pure=False)
     index = {f.key: i for i, f in enumerate(futures)}

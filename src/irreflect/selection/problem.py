@@ -105,6 +105,28 @@ def _chunks(counts: np.ndarray, overhead: float = 300.0) -> list[np.ndarray]:
     return out
 
 
+#: Caller-side memory bound of one :func:`~irreflect.fitting.fit_subsets` call: its arrays
+#: are about (subsets) x (largest subset) x (screening candidates + starts x 16) float64
+#: values each; a chunk is split until that product is at most this (about 100 MB per array).
+MAX_BATCH_VALUES = 12_000_000
+
+
+def values_per_point(options: dict) -> int:
+    """float64 values per subset point that one batched subset fit holds at once: the
+    screening candidates and data-driven starts (one basis value each), and 16 per
+    Levenberg-Marquardt start (basis, derivatives and their products), plus 8."""
+    starts = int(options.get("n_keep", 2)) + int(options.get("n_data_starts", 1))
+    return int(options.get("n_screen", 32)) + 5 + 16 * starts + 8
+
+
+def _bounded(rows: np.ndarray, counts: np.ndarray, per_point: int) -> list[np.ndarray]:
+    """Split ``rows`` (sorted by subset size) into pieces whose (rows x largest subset x
+    per_point) stays within :data:`MAX_BATCH_VALUES`."""
+    largest = int(counts[rows].max()) if rows.size else 1
+    step = max(1, MAX_BATCH_VALUES // max(1, largest * per_point))
+    return [rows[i:i + step] for i in range(0, rows.size, step)]
+
+
 class SubsetEvaluator:
     """Scores masks by ``1 - R^2`` of the subset fit against all points, in batches.
 
@@ -162,13 +184,15 @@ class SubsetEvaluator:
         fittable = np.nonzero(counts >= self.model.n_params)[0]
         if fittable.size == 0:
             return scores, failed
+        options = settings.kwargs()
+        per_point = values_per_point(options)
         for idx in _chunks(counts[fittable]):
-            rows = fittable[idx]
-            res = fit_subsets(self.gamma_deg, self.theta_deg, self.power, masks[rows],
-                              self.model, sigma=self.sigma, **settings.kwargs())
-            ok = ~res.failed & np.isfinite(res.r2_all)
-            scores[rows] = np.where(ok, 1.0 - res.r2_all, FAILED_SCORE)
-            failed[rows] = ~ok
+            for piece in _bounded(fittable[idx], counts, per_point):
+                res = fit_subsets(self.gamma_deg, self.theta_deg, self.power, masks[piece],
+                                  self.model, sigma=self.sigma, **options)
+                ok = ~res.failed & np.isfinite(res.r2_all)
+                scores[piece] = np.where(ok, 1.0 - res.r2_all, FAILED_SCORE)
+                failed[piece] = ~ok
         return scores, failed
 
     def __call__(self, masks: np.ndarray) -> np.ndarray:

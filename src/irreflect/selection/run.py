@@ -11,7 +11,9 @@ all points.
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
+import numbers
 import sys
 import time
 from dataclasses import dataclass, field
@@ -21,10 +23,12 @@ import numpy as np
 import pandas as pd
 
 from .. import metrics
+from .._atomic import claim_output
 from ..data import Measurements, as_measurements, project_root
 from ..errors import IrreflectError
 from ..fitting import fit
 from ..model import get_model
+from ..validation import check_int, check_masks, check_seed, check_selection_budget
 from .problem import SEARCH_FIT, VERIFY_FIT, FitSettings, SubsetEvaluator, check_sizes, unpack
 from .selectors import SearchSpec, get_selector
 
@@ -122,17 +126,18 @@ def snap_points(meas: Measurements, points) -> pd.DataFrame:
     with the requested and the snapped angles, the distance (deg) and the row index.
     """
     pts = _as_points(points)
+    if len(pts) > meas.n_points:
+        raise IrreflectError(
+            f"cannot snap {len(pts)} protocol points to the {meas.n_points} measured points of "
+            f"{meas.name}: each needs its own measured point; measure at least {len(pts)} "
+            "points or pass fewer protocol points"
+        )
     taken = np.zeros(meas.n_points, bool)
     rows = []
     for g, t in pts:
         dist = np.hypot(meas.gamma_deg - g, meas.theta_deg - t)
         dist = np.where(taken, np.inf, dist)
         i = int(np.argmin(dist))
-        if not np.isfinite(dist[i]):
-            raise IrreflectError(
-                f"cannot snap {len(pts)} points to {meas.n_points} measured points: every "
-                "measured point is already used"
-            )
         taken[i] = True
         rows.append({"gamma_requested": g, "theta_requested": t,
                      "gamma_deg": meas.gamma_deg[i], "theta_deg": meas.theta_deg[i],
@@ -335,20 +340,25 @@ def run_selection(measurements, model="two-lobe", selector: str = "nsga2", pop_s
         checkpoint of another run.
     """
     t_start = time.perf_counter()
+    seed = check_seed(seed)
     meas = as_measurements(measurements)
     model_obj = get_model(model)
     run = get_selector(selector)
-    if pop_size < 2 or generations < 1:
+    if isinstance(pop_size, bool) or not isinstance(pop_size, numbers.Integral) or \
+            isinstance(generations, bool) or not isinstance(generations, numbers.Integral) or \
+            pop_size < 2 or generations < 1:
         raise IrreflectError(
-            f"pop_size must be >= 2 and generations >= 1; found {pop_size} and {generations}"
+            f"pop_size must be an integer >= 2 and generations >= 1; found {pop_size!r} and "
+            f"{generations!r}"
         )
+    if max_points is not None:
+        max_points = check_int(max_points, "max_points", 1)
     n = meas.n_points
+    check_selection_budget(n, max_points, meas.name, option="max_points")
     cand = np.ones(n, bool) if candidates is None else np.asarray(candidates, bool)
     n_min, n_max = check_sizes(n, model_obj.n_params, max_points, candidates)
     if initial is not None:
-        initial = np.atleast_2d(np.asarray(initial, bool))
-        if initial.shape[1] != n:
-            raise IrreflectError(f"initial masks must have {n} columns; found {initial.shape[1]}")
+        initial = check_masks(initial, n, "initial")
     if selector == "nsga2" and include_all_points and cand.sum() <= n_max:
         full = cand[None].copy()
         initial = full if initial is None else np.vstack([initial, full])
@@ -369,8 +379,12 @@ def run_selection(measurements, model="two-lobe", selector: str = "nsga2", pop_s
     spec.tick = bar
     interrupted = False
     t_search = time.perf_counter()
+    # the checkpoint file is this run's until it ends: checked, locked, leftovers removed
+    claim = (contextlib.nullcontext() if checkpoint is None or selector != "nsga2"
+             else claim_output(checkpoint, "file", "--checkpoint"))
     try:
-        run(spec)
+        with claim:
+            run(spec)
     except KeyboardInterrupt:
         interrupted = True
     finally:
@@ -467,6 +481,13 @@ def compare_methods(meas: Measurements, result: SelectionResult | None = None,
     else:
         out["B"] = {"r2": None, "n_points": None}
     points = paper_protocol_points(meas) if protocol_points is None else protocol_points
+    if len(_as_points(points)) > meas.n_points:
+        # fewer measured points than the protocol has: Method 12 cannot be formed
+        out["12"] = {"r2": None, "n_points": None}
+        out["order_holds"] = True
+        out["note"] = (f"the table has {meas.n_points} points, fewer than the protocol's "
+                       f"{len(_as_points(points))}: Method 12 not available")
+        return out
     snapped = snap_points(meas, points)
     mask_12 = np.zeros(meas.n_points, bool)
     mask_12[snapped["index"].to_numpy()] = True

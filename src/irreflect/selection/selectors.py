@@ -18,14 +18,12 @@ d-optimal   sequential D-optimal design: add the point that most increases
 
 from __future__ import annotations
 
-import pickle
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
-from .._atomic import atomic_path
 from ..errors import IrreflectError, unknown_name
 from .problem import (
     MaskDuplicateElimination,
@@ -36,8 +34,6 @@ from .problem import (
     SubsetMutation,
     SubsetProblem,
 )
-
-CHECKPOINT_VERSION = 1
 
 
 @dataclass
@@ -82,61 +78,33 @@ class SearchSpec:
 
 
 # ----------------------------------------------------------------------------- nsga2
-def _save_checkpoint(path: Path, spec: SearchSpec, algorithm, generation: int,
-                     seconds: float) -> None:
-    state = {"version": CHECKPOINT_VERSION, "fingerprint": spec.fingerprint,
-             "generation": generation, "seconds": seconds, "algorithm": algorithm}
-    with atomic_path(path) as tmp, open(tmp, "wb") as fh:
-        pickle.dump(state, fh, protocol=pickle.HIGHEST_PROTOCOL)
-
-
-def _load_checkpoint(path: Path, spec: SearchSpec):
-    try:
-        with open(path, "rb") as fh:
-            state = pickle.load(fh)
-    except (OSError, pickle.UnpicklingError, EOFError, AttributeError, ImportError) as exc:
-        raise IrreflectError(
-            f"{path}: cannot be read as an irreflect selection checkpoint ({type(exc).__name__}); "
-            "delete it to start afresh"
-        ) from exc
-    if not isinstance(state, dict) or state.get("version") != CHECKPOINT_VERSION:
-        raise IrreflectError(f"{path}: not an irreflect selection checkpoint (version "
-                             f"{CHECKPOINT_VERSION}); delete it to start afresh")
-    if state["fingerprint"] != spec.fingerprint:
-        raise IrreflectError(
-            f"{path}: checkpoint of a different run (other data, model, seed, population or "
-            "selection settings): use another --checkpoint file or delete this one"
-        )
-    return state
-
-
 def nsga2(spec: SearchSpec) -> None:
-    """NSGA-II over masks; checkpoints and resumes (same result as an uninterrupted run)."""
+    """NSGA-II over masks; checkpoints and resumes (same result as an uninterrupted run).
+
+    Checkpoints are data-only ``.npz`` files (:mod:`.checkpoint`): the population, the
+    random generator's state and the evaluator's cache and archive."""
     from pymoo.algorithms.moo.nsga2 import NSGA2
     from pymoo.termination.max_gen import MaximumGenerationTermination
 
+    from .checkpoint import load_checkpoint, restore, save_checkpoint
+
     generation, previous_seconds = 0, 0.0
-    algorithm = None
+    problem = SubsetProblem(spec.evaluator, spec.n_min, spec.n_max, spec.candidates)
+    algorithm = NSGA2(
+        pop_size=spec.pop_size,
+        sampling=SizeVariedSampling(spec.initial),
+        crossover=SubsetCrossover(),
+        mutation=SubsetMutation(),
+        repair=SizeRepair(),
+        eliminate_duplicates=MaskDuplicateElimination(),
+    )
+    algorithm.setup(problem, termination=("n_gen", spec.generations), seed=spec.seed,
+                    verbose=False)
     if spec.checkpoint is not None and Path(spec.checkpoint).exists():
-        state = _load_checkpoint(Path(spec.checkpoint), spec)
-        algorithm, generation = state["algorithm"], state["generation"]
-        previous_seconds = state["seconds"]
-        # the evaluator travels inside the checkpoint (archive, counters, cache)
-        spec.evaluator.__dict__.update(algorithm.problem.evaluator.__dict__)
-        algorithm.problem.evaluator = spec.evaluator
+        state = load_checkpoint(Path(spec.checkpoint), spec.fingerprint, spec.evaluator.n)
+        generation = restore(state, algorithm, spec.evaluator)
+        previous_seconds = state["meta"]["seconds"]
         spec.info["resumed_from_generation"] = generation
-    if algorithm is None:
-        problem = SubsetProblem(spec.evaluator, spec.n_min, spec.n_max, spec.candidates)
-        algorithm = NSGA2(
-            pop_size=spec.pop_size,
-            sampling=SizeVariedSampling(spec.initial),
-            crossover=SubsetCrossover(),
-            mutation=SubsetMutation(),
-            repair=SizeRepair(),
-            eliminate_duplicates=MaskDuplicateElimination(),
-        )
-        algorithm.setup(problem, termination=("n_gen", spec.generations), seed=spec.seed,
-                        verbose=False)
     algorithm.termination = MaximumGenerationTermination(max(spec.generations, 1))
     spec.info["seconds_before_resume"] = previous_seconds
     import time
@@ -150,8 +118,8 @@ def nsga2(spec: SearchSpec) -> None:
         spec.tick(generation, spec.generations)
         if spec.checkpoint is not None and (generation % spec.checkpoint_every == 0
                                             or generation == spec.generations):
-            _save_checkpoint(Path(spec.checkpoint), spec, algorithm, generation,
-                             previous_seconds + time.perf_counter() - t0)
+            save_checkpoint(Path(spec.checkpoint), spec.fingerprint, algorithm, spec.evaluator,
+                            generation, previous_seconds + time.perf_counter() - t0)
     spec.info["generations_done"] = generation
 
 
