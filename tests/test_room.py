@@ -342,3 +342,34 @@ def test_room_cli_writes_results_and_refuses_bad_input(tmp_path, capsys):
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "missing key" in err and "Traceback" not in err
     assert not target.exists()
+
+
+def test_report_room_section(tmp_path):
+    from irreflect.reporting import ReportContext
+    from irreflect.room.report import room_section
+
+    ctx = ReportContext(datasets={}, fits={}, out_dir=tmp_path, quick=True)
+    section = room_section(ctx, ROOMS / "office.toml")
+    comp = section.tables["room_comparison"]
+    lam = comp[comp.surfaces.str.startswith("Lambertian")]
+    assert (lam["d DC gain vs Lambertian %"] == 0).all()
+    assert comp["range error (cm)"].notna().all() and (comp["range error (cm)"] > 0).all()
+    barry = section.tables["room_barry_a"]
+    assert barry.loc[0, "closed form"] == pytest.approx(1.2318e-6, rel=1e-4)
+    one = section.tables["room_one_bounce"]
+    assert abs(one["relative error"]).is_monotonic_decreasing
+    for key in ("room_impulse", "room_map_range_change"):
+        assert Path(section.figures[key]).exists()
+    for name in ("room_scene", "room_comparison", "room_barry_a", "room_checks"):
+        assert "{table:" + name + "}" in section.markdown
+
+
+def test_reproduce_refuses_a_bad_scene_first(tmp_path, capsys):
+    from irreflect.cli import main
+
+    bad = tmp_path / "bad.toml"
+    bad.write_text("[room]\nsize_m = [4, 4, 3]\n")
+    assert main(["reproduce", "--quick", "--out", str(tmp_path / "out"), "--no-progress",
+                 "--scene", str(bad)]) == 2
+    assert "missing key" in capsys.readouterr().err
+    assert not (tmp_path / "out").exists()

@@ -272,12 +272,18 @@ def paper_tables_dir() -> Path | None:
     return None
 
 
-def reproduce(out_dir="out", data_dir=None, quick=False, seed=0, progress=True) -> dict:
-    """Run every capability and write the report; returns a summary dict."""
+def reproduce(out_dir="out", data_dir=None, quick=False, seed=0, progress=True,
+              scene=None) -> dict:
+    """Run every capability and write the report; returns a summary dict. ``scene``: a room
+    scene (TOML) whose multipath section is added (:mod:`irreflect.room.report`)."""
     t_start = time.perf_counter()
     datasets = load_datasets(data_dir)
     out_dir = Path(out_dir)
-    steps = len(datasets) * (1 + 1) + len(PROVIDERS) * (1 + len(datasets))
+    steps = len(datasets) * (1 + 1) + len(PROVIDERS) * (1 + len(datasets)) + (5 if scene else 0)
+    if scene is not None:
+        from .room.scene import load_scene
+
+        load_scene(scene)  # refuse a bad scene before hours of work
     bar = tqdm(total=steps, desc="reproduce", unit="step", disable=not progress,
                file=sys.stderr, dynamic_ncols=True)
 
@@ -303,6 +309,11 @@ def reproduce(out_dir="out", data_dir=None, quick=False, seed=0, progress=True) 
             section = func(ctx)
             section.title = section.title or title
             sections.append(section)
+        if scene is not None:
+            from .room.report import room_section
+
+            advance("room")
+            sections.append(room_section(ctx, scene))
         seconds = time.perf_counter() - t_start
         source = ("the bundled reconstructions (datasets/)" if data_dir is None
                   else f"the tables of {data_dir}")
@@ -369,7 +380,7 @@ def _cmd_reproduce(args) -> int:
     if args.out is None or str(args.out).strip() == "":
         raise IrreflectError("--out must name a folder")
     reproduce(out_dir=args.out, data_dir=args.data_dir, quick=args.quick, seed=args.seed,
-              progress=not args.no_progress)
+              progress=not args.no_progress, scene=args.scene)
     return 0
 
 
@@ -383,6 +394,8 @@ def register(sub) -> None:
     p.add_argument("--quick", action="store_true", help="small optimiser budgets (about a minute)")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p.add_argument("--scene", default=None, metavar="SCENE.toml",
+                   help="add the room multipath section for this scene (irreflect room)")
     p.set_defaults(handler=_cmd_reproduce)
 
 
