@@ -75,7 +75,7 @@ def _report(result, summary) -> str:
              + (f", {result.rays} rays per link, seed {result.seed}" if result.rays else "")
              + f", {result.seconds:.1f} s"]
     if result.ray_bounces_per_s:
-        lines.append(f"  Monte Carlo: {result.ray_bounces_per_s:,.0f} ray-bounces/s per process")
+        lines.append(f"  Monte Carlo: {result.ray_bounces_per_s:,.0f} ray-bounces/s per process (tracing time only)")
     for note in result.notes:
         lines.append(f"  note: {note}")
     singles = summary[summary.grid == ""]

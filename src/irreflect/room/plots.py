@@ -119,6 +119,8 @@ def plot_material_3d(material, gamma_deg: float, ax=None, azimuths=(0, 30, 60, 9
         f = material.intensity(gamma_deg, theta, az)
         ax.plot(np.radians(theta), f, label=f"azimuth {az} deg")
     ax.set_theta_zero_location("N")
+    ax.set_theta_direction(-1)  # positive theta (the mirror side) to the right
+    ax.tick_params(labelsize=7)
     ax.set_thetamin(-90)
     ax.set_thetamax(90)
     ax.set_title(f"{material.name}: 3D intensity (1/sr per W), gamma = {gamma_deg:g} deg", fontsize=9)
