@@ -426,6 +426,7 @@ class _EmitterState:
     omega: float
     orders: list = field(default_factory=list)  # [(hist, mom, ph)] for light after 1, 2, ... reflections
     ubar: np.ndarray | None = None
+    prep_u: tuple | None = None  # lobes of every cell prepared for the incidence ubar
 
 
 def _emitter_state(ctx: _Context, e: int) -> _EmitterState:
@@ -442,9 +443,12 @@ def _emitter_state(ctx: _Context, e: int) -> _EmitterState:
     ubar = np.zeros((N, 3))
 
     if ctx.general:
+        prep_e = K.prepare_cells(ctx.mats, cells.material, cells.normal, st.edir)
+
         def run(a, b):
             K.forward_cells(a, b, cells.pos, cells.normal, cells.area, cells.material, epow, etau,
-                            st.edir, ctx.boxes, ctx.mats, ctx.dt, st.omega, hist, mom, ph, ubar)
+                            st.edir, ctx.boxes, ctx.mats, prep_e, ctx.dt, st.omega, hist, mom,
+                            ph, ubar)
     else:
         ubar[:] = -cells.normal
         crho = ctx.mats[1][cells.material]
@@ -455,6 +459,7 @@ def _emitter_state(ctx: _Context, e: int) -> _EmitterState:
 
     _in_chunks(N, ctx.threads, run)
     st.ubar = ubar
+    st.prep_u = K.prepare_cells(ctx.mats, cells.material, cells.normal, ubar)
     st.orders.append((hist, mom, ph))
     for m in range(2, ctx.bounces - 1):  # light after m reflections, for orders m + 2
         hin, momin, phin = st.orders[-1]
@@ -464,8 +469,8 @@ def _emitter_state(ctx: _Context, e: int) -> _EmitterState:
 
         def prop(a, b, hin=hin, momin=momin, phin=phin, hout=hout, momout=momout, phout=phout):
             K.propagate_cells(a, b, cells.pos, cells.normal, cells.area, cells.material, ubar,
-                              ctx.boxes, ctx.mats, ctx.dt, st.omega, hin, momin, phin, hout,
-                              momout, phout)
+                              ctx.boxes, ctx.mats, st.prep_u, ctx.dt, st.omega, hin, momin, phin,
+                              hout, momout, phout)
 
         _in_chunks(N, ctx.threads, prop)
         st.orders.append((hout, momout, phout))
@@ -513,11 +518,16 @@ def _recursive_link(ctx: _Context, e: int, r: int) -> LinkResult:
         ubar = st.ubar if st.ubar is not None else -cells.normal
 
         if ctx.general:
+            prep_u = st.prep_u if st.prep_u is not None else K.prepare_cells(
+                ctx.mats, cells.material, cells.normal, np.ascontiguousarray(ubar))
+            prep_e = K.prepare_cells(ctx.mats, cells.material, cells.normal, st.edir)
+            ubar = np.ascontiguousarray(ubar)
+
             def run(a, b):
                 K.backward_cells(a, b, _CHUNK, cells.pos, cells.normal, cells.area,
                                  cells.material, rgain, rtau, rdir, ubar, st.epow, st.etau,
-                                 st.edir, ctx.boxes, ctx.mats, ctx.dt, omega, ctx.general, histB,
-                                 momB, phB, h2, h2mom, h2ph)
+                                 st.edir, ctx.boxes, ctx.mats, prep_u, prep_e, ctx.dt, omega,
+                                 ctx.general, histB, momB, phB, h2, h2mom, h2ph)
         else:
             crho = ctx.mats[1][cells.material]
             rlam = rgain * crho * np.clip(np.einsum("ij,ij->i", cells.normal, rdir), 0, None) / np.pi

@@ -169,6 +169,78 @@ def material_value(mats, m, dx, dy, dz, nx, ny, nz, ox, oy, oz):
 
 
 @njit(cache=True)
+def prepare_cells(mats, cmat, cnorm, din):
+    """Per cell, the lobes for one fixed incidence ``din[i]``: ``coef`` (N, L) = norm x weight
+    x (n+1)/2pi, ``expo`` (N, L) = n, ``axes`` (N, L, 3); ``mode`` (N,): 0 Lambertian
+    (``coef[:, 0]`` = rho/pi), 1 prepared lobes, 2 use :func:`material_value` (tabulated)."""
+    kind, rho, gmax, share, lobes, nlobes, norm, rhotab, table = mats
+    N = cmat.shape[0]
+    L = lobes.shape[1]
+    mode = np.zeros(N, np.int64)
+    coef = np.zeros((N, L))
+    expo = np.zeros((N, L))
+    axes = np.zeros((N, L, 3))
+    for i in range(N):
+        m = cmat[i]
+        k = kind[m]
+        if k == 0:
+            coef[i, 0] = rho[m] / PI
+            continue
+        if k == 2:
+            mode[i] = 2
+            continue
+        mode[i] = 1
+        nx, ny, nz = cnorm[i, 0], cnorm[i, 1], cnorm[i, 2]
+        dx, dy, dz = din[i, 0], din[i, 1], din[i, 2]
+        cos_g = -(dx * nx + dy * ny + dz * nz)
+        if cos_g <= 0.0:
+            continue
+        cos_g = min(cos_g, 1.0)
+        g = math.acos(cos_g)
+        nrm = _interp_gamma(norm, m, g)
+        hx, hy, hz = _tangent(dx, dy, dz, nx, ny, nz, cos_g)
+        gl = min(g, gmax[m])
+        lcg = math.log(math.cos(gl))
+        a = min(max(share[m, 0] * math.exp(share[m, 1] * lcg), 0.0), 1.0)
+        for q in range(nlobes[m]):
+            w = lobes[m, q, 1] + lobes[m, q, 2] * a
+            if w <= 0.0:
+                continue
+            nn = lobes[m, q, 3] * math.exp(lobes[m, q, 4] * lcg)
+            ang = lobes[m, q, 0] * g
+            ca = math.cos(ang)
+            sa = math.sin(ang)
+            coef[i, q] = nrm * w * (nn + 1.0) / TWO_PI
+            expo[i, q] = nn
+            axes[i, q, 0] = ca * nx + sa * hx
+            axes[i, q, 1] = ca * ny + sa * hy
+            axes[i, q, 2] = ca * nz + sa * hz
+    return mode, coef, expo, axes
+
+
+@njit(cache=True)
+def prepared_value(mats, prep, cmat, cnorm, din, i, ox, oy, oz, cos_o):
+    """:func:`material_value` of cell ``i`` for its prepared incidence ``din[i]``."""
+    mode, coef, expo, axes = prep
+    md = mode[i]
+    if md == 0:
+        return coef[i, 0] * cos_o
+    if md == 2:
+        return material_value(mats, cmat[i], din[i, 0], din[i, 1], din[i, 2], cnorm[i, 0],
+                              cnorm[i, 1], cnorm[i, 2], ox, oy, oz)
+    s = 0.0
+    for q in range(coef.shape[1]):
+        c0 = coef[i, q]
+        if c0 <= 0.0:
+            continue
+        c = ox * axes[i, q, 0] + oy * axes[i, q, 1] + oz * axes[i, q, 2]
+        if c <= 0.0:
+            continue
+        s += c0 * math.exp(expo[i, q] * math.log(c))
+    return s
+
+
+@njit(cache=True)
 def _basis(ax, ay, az):
     if abs(az) < 0.9:
         tx, ty, tz = -ay, ax, 0.0
@@ -288,8 +360,8 @@ def occluded(px, py, pz, qx, qy, qz, boxes):
 
 # ----------------------------------------------------------------------------- recursive method
 @njit(cache=True, nogil=True)
-def forward_cells(j0, j1, cpos, cnorm, carea, cmat, epow, etau, edir, boxes, mats, dt, omega,
-                  hist, mom, ph, ubar):
+def forward_cells(j0, j1, cpos, cnorm, carea, cmat, epow, etau, edir, boxes, mats, prep, dt,
+                  omega, hist, mom, ph, ubar):
     """Power arriving at cells ``j0..j1`` after one reflection (bounce-1 light), per cell.
 
     ``epow[i]``, ``etau[i]``, ``edir[i]``: power, delay and propagation direction of the light
@@ -301,8 +373,6 @@ def forward_cells(j0, j1, cpos, cnorm, carea, cmat, epow, etau, edir, boxes, mat
     N = cpos.shape[0]
     nb = hist.shape[1]
     has_boxes = boxes.shape[0] > 0
-    kind = mats[0]
-    rho = mats[1]
     for j in range(j0, j1):
         pjx, pjy, pjz = cpos[j, 0], cpos[j, 1], cpos[j, 2]
         njx, njy, njz = cnorm[j, 0], cnorm[j, 1], cnorm[j, 2]
@@ -336,12 +406,7 @@ def forward_cells(j0, j1, cpos, cnorm, carea, cmat, epow, etau, edir, boxes, mat
                 continue
             if has_boxes and occluded(cpos[i, 0], cpos[i, 1], cpos[i, 2], pjx, pjy, pjz, boxes):
                 continue
-            mi = cmat[i]
-            if kind[mi] == 0:
-                f = rho[mi] * cos_out / PI
-            else:
-                f = material_value(mats, mi, edir[i, 0], edir[i, 1], edir[i, 2],
-                                   cnorm[i, 0], cnorm[i, 1], cnorm[i, 2], vx, vy, vz)
+            f = prepared_value(mats, prep, cmat, cnorm, edir, i, vx, vy, vz, cos_out)
             c = w * f * carea[j] * cos_in / d2
             if c <= 0.0:
                 continue
@@ -376,7 +441,7 @@ def forward_cells(j0, j1, cpos, cnorm, carea, cmat, epow, etau, edir, boxes, mat
 
 @njit(cache=True, nogil=True)
 def backward_cells(c0, c1, chunk, cpos, cnorm, carea, cmat, rgain, rtau, rdir, ubar,
-                   epow, etau, edir, boxes, mats, dt, omega, general,
+                   epow, etau, edir, boxes, mats, prep_u, prep_e, dt, omega, general,
                    histB, momB, phB, h2, h2mom, h2ph):
     """Per receiver: what a unit power arriving at cell ``j`` delivers to the receiver after
     two more reflections (at ``j`` and at a cell ``q``), for the cells of chunks ``c0..c1``.
@@ -448,8 +513,7 @@ def backward_cells(c0, c1, chunk, cpos, cnorm, carea, cmat, rgain, rtau, rdir, u
                 if lam_j:
                     fj = rho[mj] * cos_out / PI
                 else:
-                    fj = material_value(mats, mj, ubar[j, 0], ubar[j, 1], ubar[j, 2],
-                                        njx, njy, njz, vx, vy, vz)
+                    fj = prepared_value(mats, prep_u, cmat, cnorm, ubar, j, vx, vy, vz, cos_out)
                 tau = d / C_LIGHT + rtau[q]
                 c = fj * geo * r
                 if c > 0.0:
@@ -464,8 +528,8 @@ def backward_cells(c0, c1, chunk, cpos, cnorm, carea, cmat, rgain, rtau, rdir, u
                         pim -= c * math.sin(omega * tau)
                 if ej > 0.0:
                     if general and not lam_j:
-                        fs = material_value(mats, cmat[j], edir[j, 0], edir[j, 1], edir[j, 2],
-                                            njx, njy, njz, vx, vy, vz)
+                        fs = prepared_value(mats, prep_e, cmat, cnorm, edir, j, vx, vy, vz,
+                                            cos_out)
                         c2 = ej * fs * geo * r
                     else:
                         c2 = ej * c
@@ -614,7 +678,7 @@ def shift_add(out, rows, weights, offsets):
 
 
 @njit(cache=True, nogil=True)
-def propagate_cells(l0, l1, cpos, cnorm, carea, cmat, ubar, boxes, mats, dt, omega,
+def propagate_cells(l0, l1, cpos, cnorm, carea, cmat, ubar, boxes, mats, prep_u, dt, omega,
                     hin, momin, phin, hout, momout, phout):
     """One more cell-to-cell leg: light arriving at cells (``hin``, after m reflections) is
     reflected (with the incidence ``ubar``) and arrives at cells ``l0..l1`` (``hout``)."""
@@ -622,8 +686,6 @@ def propagate_cells(l0, l1, cpos, cnorm, carea, cmat, ubar, boxes, mats, dt, ome
     nin = hin.shape[1]
     nout = hout.shape[1]
     has_boxes = boxes.shape[0] > 0
-    kind = mats[0]
-    rho = mats[1]
     for q in range(l0, l1):
         plx, ply, plz = cpos[q, 0], cpos[q, 1], cpos[q, 2]
         s0 = 0.0
@@ -652,12 +714,7 @@ def propagate_cells(l0, l1, cpos, cnorm, carea, cmat, ubar, boxes, mats, dt, ome
                 continue
             if has_boxes and occluded(cpos[j, 0], cpos[j, 1], cpos[j, 2], plx, ply, plz, boxes):
                 continue
-            mj = cmat[j]
-            if kind[mj] == 0:
-                f = rho[mj] * cos_out / PI
-            else:
-                f = material_value(mats, mj, ubar[j, 0], ubar[j, 1], ubar[j, 2], cnorm[j, 0],
-                                   cnorm[j, 1], cnorm[j, 2], vx, vy, vz)
+            f = prepared_value(mats, prep_u, cmat, cnorm, ubar, j, vx, vy, vz, cos_out)
             G = f * carea[q] * cos_in / d2
             if G <= 0.0:
                 continue
