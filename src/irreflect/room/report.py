@@ -74,7 +74,7 @@ def room_section(ctx: ReportContext, scene_path) -> Section:
     from .scene import load_scene
 
     scene = load_scene(scene_path)
-    rays = 4000 if ctx.quick else int(scene.settings.get("rays", 20000))
+    rays = 1500 if ctx.quick else int(scene.settings.get("rays", 20000))
     bounces = int(scene.settings.get("bounces", 3))
     tables, figures, md = {}, {}, []
 
@@ -205,7 +205,7 @@ def validation_page(quick: bool):
     los, tau = line_of_sight_closed_form(scene.emitters[0], scene.receivers[0])
     cell = 0.25 if quick else 0.125
     rec = simulate(scene, method="recursive", bounces=3, cell_m=cell)
-    mc = simulate(scene, method="montecarlo", bounces=3, rays=50000 if quick else 200000, seed=0)
+    mc = simulate(scene, method="montecarlo", bounces=3, rays=20000 if quick else 200000, seed=0)
     rows = []
     for k in range(4):
         rows.append({
