@@ -15,7 +15,8 @@ $(STAMP): pyproject.toml
 venv: $(STAMP)
 
 demo: $(STAMP)
-	$(BIN)/irreflect reproduce --out out
+	$(BIN)/irreflect reproduce --out out --scene datasets/rooms/office.toml
+	$(BIN)/irreflect room datasets/rooms/office.toml --out out/room --workers 2
 
 test: $(STAMP)
 	$(BIN)/python -m pytest -q -n 2 --dist loadfile
@@ -26,6 +27,7 @@ lint: $(STAMP)
 bench: $(STAMP)
 	$(BIN)/python experiments/bench_fit.py
 	$(BIN)/python experiments/bench_select.py
+	$(BIN)/python experiments/bench_room.py
 
 clean:
 	rm -rf $(VENV) out build src/*.egg-info .pytest_cache

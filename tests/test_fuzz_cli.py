@@ -23,6 +23,7 @@ from irreflect.cli import main
 from irreflect.data import bundled_dir
 
 TERRAZZO = str(bundled_dir() / "terrazzo.csv")
+SCENE = str(bundled_dir() / "rooms" / "office.toml")
 PROTOCOL = "gamma_deg,theta_deg,purpose\n-20,20,mirror\n-20,10,lobe_width\n-20,30,lobe_width\n" \
            "-40,-20,central\n-40,60,central\n-60,60,mirror\n-60,50,lobe_width\n-60,70,diffuse\n"
 
@@ -267,6 +268,13 @@ BAD_OPTIONS = [
     ("reproduce", ["--data-dir", "{root}/folder", "--out", "{root}/r"]),
     ("reproduce", ["--out", "{root}/file.txt"]), ("reproduce", ["--out", "/proc/r"]),
     ("reproduce", ["--out", "{root}/foreign"]),
+    ("room", ["{scene}", "--out", "{root}/file.txt"]),
+    ("room", ["{scene}", "--seed", "-1", "--out", "{root}/r"]),
+    ("room", ["{scene}", "--bounces", "-1", "--out", "{root}/r"]),
+    ("room", ["{scene}", "--method", "raytrace", "--out", "{root}/r"]),
+    ("room", ["{root}/nothing.toml", "--out", "{root}/r"]),
+    ("room", ["{root}/file.txt", "--out", "{root}/r"]),
+    ("room", ["{scene}", "--out", "{root}/foreign"]),
 ]
 
 
@@ -280,8 +288,8 @@ def _fixture_root(root: Path) -> None:
 
 
 def _argv(command, args, root: Path) -> list[str]:
-    return [command] + [a.format(data=TERRAZZO, root=root, protocol=root / "protocol.csv")
-                        for a in args]
+    return [command] + [a.format(data=TERRAZZO, root=root, protocol=root / "protocol.csv",
+                                 scene=SCENE) for a in args]
 
 
 def test_the_option_catalogue_covers_every_command():

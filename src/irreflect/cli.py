@@ -27,6 +27,7 @@ COMMAND_MODULES = (
     "irreflect.compare",
     "irreflect.diagnose",
     "irreflect.report",
+    "irreflect.room.command",
 )
 #: Which module provides each command, so that running one command imports only its
 #: module (the optimiser, the statistics and the plotting stacks cost seconds to import).
@@ -37,6 +38,7 @@ COMMANDS = {
     "compare": "irreflect.compare",
     "diagnose": "irreflect.diagnose",
     "reproduce": "irreflect.report",
+    "room": "irreflect.room.command",
 }
 
 
@@ -135,12 +137,32 @@ def json_default(o):
 
 # ----------------------------------------------------------------------------- core commands
 def _cmd_fit(args) -> int:
+    import contextlib
+
+    from ._atomic import claim_output
+
+    claim = (claim_output(args.save, "file", "--save", suffixes=(".json",)) if args.save
+             else contextlib.nullcontext())
+    with claim:  # the material file's path is checked and locked before any work
+        return _fit(args)
+
+
+def _fit(args) -> int:
     from .fitting import fit
     from .model import get_model
 
     model = get_model(args.model)
+    if args.save and args.reflectance is not None:
+        from .room.materials import parse_reflectance
+
+        parse_reflectance(args.reflectance, "--reflectance")  # before the fit, not after
     meas = load_data(args)
     result = fit(meas, model, seed=args.seed)
+    if args.save:
+        from .room.materials import save_material
+
+        save_material(result, args.save, data_file=args.data, wavelength_nm=args.wavelength,
+                      notes=args.notes, reflectance=args.reflectance)
     if args.json:
         d = result.to_dict()
         print_json({k: d[k] for k in ("model", "params", "stderr", "r2", "rmse", "mse",
@@ -151,6 +173,8 @@ def _cmd_fit(args) -> int:
         print(f"{meas.name}: {meas.n_points} points, angles of incidence "
               f"{', '.join(f'{g:g}' for g in meas.gammas)} deg")
         print(result.report(warnings=False))  # the warnings go to stderr
+        if args.save:
+            print(f"wrote {args.save} (material file for 'irreflect room' scenes)")
     return 0
 
 
@@ -191,6 +215,14 @@ def register(sub) -> None:
     add_model_argument(p)
     p.add_argument("--seed", type=SEED, default=0, help="seed of the random extra starts")
     p.add_argument("--json", action="store_true", help="one JSON object on stdout")
+    p.add_argument("--save", metavar="MATERIAL.json",
+                   help="also write the fit as a material file for room scenes")
+    p.add_argument("--reflectance", default=None, metavar="RHO|K",
+                   help="with --save: total reflectance of the material (0..1), or K when the "
+                        "power column is BRDF x cos(theta) in 1/sr")
+    p.add_argument("--wavelength", type=float, default=None, metavar="NM",
+                   help="with --save: wavelength of the measurement (nm)")
+    p.add_argument("--notes", default=None, help="with --save: free text kept in the file")
     p.set_defaults(handler=_cmd_fit)
 
     p = sub.add_parser("plot", help="polar diagram per angle of incidence (Figs. 15-17)")

@@ -309,18 +309,24 @@ def paper_tables_dir() -> Path | None:
     return None
 
 
-def reproduce(out_dir="out", data_dir=None, quick=False, seed=0, progress=True) -> dict:
-    """Run every capability and write the report; returns a summary dict."""
+def reproduce(out_dir="out", data_dir=None, quick=False, seed=0, progress=True,
+              scene=None) -> dict:
+    """Run every capability and write the report; returns a summary dict. ``scene``: a room
+    scene (TOML) whose multipath section is added (:mod:`irreflect.room.report`)."""
     t_start = time.perf_counter()
     seed = check_seed(seed)
     out_dir = Path(out_dir)
+    if scene is not None:
+        from .room.scene import load_scene
+
+        load_scene(scene)  # refuse a bad scene before any work
     with claim_output(out_dir, "dir", "--out"):  # checked and locked before any work
-        return _reproduce(out_dir, data_dir, quick, seed, progress, t_start)
+        return _reproduce(out_dir, data_dir, quick, seed, progress, t_start, scene)
 
 
-def _reproduce(out_dir: Path, data_dir, quick, seed, progress, t_start) -> dict:
+def _reproduce(out_dir: Path, data_dir, quick, seed, progress, t_start, scene=None) -> dict:
     datasets = load_datasets(data_dir)
-    steps = len(datasets) * (1 + 1) + len(PROVIDERS) * (1 + len(datasets))
+    steps = len(datasets) * (1 + 1) + len(PROVIDERS) * (1 + len(datasets)) + (5 if scene else 0)
     bar = tqdm(total=steps, desc="reproduce", unit="step", disable=not progress,
                file=sys.stderr, dynamic_ncols=True)
 
@@ -334,7 +340,7 @@ def _reproduce(out_dir: Path, data_dir, quick, seed, progress, t_start) -> dict:
     warnings.simplefilter("always")
     try:
         return _run_report(out_dir, datasets, quick, seed, data_dir, t_start, bar, advance,
-                           sections, caught)
+                           sections, caught, scene)
     finally:
         caught_warnings.__exit__(None, None, None)
         for w in caught:  # reader notes go on to the caller; fit warnings are in the report
@@ -343,7 +349,7 @@ def _reproduce(out_dir: Path, data_dir, quick, seed, progress, t_start) -> dict:
 
 
 def _run_report(out_dir, datasets, quick, seed, data_dir, t_start, bar, advance, sections,
-                caught) -> dict:
+                caught, scene=None) -> dict:
     with atomic_directory(out_dir, command="reproduce") as tmp:
         fits = {}
         for name, meas in datasets.items():
@@ -361,6 +367,11 @@ def _run_report(out_dir, datasets, quick, seed, data_dir, t_start, bar, advance,
             section = func(ctx)
             section.title = section.title or title
             sections.append(section)
+        if scene is not None:
+            from .room.report import room_section
+
+            advance("room")
+            sections.append(room_section(ctx, scene))
         fit_warnings = list(dict.fromkeys(str(w.message) for w in caught
                                           if issubclass(w.category, FitWarning)))
         sections.append(_warnings_section(fit_warnings))
@@ -444,7 +455,7 @@ def _html(md: str, root: Path) -> str:
 # ----------------------------------------------------------------------------- CLI
 def _cmd_reproduce(args) -> int:
     reproduce(out_dir=args.out, data_dir=args.data_dir, quick=args.quick, seed=args.seed,
-              progress=not args.no_progress)
+              progress=not args.no_progress, scene=args.scene)
     return 0
 
 
@@ -460,6 +471,8 @@ def register(sub) -> None:
     p.add_argument("--quick", action="store_true", help="small optimiser budgets (about a minute)")
     p.add_argument("--seed", type=SEED, default=0)
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p.add_argument("--scene", default=None, metavar="SCENE.toml",
+                   help="add the room multipath section for this scene (irreflect room)")
     p.set_defaults(handler=_cmd_reproduce)
 
 

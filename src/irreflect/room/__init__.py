@@ -1,0 +1,33 @@
+"""Room multipath from fitted materials: impulse response, DC gain, delay spread and the
+range error of phase-based ranging, in a room of known geometry.
+
+    from irreflect.room import load_scene, simulate
+    scene = load_scene("datasets/rooms/office.toml")
+    result = simulate(scene, method="montecarlo", bounces=3, rays=20000, seed=0)
+    result.summary()            # one row per emitter-receiver pair
+    result.write("out/room")    # CSV / Parquet of every number, figures
+
+Modules: :mod:`.materials` (the 3D extension of the plane-of-incidence models and material
+files), :mod:`.scene` (TOML scenes), :mod:`.geometry` (cells, line of sight),
+:mod:`.engine` (recursive method and Monte Carlo), :mod:`.results` (metrics, files),
+:mod:`.plots`, :mod:`.validation` (checks against closed forms and Barry's configuration A),
+:mod:`.report` (the ``reproduce --scene`` section), :mod:`.command` (``irreflect room``).
+"""
+
+import importlib
+
+_EXPORTS = {
+    "Material": "materials", "from_model": "materials", "lambertian": "materials",
+    "load_material": "materials", "save_material": "materials",
+    "Scene": "scene", "Emitter": "scene", "Receiver": "scene", "Box": "scene", "Grid": "scene",
+    "load_scene": "scene", "scene_from_dict": "scene",
+    "simulate": "engine", "RoomResult": "engine", "LinkResult": "engine",
+}
+__all__ = sorted(_EXPORTS)
+
+
+def __getattr__(name):
+    # lazy: `irreflect fit --save` needs the material files, not the compiled kernels
+    if name in _EXPORTS:
+        return getattr(importlib.import_module(f"{__name__}.{_EXPORTS[name]}"), name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

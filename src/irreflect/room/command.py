@@ -1,0 +1,108 @@
+"""``irreflect room SCENE.toml --out DIR``: impulse response, DC gain, delay spread and range
+error for every emitter-receiver pair of a scene (see :mod:`irreflect.room`)."""
+
+from __future__ import annotations
+
+import sys
+
+from ..cli import NON_NEGATIVE_INT, POSITIVE, POSITIVE_INT, SEED
+
+
+def _cmd_room(args) -> int:
+    from .._atomic import claim_output
+
+    with claim_output(args.out, "dir", "--out"):  # checked and locked before any work
+        return _room(args)
+
+
+def _room(args) -> int:
+    from pathlib import Path
+
+    from .engine import simulate
+    from .scene import load_scene
+
+    if args.scheduler is not None:
+        from ..selection.parallel import check_scheduler_address
+
+        check_scheduler_address(args.scheduler)
+    out = Path(args.out)
+    scene = load_scene(args.scene)
+    result = simulate(scene, method=args.method, bounces=args.bounces, cell_m=args.cell,
+                      rays=args.rays, seed=args.seed, time_resolution_ns=args.dt,
+                      scheduler=args.scheduler, workers=args.workers, progress=not args.quiet)
+    written = result.write(out, figures=not args.no_figures)
+    summary = result.summary()
+    print(_report(result, summary))
+    print(f"wrote {out}/: {', '.join(written[:6])}{' ...' if len(written) > 6 else ''} "
+          f"({len(written)} files)")
+    return 0
+
+
+def _report(result, summary) -> str:
+    scene = result.scene
+    lines = [f"{scene.name}: {len(scene.emitters)} emitter(s), {len(scene.receivers)} receiver(s), "
+             f"method {result.method}, {result.bounces} bounce(s)"
+             + (f", {result.n_cells} cells of {result.cell_m:g} m" if result.cell_m else "")
+             + (f", {result.rays} rays per link, seed {result.seed}" if result.rays else "")
+             + f", {result.seconds:.1f} s"]
+    if result.ray_bounces_per_s:
+        lines.append(f"  Monte Carlo: {result.ray_bounces_per_s:,.0f} ray-bounces/s per process (tracing time only)")
+    for note in result.notes:
+        lines.append(f"  note: {note}")
+    singles = summary[summary.grid == ""]
+    cols = [c for c in summary.columns if c.startswith("dc_gain_b") and not c.endswith("stderr")]
+    for _, row in singles.iterrows():
+        gains = "  ".join(f"{c[8:]} {row[c]:.4g}" for c in cols)
+        rng = ("" if row.range_error_m != row.range_error_m else
+               f"  range error {row.range_error_m * 100:+.2f} cm ({row.phase_error_deg:+.3f} deg at "
+               f"{row.modulation_hz / 1e6:g} MHz)")
+        lines.append(f"  {row.emitter} -> {row.receiver}: H total {row.dc_gain_total:.4g} "
+                     f"(LoS {row.dc_gain_los:.4g}  {gains})  mean delay {row.mean_delay_ns:.2f} ns  "
+                     f"RMS spread {row.rms_delay_spread_ns:.2f} ns{rng}")
+    for grid in scene.grids:
+        sub = summary[summary.grid == grid.name]
+        for em, part in sub.groupby("emitter", sort=False):
+            text = (f"  grid {grid.name} ({len(part)} receivers) from {em}: H total "
+                    f"{part.dc_gain_total.min():.3g}..{part.dc_gain_total.max():.3g}, RMS spread "
+                    f"{part.rms_delay_spread_ns.min():.2f}..{part.rms_delay_spread_ns.max():.2f} ns")
+            if part.range_error_m.notna().any():
+                text += (f", range error {part.range_error_m.min() * 100:+.2f}.."
+                         f"{part.range_error_m.max() * 100:+.2f} cm")
+            lines.append(text)
+    return "\n".join(lines)
+
+
+def register(sub) -> None:
+    p = sub.add_parser(
+        "room", help="multipath in a room from fitted materials: h(t), DC gain, delay spread, "
+                     "range error",
+        description="Line of sight and reflections (Barry's recursive method or Monte Carlo with "
+                    "next-event estimation) for every emitter-receiver pair of a scene; writes "
+                    "summary/bounces/impulse_response as CSV and Parquet, run.json and figures "
+                    "to --out. Options override the scene's [simulation] table.")
+    p.add_argument("scene", metavar="SCENE.toml", help="scene file (see datasets/rooms/office.toml)")
+    p.add_argument("--out", required=True, metavar="DIR", help="output folder")
+    p.add_argument("--method", choices=("recursive", "montecarlo"), default=None,
+                   help="reflections by Barry's recursive method or Monte Carlo (default: the "
+                        "scene's, else montecarlo)")
+    p.add_argument("--bounces", type=NON_NEGATIVE_INT, default=None, metavar="K",
+                   help="reflections to follow (default 3)")
+    p.add_argument("--cell", type=POSITIVE, default=None, metavar="M",
+                   help="cell size of the recursive method in metres (default 0.25)")
+    p.add_argument("--rays", type=POSITIVE_INT, default=None, metavar="R",
+                   help="Monte Carlo rays per emitter-receiver pair (default 20000)")
+    p.add_argument("--seed", type=SEED, default=None, metavar="S",
+                   help="seed of the Monte Carlo rays (default 0)")
+    p.add_argument("--dt", type=POSITIVE, default=None, metavar="NS",
+                   help="h(t) bin width in ns (default 0.25)")
+    p.add_argument("--scheduler", default=None, metavar="ADDRESS",
+                   help="dask.distributed scheduler (e.g. tcp://host:8786) for the receivers")
+    p.add_argument("--workers", type=POSITIVE_INT, default=None,
+                   help="local worker processes for the receivers (default 1)")
+    p.add_argument("--no-figures", action="store_true", help="numbers only")
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    p.set_defaults(handler=_cmd_room)
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(1)

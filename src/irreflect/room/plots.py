@@ -1,0 +1,128 @@
+"""Figures of room simulations: h(t), per-order DC gains, maps over receiver grids, and the
+3D extension of a material. ``plot_*(..., ax=None) -> Axes``; nothing is shown or saved
+behind the caller's back (use :func:`save`)."""
+
+from __future__ import annotations
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+
+_ORDER_LABEL = {0: "line of sight", 1: "1 reflection"}
+
+
+def _ax(ax, figsize=(6.4, 4.0)):
+    if ax is None:
+        _, ax = plt.subplots(figsize=figsize, constrained_layout=True)
+    return ax
+
+
+def save(ax, path, dpi: int = 110) -> None:
+    ax.figure.savefig(path, dpi=dpi)
+    plt.close(ax.figure)
+
+
+def plot_impulse_response(result, emitter=0, receiver=0, ax=None, *, max_order=None):
+    """h(t) per order (W per ns per W emitted), stacked in time; LoS as a stem."""
+    ax = _ax(ax)
+    link = result.link(emitter, receiver)
+    P = result.scene.emitters[link.emitter].power_w
+    dt_ns = result.dt_s * 1e9
+    t = np.arange(link.hist.shape[1]) * dt_ns
+    top = len(link.power_w) - 1 if max_order is None else min(max_order, len(link.power_w) - 1)
+    for k in range(1, top + 1):
+        h = link.hist[k] / P / dt_ns
+        if np.any(h > 0):
+            ax.step(t, h, where="post", lw=1.0,
+                    label=_ORDER_LABEL.get(k, f"{k} reflections") + f" (H = {link.power_w[k] / P:.3g})")
+    total = link.hist[1:top + 1].sum(axis=0) / P / dt_ns
+    if top >= 2:
+        ax.step(t, total, where="post", color="k", lw=0.8, alpha=0.6, label="sum of reflections")
+    if link.power_w[0] > 0:
+        ax.axvline(link.los_delay_s * 1e9, color="C3", ls="--", lw=1,
+                   label=f"line of sight (H = {link.power_w[0] / P:.3g})")
+    nz = np.nonzero(link.hist.sum(axis=0))[0]
+    if nz.size:
+        ax.set_xlim(max(0.0, t[nz[0]] - 2), t[nz[-1]] + 2)
+    ax.set_xlabel("delay t (ns)")
+    ax.set_ylabel("h(t) (1/ns)")
+    rx = result.scene.receivers[link.receiver]
+    ax.set_title(f"{result.scene.name}: {result.scene.emitters[link.emitter].name} -> {rx.name} "
+                 f"({result.method})", fontsize=9)
+    ax.legend(fontsize=7)
+    return ax
+
+
+def plot_bounce_gains(result, emitter=0, receivers=None, ax=None):
+    """DC gain per order (0 = line of sight) for some receivers, as grouped bars (log scale),
+    with Monte Carlo error bars."""
+    ax = _ax(ax)
+    scene = result.scene
+    receivers = list(range(len(scene.receivers))) if receivers is None else list(receivers)
+    width = 0.8 / max(len(receivers), 1)
+    for i, r in enumerate(receivers):
+        link = result.link(emitter, r)
+        P = scene.emitters[link.emitter].power_w
+        orders = np.arange(len(link.power_w))
+        ax.bar(orders + i * width - 0.4 + width / 2, link.power_w / P, width,
+               yerr=link.stderr_w / P if np.any(link.stderr_w > 0) else None,
+               label=scene.receivers[r].name)
+    ax.set_yscale("log")
+    ax.set_xticks(np.arange(result.bounces + 1))
+    ax.set_xticklabels(["LoS"] + [str(k) for k in range(1, result.bounces + 1)])
+    ax.set_xlabel("reflections")
+    ax.set_ylabel("DC gain H(0)")
+    ax.set_title(f"{scene.name}: DC gain per order ({result.method})", fontsize=9)
+    ax.legend(fontsize=7)
+    return ax
+
+
+def plot_map(result, summary, grid, column, emitter, ax=None, *, label=None, cmap="viridis",
+             center=None):
+    """A summary column over a receiver grid (``pcolormesh``), with emitters and boxes drawn."""
+    from .results import grid_values
+
+    ax = _ax(ax, figsize=(5.6, 4.6))
+    x, y, values = grid_values(result, summary, grid, column, emitter)
+    kw = {}
+    if center is not None:
+        lim = np.nanmax(np.abs(values - center)) or 1.0
+        kw = {"vmin": center - lim, "vmax": center + lim}
+        cmap = "RdBu_r"
+    mesh = ax.pcolormesh(x, y, values, shading="nearest", cmap=cmap, **kw)
+    ax.figure.colorbar(mesh, ax=ax, label=label or column)
+    for em in result.scene.emitters:
+        ax.plot(em.position[0], em.position[1], "r*", ms=12)
+    for b in result.scene.boxes:
+        ax.add_patch(matplotlib.patches.Rectangle((b.lo[0], b.lo[1]), b.hi[0] - b.lo[0],
+                                                  b.hi[1] - b.lo[1], fill=False, ec="w", lw=1.2))
+    ax.set_xlim(0, result.scene.size[0])
+    ax.set_ylim(0, result.scene.size[1])
+    ax.set_aspect("equal")
+    ax.set_xlabel("x (m)")
+    ax.set_ylabel("y (m)")
+    ax.set_title(f"{result.scene.name}: {label or column}\n{grid.name} at z = {grid.z_m:g} m, "
+                 f"{emitter} ({result.method})", fontsize=9)
+    return ax
+
+
+def plot_material_3d(material, gamma_deg: float, ax=None, azimuths=(0, 30, 60, 90)):
+    """Slices of a material's 3D intensity at one angle of incidence: the plane of incidence
+    (azimuth 0) and planes rotated about the normal, in polar form."""
+    if ax is None:
+        fig = plt.figure(figsize=(5.2, 4.4), constrained_layout=True)
+        ax = fig.add_subplot(projection="polar")
+    theta = np.linspace(-89.5, 89.5, 721)
+    for az in azimuths:
+        f = material.intensity(gamma_deg, theta, az)
+        ax.plot(np.radians(theta), f, label=f"azimuth {az} deg")
+    ax.set_theta_zero_location("N")
+    ax.set_theta_direction(-1)  # positive theta (the mirror side) to the right
+    ax.tick_params(labelsize=7)
+    ax.set_thetamin(-90)
+    ax.set_thetamax(90)
+    ax.set_title(f"{material.name}: 3D intensity (1/sr per W), gamma = {gamma_deg:g} deg", fontsize=9)
+    ax.legend(fontsize=7, loc="lower left")
+    return ax
