@@ -3,16 +3,36 @@
 Fit the paper's two-component model (and others) to goniometer measurements, choose the
 few measurement points that pin it down, design protocols, compare models and diagnose
 what a model is missing. Angles in degrees at the edges, radians inside.
+
+The public names below are imported on first use (PEP 562), so that ``import irreflect``
+and ``irreflect --version`` do not pay for pandas, scipy and the fitter.
 """
 
-from .data import Measurements, read_measurements, validate_table, write_measurements
-from .errors import DataError, FitError, IrreflectError, UnknownNameError
-from .fitting import FitResult, fit, fit_subsets
-from .model import ReflectionModel, get_model, model_names
+from __future__ import annotations
 
-__all__ = [
-    "DataError", "FitError", "FitResult", "IrreflectError", "Measurements", "ReflectionModel",
-    "UnknownNameError", "fit", "fit_subsets", "get_model", "model_names", "read_measurements",
-    "validate_table", "write_measurements",
-]
+import importlib
+
 __version__ = "0.1.0"
+
+#: public name -> the module that defines it
+_PUBLIC = {
+    "Measurements": "data", "read_measurements": "data", "validate_table": "data",
+    "write_measurements": "data",
+    "DataError": "errors", "FitError": "errors", "FitWarning": "errors",
+    "IrreflectError": "errors", "UnknownNameError": "errors",
+    "FitResult": "fitting", "fit": "fitting", "fit_subsets": "fitting",
+    "ReflectionModel": "model", "get_model": "model", "model_names": "model",
+}
+__all__ = sorted(_PUBLIC)
+
+
+def __getattr__(name: str):
+    if name in _PUBLIC:
+        value = getattr(importlib.import_module(f".{_PUBLIC[name]}", __name__), name)
+        globals()[name] = value
+        return value
+    raise AttributeError(f"module 'irreflect' has no attribute {name!r}")
+
+
+def __dir__():
+    return sorted(set(globals()) | set(__all__))

@@ -119,6 +119,16 @@ def load_data(args, command: str | None = None, path=None):
     return meas
 
 
+#: Up to this many points, a command that fits once uses the numpy fitter: loading the
+#: compiled kernel (about a second) costs more than it saves on one fit.
+SINGLE_FIT_NUMPY_POINTS = 5000
+
+
+def single_fit_engine(n_points: int) -> str | None:
+    """The fitting engine of a command that fits one table once."""
+    return "numpy" if n_points <= SINGLE_FIT_NUMPY_POINTS else None
+
+
 def print_json(obj) -> None:
     json.dump(obj, sys.stdout, indent=2, default=json_default)
     sys.stdout.write("\n")
@@ -157,7 +167,7 @@ def _fit(args) -> int:
 
         parse_reflectance(args.reflectance, "--reflectance")  # before the fit, not after
     meas = load_data(args)
-    result = fit(meas, model, seed=args.seed)
+    result = fit(meas, model, seed=args.seed, engine=single_fit_engine(meas.n_points))
     if args.save:
         from .room.materials import save_material
 
@@ -189,7 +199,7 @@ def _cmd_plot(args) -> int:
         meas = load_data(args)
         predict, title = None, meas.name
         if args.fit:
-            result = fit(meas, model, seed=args.seed)
+            result = fit(meas, model, seed=args.seed, engine=single_fit_engine(meas.n_points))
             predict = result.predict
             title = f"{meas.name}: {result.model} fit, R^2 = {result.r2:.4f}"
         ax = plot_polar(meas, predict, title=title)
@@ -264,6 +274,9 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
 
 def main(argv=None) -> int:
     argv = sys.argv[1:] if argv is None else list(argv)
+    if argv in (["--version"], ["-V"]):  # without importing every command's module
+        print(f"irreflect {__version__}")
+        return 0
     command = next((a for a in argv if not a.startswith("-")), None)
     parser = build_parser(command)
     try:

@@ -14,6 +14,7 @@ fit_subsets(gamma, theta, power, masks, model, ...)    -> SubsetFits (one fit pe
 
 from __future__ import annotations
 
+import functools
 import time
 from dataclasses import dataclass, field
 from warnings import warn
@@ -22,7 +23,14 @@ import numpy as np
 
 from . import metrics
 from .errors import FitError, FitWarning, IrreflectError
-from .model import ReflectionModel, get_model, plane_geometry, take_geometry
+from .model import (
+    PROFILE_DIFFUSE_INDICES,
+    PROFILE_SPECULAR_INDICES,
+    ReflectionModel,
+    get_model,
+    plane_geometry,
+    take_geometry,
+)
 from .validation import check_angles_deg, check_seed, check_subset_inputs
 
 # ----------------------------------------------------------------------------- core solver
@@ -405,14 +413,24 @@ class FitResult:
 
 
 # ----------------------------------------------------------------------------- fit()
-def _covariance(model, z, alpha, gamma, theta, weights, absolute_sigma, cost, n_points):
-    """Covariance of the natural parameters from the Jacobian in (z, alpha), and whether
-    the information matrix is near-singular (then the floored directions' natural
-    parameters are returned too)."""
+def _fitted_and_jacobian(model, z, alpha, gamma, theta, weights, engine=None, kgeo=None):
+    """The fitted curve and the Jacobian in (z, alpha) of the weighted model, (n, P + L)."""
+    codes = _kernel_codes(model, engine)
+    if codes is not None:
+        from . import _kernel
+
+        geo, glcg, _, _ = kgeo if kgeo is not None else _kernel_geometry(gamma, theta)
+        return (_kernel.predict(codes, z, alpha, geo, glcg),
+                _kernel.jacobian_full(codes, z, alpha, geo, glcg, np.sqrt(weights)))
     with np.errstate(over="ignore", under="ignore", invalid="ignore", divide="ignore"):
         basis, dbasis = model.basis(plane_geometry(gamma[None], theta[None]), z[None], True)
     jz = np.einsum("mnlp,ml->mnp", dbasis, alpha[None])[0]
-    jfull = np.concatenate([jz, basis[0]], axis=1) * np.sqrt(weights)[:, None]
+    return basis[0] @ alpha, np.concatenate([jz, basis[0]], axis=1) * np.sqrt(weights)[:, None]
+
+
+def _covariance(model, z, alpha, jfull, absolute_sigma, cost, n_points):
+    """Covariance of the natural parameters from the Jacobian ``jfull`` in (z, alpha), and
+    which natural parameters lie in a near-singular direction of the information matrix."""
     # scale the columns so that the singularity test does not depend on units
     col = np.sqrt(np.sum(jfull * jfull, axis=0))
     col = np.where(col > 0, col, 1.0)  # a coordinate the data do not see: left unscaled
@@ -455,6 +473,14 @@ def default_screen(model) -> int:
     if "n_screen" in model.options:
         return int(model.options["n_screen"])
     return DEFAULT_SCREEN.get(model.n_nonlinear, 100 * model.n_nonlinear)
+
+
+def _default_hops(model, n_keep: int) -> int:
+    """Basin hops per refinement round: ``n_keep`` for models of 4 or more coordinates
+    (exchangeable lobes), unless the model sets ``options["n_hops"]``."""
+    if "n_hops" in model.options:
+        return int(model.options["n_hops"])
+    return n_keep if model.n_nonlinear >= 4 else 0
 
 
 def default_keep(model) -> int:
@@ -590,10 +616,13 @@ def _coordinate_scan(model, geom, z_best, cost_best, sw1, yw1):
     return np.array(out).reshape(-1, z_best.size), len(cand)
 
 
-def _candidates(model, gamma_rad, theta_rad, power, seed, n_random):
-    """Data-driven starts, and seeded random perturbations of the first."""
+def _candidates(model, gamma_rad, theta_rad, power, seed, n_random, extra=None):
+    """The caller's extra starts, data-driven starts, and seeded random perturbations of
+    the first row."""
     starts = np.atleast_2d(np.asarray(model.starts(gamma_rad, theta_rad, power), float))
     starts = starts.reshape(-1, model.n_nonlinear)
+    if extra is not None and len(extra):
+        starts = np.vstack([np.asarray(extra, float).reshape(-1, model.n_nonlinear), starts])
     parts = [starts]
     if n_random and len(starts):
         rng = np.random.default_rng(seed)
@@ -690,20 +719,16 @@ def _global_search(model_obj, gamma, theta, power, weights, **options):
     return (z, alpha * scale, cost * scale * scale, *rest)
 
 
-def _global_search_unit(model_obj, gamma, theta, power, weights, *, seed, n_random_starts=2,
-                        n_screen=None, n_keep=None, n_data_starts=None, max_iter=200,
-                        max_rounds=3, polish=True):
-    geom = plane_geometry(gamma[None], theta[None])
-    sw1 = np.sqrt(weights)[None]
-    yw1 = sw1 * power
-    n_screen = default_screen(model_obj) if n_screen is None else int(n_screen)
-    n_keep = default_keep(model_obj) if n_keep is None else int(n_keep)
-    if n_data_starts is None:
-        n_data_starts = int(model_obj.options.get("n_data_starts", 2))
+def _search_numpy(model_obj, codes, gamma, theta, power, weights, geom, sw1, yw1, *, seed,
+                  n_random_starts, n_screen, n_keep, n_data_starts, max_iter, max_rounds,
+                  extra_starts, kgeo=None):
+    """The global search in numpy (the reference implementation): data-driven and random
+    starts, screening, Levenberg-Marquardt from diverse candidates, refinement rounds.
+    Returns ``(z, alpha, cost, reason, n_starts, n_evals)`` or None."""
     lo, hi = model_obj.screen_box()
     # every candidate is scored by its projected cost in one batch; Levenberg-Marquardt
     # starts from the best data-driven ones and from the best in different basins
-    own = _candidates(model_obj, gamma, theta, power, seed, n_random_starts)
+    own = _candidates(model_obj, gamma, theta, power, seed, n_random_starts, extra_starts)
     cands = own
     if n_screen and model_obj.n_nonlinear:
         cands = np.vstack([own, np.clip(screen_samples(model_obj, n_screen, seed),
@@ -733,7 +758,7 @@ def _global_search_unit(model_obj, gamma, theta, power, weights, *, seed, n_rand
     # with many coordinates, seeded jumps around the best point (basin hopping, Wales and
     # Doye 1997); Levenberg-Marquardt from all of them; stop when nothing improves
     rng = np.random.default_rng([seed, 1])
-    n_hops = n_keep if model_obj.n_nonlinear >= 4 else 0
+    n_hops = _default_hops(model_obj, n_keep)
     width = np.where(hi > lo, hi - lo, 1.0)
     for _ in range(max_rounds if model_obj.n_nonlinear else 0):
         extra, scanned = _coordinate_scan(model_obj, geom, zb, cb, sw1, yw1)
@@ -749,6 +774,151 @@ def _global_search_unit(model_obj, gamma, theta, power, weights, *, seed, n_rand
         if not st2["cost"][j] < cb * (1.0 - 1e-12):
             break
         zb, ab, cb, rb = z2[j], st2["alpha"][j], float(st2["cost"][j]), int(reason2[j])
+    return zb, ab, cb, rb, n_starts, n_evals
+
+
+def _search_compiled(model_obj, codes, gamma, theta, power, weights, geom, sw1, yw1, *, seed,
+                     n_random_starts, n_screen, n_keep, n_data_starts, max_iter, max_rounds,
+                     extra_starts, kgeo=None):
+    """The same search in the compiled kernel (:mod:`irreflect._kernel`): the same
+    candidates (the random draws are made here, with the same generators), the same order
+    and stopping rules."""
+    from . import _kernel
+
+    p = model_obj.n_nonlinear
+    st = _kernel_static(model_obj)
+    geo, glcg, levels, group = kgeo if kgeo is not None else _kernel_geometry(gamma, theta)
+    jitter, hops = _draws(seed, n_random_starts, _default_hops(model_obj, n_keep), max_rounds,
+                          p)
+    screen = (screen_samples(model_obj, n_screen, seed) if n_screen and p
+              else np.zeros((0, p)))
+    extra = (st["no_extra"] if extra_starts is None else
+             np.clip(np.asarray(extra_starts, float).reshape(-1, p), st["zlo"], st["zhi"]))
+    zb, ab, cb, rb, n_starts, n_evals = _kernel.global_search(
+        codes, st["nonneg"], st["residual"], geo, glcg, power, weights, levels, group,
+        PROFILE_DIFFUSE_INDICES, PROFILE_SPECULAR_INDICES, jitter * st["jitter_width"],
+        st["ext_rows"], extra, screen, st["lo"], st["hi"], st["zlo"], st["zhi"], st["axes"],
+        hops, int(n_data_starts), int(n_keep), int(max_iter), int(max_rounds))
+    if not np.isfinite(cb):
+        return None
+    return zb, ab, float(cb), int(rb), int(n_starts), int(n_evals)
+
+
+def _kernel_static(model_obj) -> dict:
+    """What the kernel needs of a model that does not change between fits (cached on the
+    model object)."""
+    cached = model_obj.options.get("_kernel_static")
+    if cached is not None and cached[0] is model_obj:
+        return cached[1]
+    p = model_obj.n_nonlinear
+    lo, hi = model_obj.screen_box()
+    st = {
+        "nonneg": np.asarray(model_obj.alpha_nonneg, np.bool_),
+        "residual": int(model_obj.options.get("residual_column", -1)),
+        "lo": np.ascontiguousarray(lo, float), "hi": np.ascontiguousarray(hi, float),
+        "zlo": np.ascontiguousarray(model_obj.z_lower, float),
+        "zhi": np.ascontiguousarray(model_obj.z_upper, float),
+        "axes": np.ascontiguousarray(np.array(_scan_axes(model_obj, 33)).reshape(p, 33)),
+        "ext_rows": _extension_start_rows(model_obj),
+        "jitter_width": np.minimum(model_obj.z_upper - model_obj.z_lower, 10.0),
+        "no_extra": np.zeros((0, p)),
+    }
+    try:
+        model_obj.options["_kernel_static"] = (model_obj, st)
+    except TypeError:
+        pass
+    return st
+
+
+@functools.lru_cache(maxsize=64)
+def _draws(seed, n_random: int, n_hops: int, rounds: int, p: int):
+    """The random draws of one search (as the numpy path draws them): normal jitter of the
+    first start (times 0.15; the caller scales it) and the basin hops of every round."""
+    jitter = (np.random.default_rng(seed).normal(0.0, 0.15, (n_random, p)) if n_random
+              else np.zeros((0, p)))
+    hops = np.random.default_rng([seed, 1]).normal(0.0, 0.15, (rounds, n_hops, p))
+    jitter.flags.writeable = False
+    hops.flags.writeable = False
+    return jitter, hops
+
+
+def _kernel_geometry(gamma, theta):
+    """The compiled kernel's geometry of one table, its exact angles of incidence (log cos)
+    and the rounded ones of the per-angle decomposition (as model.lobe_profile)."""
+    from . import _kernel
+
+    gamma = np.ascontiguousarray(gamma, float)
+    theta = np.ascontiguousarray(theta, float)
+    exact, group = np.unique(gamma, return_inverse=True)
+    levels, pgroup = np.unique(np.round(gamma, 9), return_inverse=True)
+    geo = _kernel.make_geometry(gamma, theta, group.astype(np.int64), exact)
+    return geo, np.log(np.cos(exact)), levels, pgroup.astype(np.int64)
+
+
+def _extension_start_rows(model) -> np.ndarray:
+    """The starting values of the extensions' coordinates, as the extended models' own
+    ``starts`` combine them (the first row with every extension's first value, then, one
+    extension at a time, its other values): ``(rows, P - 5)``."""
+    from .diagnose.extensions import Extension, _start_rows
+
+    chain = []
+    m = model
+    while "wrapped" in m.options:
+        chain.append(m.options["extension"])
+        m = m.options["wrapped"]
+    tails = [np.zeros(0)]
+    for ext in reversed(chain):
+        assert isinstance(ext, Extension)
+        values = _start_rows(ext.z_starts, len(ext.nonlinear_names))
+        tails = ([np.concatenate([t, values[0]]) for t in tails]
+                 + [np.concatenate([tails[0], v]) for v in values[1:]])
+    return np.array(tails, float).reshape(len(tails), -1)
+
+
+#: Which implementation fits: "compiled" (the numba kernel, for the models it covers;
+#: numpy for the others) or "numpy" (the reference implementation everywhere).
+ENGINE = "compiled"
+ENGINES = ("compiled", "numpy")
+
+
+def _kernel_codes(model_obj, engine=None):
+    """The kernel's code of ``model_obj`` when the compiled engine is to fit it, else None
+    (models the kernel does not cover, or a model whose starts a caller replaced)."""
+    engine = engine or ENGINE
+    if engine not in ENGINES:
+        from .errors import unknown_name
+
+        raise unknown_name("fitting engine", str(engine), ENGINES)
+    if engine != "compiled" or model_obj.options.get("canonical_starts") is not \
+            model_obj.starts:
+        return None
+    try:
+        from . import _kernel
+    except ImportError:  # numba missing: the numpy path serves
+        return None
+    return _kernel.model_code(model_obj)
+
+
+def _global_search_unit(model_obj, gamma, theta, power, weights, *, seed, n_random_starts=2,
+                        n_screen=None, n_keep=None, n_data_starts=None, max_iter=200,
+                        max_rounds=3, polish=True, engine=None, extra_starts=None,
+                        kgeo=None):
+    geom = plane_geometry(gamma[None], theta[None])
+    sw1 = np.sqrt(weights)[None]
+    yw1 = sw1 * power
+    n_screen = default_screen(model_obj) if n_screen is None else int(n_screen)
+    n_keep = default_keep(model_obj) if n_keep is None else int(n_keep)
+    if n_data_starts is None:
+        n_data_starts = int(model_obj.options.get("n_data_starts", 2))
+    codes = _kernel_codes(model_obj, engine)
+    search = _search_numpy if codes is None else _search_compiled
+    found = search(model_obj, codes, gamma, theta, power, weights, geom, sw1, yw1, seed=seed,
+                   n_random_starts=n_random_starts, n_screen=n_screen, n_keep=n_keep,
+                   n_data_starts=n_data_starts, max_iter=max_iter, max_rounds=max_rounds,
+                   extra_starts=extra_starts, kgeo=kgeo)
+    if found is None:
+        return None
+    zb, ab, cb, rb, n_starts, n_evals = found
     if polish and rb in (STOP_STUCK, STOP_MAXITER) and model_obj.n_nonlinear:
         polished = _polish(model_obj, geom, zb, sw1, yw1)
         n_evals += polished[3]
@@ -770,7 +940,8 @@ def _global_search_unit(model_obj, gamma, theta, power, weights, *, seed, n_rand
 def fit(measurements, model="two-lobe", *, seed: int = 0, n_random_starts: int = 2,
         n_screen: int | None = None, n_keep: int | None = None,
         n_data_starts: int | None = None, use_sigma: bool = True, max_iter: int = 200,
-        max_rounds: int = 3, polish: bool = True) -> FitResult:
+        max_rounds: int = 3, polish: bool = True, engine: str | None = None,
+        extra_starts=None) -> FitResult:
     """Fit a reflection model to a measurement table by global least squares.
 
     The search: (1) the model's data-driven starts (for the paper's models, from the
@@ -805,6 +976,11 @@ def fit(measurements, model="two-lobe", *, seed: int = 0, n_random_starts: int =
         Iteration limit of each local search; rounds of coordinate scans.
     polish : bool
         Finish a local search that crawled with scipy's trust-region least squares.
+    engine : ``"compiled"``, ``"numpy"`` or None
+        The compiled kernel (:mod:`irreflect._kernel`; the two-lobe model and its
+        extensions) or the numpy reference implementation; None: :data:`ENGINE`.
+    extra_starts : array (S, P), optional
+        More starting points of the nonlinear coordinates, tried first (a warm start).
 
     Returns
     -------
@@ -838,10 +1014,12 @@ def fit(measurements, model="two-lobe", *, seed: int = 0, n_random_starts: int =
             "sigma column to fit unweighted"
         )
     weights = np.ones_like(power) if sigma is None else 1.0 / sigma**2
+    kgeo = _kernel_geometry(gamma, theta) if _kernel_codes(model_obj, engine) is not None \
+        else None
     out = _global_search(model_obj, gamma, theta, power, weights, seed=seed,
                          n_random_starts=n_random_starts, n_screen=n_screen, n_keep=n_keep,
                          n_data_starts=n_data_starts, max_iter=max_iter, max_rounds=max_rounds,
-                         polish=polish)
+                         polish=polish, engine=engine, extra_starts=extra_starts, kgeo=kgeo)
     if out is None:
         raise FitError(
             f"fit of '{model_obj.name}' to {source} failed: no start reached a finite cost; "
@@ -854,11 +1032,10 @@ def fit(measurements, model="two-lobe", *, seed: int = 0, n_random_starts: int =
             f"fit of '{model_obj.name}' to {source} ended at non-finite parameters "
             f"{np.array2string(values, precision=4)}: check the data for extreme values"
         )
-    fitted = model_obj.predict(values, gamma, theta)
-    with np.errstate(over="ignore", under="ignore", invalid="ignore", divide="ignore"):
-        basis, _ = model_obj.basis(plane_geometry(gamma[None], theta[None]), zb[None], False)
-    internal = basis[0] @ ab
-    if not np.allclose(fitted, internal, rtol=1e-6, atol=1e-9 * np.max(np.abs(power))):
+    fitted, jfull = _fitted_and_jacobian(model_obj, zb, ab, gamma, theta, weights, engine, kgeo)
+    z_back, a_back = model_obj.from_natural(values[None])
+    if not (np.allclose(z_back[0], zb, rtol=1e-9, atol=1e-12)
+            and np.allclose(a_back[0], ab, rtol=1e-6, atol=1e-9 * np.max(np.abs(ab)))):
         raise FitError(
             f"fit of '{model_obj.name}' to {source}: the coefficients "
             f"{np.array2string(values, precision=4)} do not reproduce the fitted curve in "
@@ -873,8 +1050,7 @@ def fit(measurements, model="two-lobe", *, seed: int = 0, n_random_starts: int =
             "<= 0): check that power is the reflected power and that the angles follow the "
             "convention (gamma < 0 on the source side, mirror at theta = -gamma)"
         )
-    cov, singular = _covariance(model_obj, zb, ab, gamma, theta, weights, sigma is not None,
-                                cb, meas.n_points)
+    cov, singular = _covariance(model_obj, zb, ab, jfull, sigma is not None, cb, meas.n_points)
     stderr = np.sqrt(np.clip(np.diag(cov), 0, None))
     at_bound, ill, warnings = judge(model_obj, values, stderr, singular, gamma, converged,
                                     message)
@@ -945,7 +1121,8 @@ def _subset_data_starts(model, gamma, theta, power, weights, g, t, y, valid):
 def fit_subsets(gamma_deg, theta_deg, power, masks, model="two-lobe", *, sigma=None,
                 max_iter: int = 40, ftol: float = 1e-8, n_screen: int = 32, n_keep: int = 2,
                 data_starts: bool = True, n_data_starts: int = 1, scan: bool = False,
-                exhaustive: bool = False, seed: int = 0) -> SubsetFits:
+                exhaustive: bool = False, seed: int = 0,
+                engine: str | None = None) -> SubsetFits:
     """Fit the model to every subset in ``masks`` (B, n) independently, in one batch.
 
     Each subset fit sees only its own points. Its starts are chosen as in :func:`fit`:
@@ -978,7 +1155,13 @@ def fit_subsets(gamma_deg, theta_deg, power, masks, model="two-lobe", *, sigma=N
     ok = counts >= model_obj.n_params
     if exhaustive:
         return _fit_subsets_one_by_one(model_obj, gamma, theta, power, masks, weights_all, ok,
-                                       seed)
+                                       seed, engine)
+    codes = _kernel_codes(model_obj, engine)
+    if codes is not None and data_starts and not scan and p_dim:
+        return _fit_subsets_compiled(model_obj, codes, gamma, theta, power, masks, weights_all,
+                                     ok, n_screen=n_screen, n_keep=n_keep,
+                                     n_data_starts=n_data_starts, max_iter=max_iter,
+                                     ftol=ftol, seed=seed)
     n_max = max(int(counts.max()) if b else 0, 1)
     # gather every subset into a padded (B, n_max) problem with zero weight on padding
     order = np.argsort(~masks, axis=1, kind="stable")[:, :n_max]
@@ -1049,7 +1232,42 @@ def fit_subsets(gamma_deg, theta_deg, power, masks, model="two-lobe", *, sigma=N
                       failed=failed, nfev=nfev_total, converged=conv & ~failed)
 
 
-def _fit_subsets_one_by_one(model, gamma, theta, power, masks, weights, ok, seed):
+def _fit_subsets_compiled(model, codes, gamma, theta, power, masks, weights, ok, *, n_screen,
+                          n_keep, n_data_starts, max_iter, ftol, seed):
+    """The batched subset search in the compiled kernel (see :func:`fit_subsets`)."""
+    from . import _kernel
+
+    st = _kernel_static(model)
+    geo, glcg, levels, group = _kernel_geometry(gamma, theta)
+    p = model.n_nonlinear
+    screen = screen_samples(model, n_screen, seed) if n_screen else np.zeros((0, p))
+    z, alpha, cost, conv, nfev = _kernel.subset_search(
+        codes, st["nonneg"], st["residual"], geo, glcg, np.ascontiguousarray(power, float),
+        np.ascontiguousarray(weights, float), np.ascontiguousarray(masks), levels, group,
+        PROFILE_DIFFUSE_INDICES, PROFILE_SPECULAR_INDICES,
+        np.ascontiguousarray(st["ext_rows"][0]), np.ascontiguousarray(screen, float),
+        st["zlo"], st["zhi"], int(n_keep), int(n_data_starts), int(max_iter), float(ftol))
+    return _subset_result(model, gamma, theta, power, z, alpha, cost, conv, ok, int(nfev))
+
+
+def _subset_result(model, gamma, theta, power, z, alpha, cost, conv, ok, nfev) -> SubsetFits:
+    """SubsetFits from the per-subset optimum (z, alpha, cost): natural parameters, R^2 on
+    all points, failures (too few points, no finite optimum) marked."""
+    b = z.shape[0]
+    finite = np.isfinite(cost) & np.all(np.isfinite(z), axis=1) & np.all(np.isfinite(alpha),
+                                                                          axis=1)
+    params = model.to_natural(np.where(finite[:, None], z, 0.0),
+                              np.where(finite[:, None], alpha, 0.0))
+    failed = ~ok | ~finite | ~np.all(np.isfinite(params), axis=1)
+    safe = np.where(failed[:, None], _placeholder_params(model, params), params)
+    r2_all = np.asarray(metrics.r2(power, model.predict(safe, gamma, theta)), float).reshape(b)
+    r2_all = np.where(failed | ~np.isfinite(r2_all), 0.0, r2_all)
+    return SubsetFits(params=np.where(failed[:, None], np.nan, params), r2_all=r2_all,
+                      cost=np.where(failed, np.inf, cost), failed=failed, nfev=nfev,
+                      converged=np.asarray(conv, bool) & ~failed)
+
+
+def _fit_subsets_one_by_one(model, gamma, theta, power, masks, weights, ok, seed, engine=None):
     """``fit``'s global search on every subset in turn (see :func:`fit_subsets`)."""
     b = masks.shape[0]
     zs = np.full((b, model.n_nonlinear), np.nan)
@@ -1059,20 +1277,13 @@ def _fit_subsets_one_by_one(model, gamma, theta, power, masks, weights, ok, seed
     nfev = 0
     for i in np.flatnonzero(ok):
         m = masks[i]
-        out = _global_search(model, gamma[m], theta[m], power[m], weights[m], seed=seed)
+        out = _global_search(model, gamma[m], theta[m], power[m], weights[m], seed=seed,
+                             engine=engine)
         if out is None:
             continue
         zs[i], alphas[i], cost[i], conv[i], _, _, evals = out
         nfev += evals
-    params = model.to_natural(np.where(np.isfinite(zs), zs, 0.0),
-                              np.where(np.isfinite(alphas), alphas, 0.0))
-    failed = ~ok | ~np.isfinite(cost) | ~np.all(np.isfinite(params), axis=1)
-    safe = np.where(failed[:, None], _placeholder_params(model, params), params)
-    r2_all = np.asarray(metrics.r2(power, model.predict(safe, gamma, theta)), float).reshape(b)
-    r2_all = np.where(failed | ~np.isfinite(r2_all), 0.0, r2_all)
-    return SubsetFits(params=np.where(failed[:, None], np.nan, params), r2_all=r2_all,
-                      cost=np.where(failed, np.inf, cost), failed=failed, nfev=nfev,
-                      converged=conv & ~failed)
+    return _subset_result(model, gamma, theta, power, zs, alphas, cost, conv, ok, nfev)
 
 
 def _scan_subsets(model, geom, zb, ab, cost, conv, sw, y, max_iter, ftol, rounds=2):

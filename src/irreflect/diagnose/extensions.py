@@ -187,6 +187,8 @@ def apply_extension(base: ReflectionModel, ext: Extension) -> ReflectionModel:
         "extensions": applied_extensions(base) + (ext.name,),
         "extension": ext,
     }
+    if base.options.get("canonical_starts") is base.starts:  # the compiled kernel's mark
+        options["canonical_starts"] = starts
     for key in ("validity", "residual_column"):  # about the wrapped model's leading part
         if key in base.options:
             options[key] = base.options[key]
@@ -308,10 +310,12 @@ INCIDENCE_REFLECTANCE = Extension(
 def _tilt_geometry(geom, tilt):
     gamma = geom["gamma"]
     s = np.sin(gamma)
-    phi = -gamma - geom["theta"] - tilt * s * np.abs(s)
+    # from the geometry's own phi, so that a shift applied outside (angle_offset) stays
+    phi = geom["phi"] - tilt * s * np.abs(s)
     cos_phi = np.cos(phi)
     pos = cos_phi > 0
     out = dict(geom)
+    out["phi"] = phi
     out["cos_phi"] = cos_phi
     out["pos_phi"] = pos
     out["log_cos_phi"] = np.log(np.where(pos, cos_phi, 1.0))
@@ -340,7 +344,14 @@ OFFSPECULAR_PEAK = Extension(
 def _offset_geometry(geom, delta):
     gamma = geom["gamma"]
     theta = geom["theta"] + delta
-    return plane_geometry(np.broadcast_to(gamma, theta.shape), theta)
+    out = plane_geometry(np.broadcast_to(gamma, theta.shape), theta)
+    # phi moves with theta, and keeps a tilt applied outside (offspecular_peak)
+    phi = geom["phi"] - delta
+    cos_phi = np.cos(phi)
+    pos = cos_phi > 0
+    out.update(phi=phi, cos_phi=cos_phi, pos_phi=pos,
+               log_cos_phi=np.log(np.where(pos, cos_phi, 1.0)))
+    return out
 
 
 ANGLE_OFFSET = Extension(

@@ -1,0 +1,1307 @@
+"""Compiled kernel of the fitter (numba): the same global search as :mod:`irreflect.fitting`.
+
+Why numba: a fit is a few hundred evaluations of the model on a few hundred points, each
+followed by a tiny linear solve; in numpy three quarters of the time is call overhead on
+small arrays. Here every step (the per-angle decomposition that gives the data-driven
+starts, the screening, the bounded Levenberg-Marquardt with Kaufman's Jacobian, the
+global scans and the basin hops) is a loop over scalars compiled once and cached on disk
+(``cache=True``), for one table or for a whole batch of subsets in one call.
+
+The numpy code in :mod:`irreflect.fitting` is the reference implementation: the kernel
+follows it step by step (same candidates in the same order, same tie-breaking, same
+stopping rules), so the two reach the same optimum; sums are taken in another order, so
+the numbers agree to rounding, not to the bit (tests hold R^2 to 1e-9).
+
+Models: the paper's two-lobe model (Eqs. 19-22) with any chain of the diagnosis
+catalogue's extensions (:mod:`irreflect.diagnose.extensions`), described by
+:func:`model_code`; other models use the numpy path. Angles in radians.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+TWO_PI = 2.0 * math.pi
+RIDGE = 1e-12
+EXTREME = 1e8
+STOP_FTOL, STOP_XTOL, STOP_STUCK, STOP_MAXITER, STOP_NONFINITE = 1, 2, 3, 4, 5
+
+# extension codes (the order they wrap the model is kept in an array)
+EXT_INCIDENCE, EXT_TILT, EXT_RETRO, EXT_OFFSET, EXT_BACKGROUND, EXT_HALO = 1, 2, 3, 4, 5, 6
+EXT_CODES = {"incidence_reflectance": EXT_INCIDENCE, "offspecular_peak": EXT_TILT,
+             "retroreflection": EXT_RETRO, "angle_offset": EXT_OFFSET,
+             "background": EXT_BACKGROUND, "specular_halo": EXT_HALO}
+# new nonlinear coordinates and linear columns each extension adds
+_EXT_P = {EXT_INCIDENCE: 1, EXT_TILT: 1, EXT_RETRO: 1, EXT_OFFSET: 1, EXT_BACKGROUND: 0,
+          EXT_HALO: 1}
+_EXT_L = {EXT_INCIDENCE: 0, EXT_TILT: 0, EXT_RETRO: 1, EXT_OFFSET: 0, EXT_BACKGROUND: 1,
+          EXT_HALO: 1}
+GEOMETRY_STEP = 1e-7  # the numpy path's central-difference step along geometric shifts
+
+
+def model_code(model) -> np.ndarray | None:
+    """The kernel's description of ``model``: extension codes innermost first, or None when
+    the kernel does not cover the model (then the numpy path fits it)."""
+    from .diagnose.extensions import applied_extensions, base_of
+
+    if base_of(model).name != "two-lobe":
+        return None
+    codes = []
+    for name in applied_extensions(model):
+        if name not in EXT_CODES:
+            return None
+        codes.append(EXT_CODES[name])
+    return np.array(codes, np.int64)
+
+
+# ----------------------------------------------------------------------------- geometry
+@njit(cache=True)
+def _lobe(log_cos, positive, n):
+    """Lobe ``(n+1)/2pi cos^n`` and ``d lobe / d n`` from ``log cos``."""
+    if positive:
+        power = math.exp(n * log_cos)
+    else:
+        power = 0.0
+    lobe = (n + 1.0) / TWO_PI * power
+    return lobe, power / TWO_PI + lobe * log_cos
+
+
+@njit(cache=True)
+def _cos_parts(angle):
+    c = math.cos(angle)
+    if c > 0.0:
+        return math.log(c), True
+    return 0.0, False
+
+
+# ----------------------------------------------------------------------------- the model
+@njit(cache=True)
+def _two_lobe_point(s, nd, ns, lcg, lct, pt, lcp, pp, deriv, b, db):
+    """Two-lobe basis (2 columns, see model._two_lobe_basis) and its derivative at one
+    point; ``s = cos^v_as``, ``nd``, ``ns`` are the point's angle-of-incidence values."""
+    ld, dld = _lobe(lct, pt, nd)
+    ls, dls = _lobe(lcp, pp, ns)
+    diff = ls - ld
+    b[0] = ld
+    b[1] = ld + s * diff
+    if deriv:
+        dd = dld * nd
+        ds = dls * ns
+        for q in range(db.shape[1]):
+            db[0, q] = 0.0
+            db[1, q] = 0.0
+        db[0, 1] = dd
+        db[0, 2] = dd * lcg
+        db[1, 0] = s * diff * lcg
+        oms = 1.0 - s
+        db[1, 1] = oms * dd
+        db[1, 2] = oms * dd * lcg
+        db[1, 3] = s * ds
+        db[1, 4] = s * ds * lcg
+
+
+@njit(cache=True)
+def _group_values(z, glcg, gval):
+    """Per angle of incidence: cos^v_as, n_d and n_s of the two-lobe model (3 exps per
+    angle instead of per point)."""
+    for g in range(glcg.size):
+        lc = glcg[g]
+        gval[g, 0] = math.exp(z[0] * lc)
+        gval[g, 1] = math.exp(z[1] + z[2] * lc)
+        gval[g, 2] = math.exp(z[3] + z[4] * lc)
+
+
+@njit(cache=True)
+def _point(codes, z, j, geo, gval, deriv, b, db, bp, dbp):
+    """Basis and derivative of the two-lobe model wrapped in ``codes`` (innermost first) at
+    point ``j`` of the geometry ``geo``. ``b`` (L,), ``db`` (L, P); ``bp``/``dbp`` are
+    scratch of the same shapes for the central differences along geometric shifts."""
+    if deriv:
+        _chain(codes, z, j, geo, gval, b, db, bp, dbp)
+    else:
+        _chain_value(codes, codes.size, z, j, geo, gval, geo[1][j], 0.0, b, db)
+
+
+@njit(cache=True)
+def _sizes(codes, level):
+    """(nonlinear coordinates, linear columns) of the model wrapped by ``codes[:level]``."""
+    p = 5
+    ll = 2
+    for i in range(level):
+        c = codes[i]
+        if c == EXT_INCIDENCE or c == EXT_TILT or c == EXT_RETRO or c == EXT_OFFSET \
+                or c == EXT_HALO:
+            p += 1
+        if c == EXT_RETRO or c == EXT_BACKGROUND or c == EXT_HALO:
+            ll += 1
+    return p, ll
+
+
+@njit(cache=True)
+def _shift(code, z, pb, gamma, theta, tilt, extra):
+    """The geometry a shift wrapper (angle_offset, offspecular_peak) passes inward, its
+    own coordinate ``z[pb]`` plus ``extra``: (theta, tilt)."""
+    if code == EXT_OFFSET:
+        return theta + z[pb] + extra, tilt
+    s = math.sin(gamma)
+    return theta, tilt + (z[pb] + extra) * s * abs(s)
+
+
+@njit(cache=True)
+def _geometry_at(codes, upto, level, z, gamma, theta, tilt):
+    """The geometry wrapper ``level`` receives (level 0: the two-lobe model itself) under
+    the wrappers ``codes[:upto]`` whose outermost receives (theta, tilt)."""
+    for outer in range(upto, level, -1):
+        code = codes[outer - 1]
+        if code == EXT_OFFSET or code == EXT_TILT:
+            pb, lb = _sizes(codes, outer - 1)
+            theta, tilt = _shift(code, z, pb, gamma, theta, tilt, 0.0)
+    return theta, tilt
+
+
+@njit(cache=True)
+def _base(z, j, geo, gval, theta, tilt, deriv, b, db):
+    gamma = geo[0][j]
+    g = geo[7][j]
+    if theta == geo[1][j] and tilt == 0.0:
+        lct, pt, lcp, pp = geo[3][j], geo[4][j], geo[5][j], geo[6][j]
+    else:
+        lct, pt = _cos_parts(theta)
+        lcp, pp = _cos_parts(-gamma - theta - tilt)
+    _two_lobe_point(gval[g, 0], gval[g, 1], gval[g, 2], geo[2][j], lct, pt, lcp, pp, deriv, b,
+                    db)
+
+
+@njit(cache=True)
+def _added(code, z, pb, gamma, theta, tilt):
+    """The column a wrapper adds (background, retro lobe, halo lobe) and d/d z[pb]."""
+    if code == EXT_BACKGROUND:
+        return 1.0, 0.0
+    n = math.exp(z[pb])
+    if code == EXT_RETRO:
+        lc, pos = _cos_parts(theta - gamma)
+    else:  # halo: about the (tilted) mirror direction
+        lc, pos = _cos_parts(-gamma - theta - tilt)
+    lobe, dlobe = _lobe(lc, pos, n)
+    return lobe, dlobe * n
+
+
+@njit(cache=True)
+def _chain_value(codes, upto, z, j, geo, gval, theta_in, tilt_in, b, scratch):
+    """The model of ``codes[:upto]`` at point ``j`` for the input geometry (theta_in,
+    tilt_in) of its outermost wrapper; no derivatives. Writes b[:L]."""
+    gamma = geo[0][j]
+    theta, tilt = _geometry_at(codes, upto, 0, z, gamma, theta_in, tilt_in)
+    _base(z, j, geo, gval, theta, tilt, False, b, scratch)
+    for level in range(1, upto + 1):
+        code = codes[level - 1]
+        pb, lb = _sizes(codes, level - 1)
+        if code == EXT_INCIDENCE:
+            f = math.exp(z[pb] * geo[2][j])
+            for col in range(lb):
+                b[col] *= f
+        elif code == EXT_BACKGROUND or code == EXT_RETRO or code == EXT_HALO:
+            theta, tilt = _geometry_at(codes, upto, level, z, gamma, theta_in, tilt_in)
+            b[lb], _ = _added(code, z, pb, gamma, theta, tilt)
+
+
+@njit(cache=True)
+def _chain(codes, z, j, geo, gval, b, db, bp, dbp):
+    """The model of all ``codes`` at point ``j`` and its derivative with respect to every
+    coordinate (central differences along geometric shifts, as the numpy path)."""
+    gamma = geo[0][j]
+    theta_j = geo[1][j]
+    upto = codes.size
+    theta, tilt = _geometry_at(codes, upto, 0, z, gamma, theta_j, 0.0)
+    _base(z, j, geo, gval, theta, tilt, True, b, db)
+    for level in range(1, upto + 1):
+        code = codes[level - 1]
+        pb, lb = _sizes(codes, level - 1)
+        for col in range(lb):  # the new coordinate, if any, starts at zero
+            if pb < db.shape[1]:
+                db[col, pb] = 0.0
+        if code == EXT_INCIDENCE:
+            lcg = geo[2][j]
+            f = math.exp(z[pb] * lcg)
+            for col in range(lb):
+                b[col] *= f
+                for q in range(pb):
+                    db[col, q] *= f
+                db[col, pb] = b[col] * lcg
+        elif code == EXT_OFFSET or code == EXT_TILT:
+            h = GEOMETRY_STEP
+            th, tl = _geometry_at(codes, upto, level, z, gamma, theta_j, 0.0)
+            t1, l1 = _shift(code, z, pb, gamma, th, tl, h)
+            _chain_value(codes, level - 1, z, j, geo, gval, t1, l1, bp, dbp)
+            plus = bp.copy()
+            t2, l2 = _shift(code, z, pb, gamma, th, tl, -h)
+            _chain_value(codes, level - 1, z, j, geo, gval, t2, l2, bp, dbp)
+            for col in range(lb):
+                db[col, pb] = (plus[col] - bp[col]) / (2.0 * h)
+        else:
+            th, tl = _geometry_at(codes, upto, level, z, gamma, theta_j, 0.0)
+            b[lb], d = _added(code, z, pb, gamma, th, tl)
+            for q in range(db.shape[1]):
+                db[lb, q] = 0.0
+            if code != EXT_BACKGROUND:
+                db[lb, pb] = d
+
+
+@njit(cache=True)
+def make_geometry(gamma, theta, group, levels):
+    """The per-point arrays every evaluation reads (computed once per table): gamma,
+    theta, log cos gamma, log cos theta, cos theta > 0, log cos phi, cos phi > 0, the
+    index of the point's angle of incidence in ``levels``."""
+    n = gamma.size
+    lcg = np.empty(n)
+    lct = np.empty(n)
+    pt = np.empty(n, np.bool_)
+    lcp = np.empty(n)
+    pp = np.empty(n, np.bool_)
+    for j in range(n):
+        lcg[j] = math.log(math.cos(gamma[j]))
+        lct[j], pt[j] = _cos_parts(theta[j])
+        lcp[j], pp[j] = _cos_parts(-gamma[j] - theta[j])
+    return (gamma, theta, lcg, lct, pt, lcp, pp, group)
+
+
+# ----------------------------------------------------------------------------- projection
+@njit(cache=True)
+def _inverse(g, free, scale, out):
+    """Inverse of the free block of the Gram matrix ``g`` (ridge ``RIDGE * scale`` on the
+    diagonal, 1 on fixed columns), zero outside it (as fitting._solve_linear)."""
+    ll = g.shape[0]
+    if ll == 1:
+        out[0, 0] = 1.0 / (g[0, 0] + RIDGE * scale[0]) if free[0] else 0.0
+        return
+    if ll == 2:
+        a00 = g[0, 0] + RIDGE * scale[0] if free[0] else 1.0
+        a11 = g[1, 1] + RIDGE * scale[1] if free[1] else 1.0
+        a01 = g[0, 1] if (free[0] and free[1]) else 0.0
+        det = a00 * a11 - a01 * a01
+        out[0, 0] = a11 / det if free[0] else 0.0
+        out[1, 1] = a00 / det if free[1] else 0.0
+        off = -a01 / det if (free[0] and free[1]) else 0.0
+        out[0, 1] = off
+        out[1, 0] = off
+        return
+    a = np.empty((ll, ll))
+    for i in range(ll):
+        for j in range(ll):
+            if free[i] and free[j]:
+                a[i, j] = g[i, j]
+            else:
+                a[i, j] = 0.0
+        a[i, i] += RIDGE * scale[i] if free[i] else 1.0
+    out[:, :] = np.linalg.inv(a)
+    for i in range(ll):
+        for j in range(ll):
+            if not (free[i] and free[j]):
+                out[i, j] = 0.0
+
+
+@njit(cache=True)
+def _solve_small(a, b, x):
+    """Solve the small system ``a x = b`` by Gaussian elimination with partial pivoting
+    (``a`` and ``b`` are overwritten); a singular pivot leaves that component 0."""
+    p = b.size
+    for k in range(p):
+        piv = k
+        big = abs(a[k, k])
+        for i in range(k + 1, p):
+            if abs(a[i, k]) > big:
+                big = abs(a[i, k])
+                piv = i
+        if piv != k:
+            for j in range(p):
+                tmp = a[k, j]
+                a[k, j] = a[piv, j]
+                a[piv, j] = tmp
+            tmp = b[k]
+            b[k] = b[piv]
+            b[piv] = tmp
+        if a[k, k] == 0.0:
+            continue
+        for i in range(k + 1, p):
+            f = a[i, k] / a[k, k]
+            if f != 0.0:
+                for j in range(k, p):
+                    a[i, j] -= f * a[k, j]
+                b[i] -= f * b[k]
+    for k in range(p - 1, -1, -1):
+        acc = b[k]
+        for j in range(k + 1, p):
+            acc -= a[k, j] * x[j]
+        x[k] = acc / a[k, k] if a[k, k] != 0.0 else 0.0
+
+
+@njit(cache=True)
+def _solve_linear(bw, yw, nonneg, residual, alpha, free, inv):
+    """Weighted non-negative linear least squares of one problem (fitting._solve_linear)."""
+    n, ll = bw.shape
+    g = np.zeros((ll, ll))
+    rhs = np.zeros(ll)
+    for j in range(n):
+        for i in range(ll):
+            bi = bw[j, i]
+            rhs[i] += bi * yw[j]
+            for k in range(i, ll):
+                g[i, k] += bi * bw[j, k]
+    for i in range(ll):
+        for k in range(i + 1, ll):
+            g[k, i] = g[i, k]
+    scale = np.empty(ll)
+    for i in range(ll):
+        scale[i] = max(g[i, i], 1e-300)
+        free[i] = g[i, i] > 0.0
+    _inverse(g, free, scale, inv)
+    _apply(inv, rhs, free, alpha)
+    for _ in range(ll):
+        worst = -1
+        worst_value = 0.0
+        total = 0.0
+        largest = -1
+        largest_value = -1.0
+        for i in range(ll):
+            if free[i]:
+                a = alpha[i]
+                if nonneg[i] and a < 0.0:
+                    v = a * math.sqrt(scale[i])
+                    if worst < 0 or v < worst_value:
+                        worst = i
+                        worst_value = v
+                m = abs(a)
+                total += m
+                if m > largest_value:
+                    largest = i
+                    largest_value = m
+        drop = worst
+        if drop < 0 and residual >= 0 and free[residual]:
+            r = abs(alpha[residual])
+            if r > 0.0 and r < total / EXTREME:
+                drop = largest
+        if drop < 0:
+            break
+        free[drop] = False
+        _inverse(g, free, scale, inv)
+        _apply(inv, rhs, free, alpha)
+    for i in range(ll):
+        if not free[i]:
+            alpha[i] = 0.0
+
+
+@njit(cache=True)
+def _apply(inv, rhs, free, alpha):
+    ll = rhs.size
+    for i in range(ll):
+        acc = 0.0
+        for k in range(ll):
+            if free[k]:
+                acc += inv[i, k] * rhs[k]
+        alpha[i] = acc
+
+
+@njit(cache=True)
+def _evaluate(codes, nonneg, residual, z, geo, sw, yw, deriv, bw, dbw, alpha, free, inv,
+              resid, b, db, bp, dbp, gval):
+    """Basis (weighted, fixed columns zeroed), linear coefficients, residuals and cost."""
+    n, ll = bw.shape
+    p = z.size
+    _group_values(z, gval[0], gval[1])
+    if codes.size == 0:
+        _two_lobe_fill(geo, gval[1], sw, deriv, bw, dbw)
+    else:
+        for j in range(n):
+            _point(codes, z, j, geo, gval[1], deriv, b, db, bp, dbp)
+            w = sw[j]
+            for col in range(ll):
+                bw[j, col] = b[col] * w
+                if deriv:
+                    for q in range(p):
+                        dbw[j, col, q] = db[col, q]
+    _solve_linear(bw, yw, nonneg, residual, alpha, free, inv)
+    cost = 0.0
+    for j in range(n):
+        acc = yw[j]
+        for col in range(ll):
+            acc -= bw[j, col] * alpha[col]
+        resid[j] = acc
+        cost += acc * acc
+    cost *= 0.5
+    if not math.isfinite(cost):
+        cost = math.inf
+    for col in range(ll):
+        if not free[col]:
+            for j in range(n):
+                bw[j, col] = 0.0
+    return cost
+
+
+@njit(cache=True)
+def _two_lobe_fill(geo, gval, sw, deriv, bw, dbw):
+    """The plain two-lobe model's weighted basis and unweighted derivative at every point
+    (the hot loop: two exponentials per point, the angle-of-incidence parts from gval)."""
+    lcg_all, lct_all, pt_all, lcp_all, pp_all, group = geo[2], geo[3], geo[4], geo[5], \
+        geo[6], geo[7]
+    for j in range(sw.size):
+        g = group[j]
+        s = gval[g, 0]
+        nd = gval[g, 1]
+        ns = gval[g, 2]
+        lct = lct_all[j]
+        lcp = lcp_all[j]
+        pd = math.exp(nd * lct) if pt_all[j] else 0.0
+        ps = math.exp(ns * lcp) if pp_all[j] else 0.0
+        ld = (nd + 1.0) / TWO_PI * pd
+        ls = (ns + 1.0) / TWO_PI * ps
+        diff = ls - ld
+        w = sw[j]
+        bw[j, 0] = ld * w
+        bw[j, 1] = (ld + s * diff) * w
+        if deriv:
+            lcg = lcg_all[j]
+            dd = nd * (pd / TWO_PI + ld * lct)
+            ds = ns * (ps / TWO_PI + ls * lcp)
+            oms = 1.0 - s
+            dbw[j, 0, 0] = 0.0
+            dbw[j, 0, 1] = dd
+            dbw[j, 0, 2] = dd * lcg
+            dbw[j, 0, 3] = 0.0
+            dbw[j, 0, 4] = 0.0
+            dbw[j, 1, 0] = s * diff * lcg
+            dbw[j, 1, 1] = oms * dd
+            dbw[j, 1, 2] = oms * dd * lcg
+            dbw[j, 1, 3] = s * ds
+            dbw[j, 1, 4] = s * ds * lcg
+
+
+@njit(cache=True)
+def _jacobian(bw, dbw, alpha, inv, sw, jac, jm, t, coef):
+    """Kaufman's Jacobian of the projected residual: ``(P_B - I) dB/dz alpha``
+    (``jm``, ``t``, ``coef``: scratch of shapes (n, P), (L, P), (L, P))."""
+    n, ll = bw.shape
+    p = jac.shape[1]
+    for j in range(n):
+        for q in range(p):
+            acc = 0.0
+            for col in range(ll):
+                acc += dbw[j, col, q] * alpha[col]
+            jm[j, q] = acc * sw[j]
+    t[:, :] = 0.0
+    for j in range(n):
+        for col in range(ll):
+            bjc = bw[j, col]
+            if bjc != 0.0:
+                for q in range(p):
+                    t[col, q] += bjc * jm[j, q]
+    for col in range(ll):
+        for q in range(p):
+            acc = 0.0
+            for k in range(ll):
+                acc += inv[col, k] * t[k, q]
+            coef[col, q] = acc
+    for j in range(n):
+        for q in range(p):
+            acc = -jm[j, q]
+            for col in range(ll):
+                acc += bw[j, col] * coef[col, q]
+            jac[j, q] = acc
+
+
+@njit(cache=True)
+def _lm(codes, nonneg, residual, z0, lo, hi, geo, glcg, sw, yw, max_iter, ftol, xtol, z_out,
+        alpha_out):
+    """Bounded Levenberg-Marquardt from one start (fitting._lm_loop for one problem).
+    Returns (cost, reason, nfev); writes z_out, alpha_out."""
+    n = sw.size
+    p = z0.size
+    pp, ll = _sizes(codes, codes.size)
+    gval = (glcg, np.empty((glcg.size, 3)))
+    bw = np.empty((n, ll))
+    dbw = np.empty((n, ll, p))
+    alpha = np.empty(ll)
+    free = np.empty(ll, np.bool_)
+    inv = np.empty((ll, ll))
+    resid = np.empty(n)
+    b = np.empty(ll)
+    db = np.empty((ll, p))
+    bp = np.empty(ll)
+    dbp = np.empty((ll, p))
+    tbw = np.empty((n, ll))
+    tdbw = np.empty((n, ll, p))
+    talpha = np.empty(ll)
+    tfree = np.empty(ll, np.bool_)
+    tinv = np.empty((ll, ll))
+    tresid = np.empty(n)
+    jac = np.empty((n, p))
+    z = np.empty(p)
+    zt = np.empty(p)
+    for q in range(p):
+        z[q] = min(max(z0[q], lo[q]), hi[q])
+    cost = _evaluate(codes, nonneg, residual, z, geo, sw, yw, True, bw, dbw, alpha, free, inv,
+                     resid, b, db, bp, dbp, gval)
+    nfev = 1
+    lam = 1e-3
+    if not math.isfinite(cost):
+        z_out[:] = z
+        alpha_out[:] = alpha
+        return math.inf, STOP_NONFINITE, nfev
+    reason = STOP_MAXITER
+    grad = np.empty(p)
+    hess = np.empty((p, p))
+    pinned = np.empty(p, np.bool_)
+    jm = np.empty((n, p))
+    tt = np.empty((ll, p))
+    coef = np.empty((ll, p))
+    a = np.empty((p, p))
+    rhs = np.empty(p)
+    step = np.empty(p)
+    for _ in range(max_iter):
+        _jacobian(bw, dbw, alpha, inv, sw, jac, jm, tt, coef)
+        for q in range(p):
+            acc = 0.0
+            for j in range(n):
+                acc += jac[j, q] * resid[j]
+            grad[q] = acc
+            for r in range(q, p):
+                acc = 0.0
+                for j in range(n):
+                    acc += jac[j, q] * jac[j, r]
+                hess[q, r] = acc
+                hess[r, q] = acc
+        for q in range(p):
+            pinned[q] = (z[q] <= lo[q] + 1e-12 and grad[q] > 0.0) or \
+                (z[q] >= hi[q] - 1e-12 and grad[q] < 0.0)
+        for q in range(p):
+            if pinned[q]:
+                for r in range(p):
+                    hess[q, r] = 0.0
+                    hess[r, q] = 0.0
+                hess[q, q] = 1.0
+                grad[q] = 0.0
+        dmax = 0.0
+        for q in range(p):
+            dmax = max(dmax, hess[q, q])
+        a[:, :] = hess
+        for q in range(p):
+            d = max(hess[q, q], 1e-12 * dmax + 1e-300)
+            a[q, q] += lam * d
+            rhs[q] = -grad[q]
+        _solve_small(a, rhs, step)
+        for q in range(p):
+            if not math.isfinite(step[q]):
+                step[q] = 0.0
+            zt[q] = min(max(z[q] + step[q], lo[q]), hi[q])
+        tcost = _evaluate(codes, nonneg, residual, zt, geo, sw, yw, True, tbw, tdbw, talpha,
+                          tfree, tinv, tresid, b, db, bp, dbp, gval)
+        better = tcost < cost
+        gain = cost - tcost
+        lam_new = max(lam / 3.0, 1e-12) if better else lam * 4.0
+        dz = 0.0
+        zn = 0.0
+        for q in range(p):
+            dz += (zt[q] - z[q]) ** 2
+            zn += z[q] * z[q]
+        dz = math.sqrt(dz)
+        small_step = dz <= xtol * (math.sqrt(zn) + xtol)
+        small_gain = better and gain <= ftol * max(cost, 1e-300)
+        stuck = lam_new > 1e10
+        nfev += 1
+        lam = lam_new
+        if better:
+            z[:] = zt
+            cost = tcost
+            bw, tbw = tbw, bw
+            dbw, tdbw = tdbw, dbw
+            alpha, talpha = talpha, alpha
+            free, tfree = tfree, free
+            inv, tinv = tinv, inv
+            resid, tresid = tresid, resid
+        if small_gain:
+            reason = STOP_FTOL
+            break
+        if small_step:
+            reason = STOP_XTOL
+            break
+        if stuck:
+            reason = STOP_STUCK
+            break
+    z_out[:] = z
+    alpha_out[:] = alpha
+    return cost, reason, nfev
+
+
+@njit(cache=True)
+def _costs(codes, nonneg, residual, cands, geo, glcg, sw, yw):
+    """Projected cost of every candidate row (no derivatives)."""
+    m, p = cands.shape
+    n = sw.size
+    gval = (glcg, np.empty((glcg.size, 3)))
+    pp, ll = _sizes(codes, codes.size)
+    bw = np.empty((n, ll))
+    dbw = np.empty((1, ll, p))
+    alpha = np.empty(ll)
+    free = np.empty(ll, np.bool_)
+    inv = np.empty((ll, ll))
+    resid = np.empty(n)
+    b = np.empty(ll)
+    db = np.empty((ll, p))
+    bp = np.empty(ll)
+    dbp = np.empty((ll, p))
+    out = np.empty(m)
+    for i in range(m):
+        out[i] = _evaluate(codes, nonneg, residual, cands[i], geo, sw, yw, False, bw, dbw,
+                           alpha, free, inv, resid, b, db, bp, dbp, gval)
+    return out
+
+
+# ----------------------------------------------------------------------------- data-driven starts
+@njit(cache=True)
+def _profile(geo, power, weights, levels, group, nd_grid, ns_grid):
+    """model.lobe_profile for one weight row: per level (diffuse index, specular index,
+    diffuse, specular, ok). ``levels``/``group``: the rounded angles of incidence."""
+    g_count = levels.size
+    n = power.size
+    lt, post, lp, posp = geo[3], geo[4], geo[5], geo[6]
+    d_count = nd_grid.size
+    s_count = ns_grid.size
+    out = np.full((g_count, 4), np.nan)
+    ok = np.zeros(g_count, np.bool_)
+    for gi in range(g_count):
+        count = 0
+        for j in range(n):
+            if group[j] == gi and weights[j] > 0.0:
+                count += 1
+        if count < 3:
+            continue
+        idx = np.empty(count, np.int64)
+        k = 0
+        for j in range(n):
+            if group[j] == gi and weights[j] > 0.0:
+                idx[k] = j
+                k += 1
+        ld = np.empty((d_count, count))
+        ls = np.empty((s_count, count))
+        for a in range(d_count):
+            nd = nd_grid[a]
+            for c in range(count):
+                j = idx[c]
+                ld[a, c] = (nd + 1.0) / TWO_PI * math.exp(nd * lt[j]) if post[j] else 0.0
+        for a in range(s_count):
+            ns = ns_grid[a]
+            for c in range(count):
+                j = idx[c]
+                ls[a, c] = (ns + 1.0) / TWO_PI * math.exp(ns * lp[j]) if posp[j] else 0.0
+        w = np.empty(count)
+        y = np.empty(count)
+        yy = 0.0
+        for c in range(count):
+            w[c] = weights[idx[c]]
+            y[c] = power[idx[c]]
+            yy += w[c] * y[c] * y[c]
+        gdd = np.zeros(d_count)
+        rd = np.zeros(d_count)
+        for a in range(d_count):
+            for c in range(count):
+                v = w[c] * ld[a, c]
+                gdd[a] += v * ld[a, c]
+                rd[a] += v * y[c]
+        gss = np.zeros(s_count)
+        rs = np.zeros(s_count)
+        for a in range(s_count):
+            for c in range(count):
+                v = w[c] * ls[a, c]
+                gss[a] += v * ls[a, c]
+                rs[a] += v * y[c]
+        best = math.inf
+        bi = 0
+        bk = 0
+        bcd = 0.0
+        bcs = 0.0
+        for a in range(d_count):
+            for s in range(s_count):
+                gds = 0.0
+                for c in range(count):
+                    gds += w[c] * ld[a, c] * ls[s, c]
+                cost, cd, cs = _two_columns(gdd[a], gss[s], gds, rd[a], rs[s], yy)
+                if cost < best:
+                    best = cost
+                    bi = a
+                    bk = s
+                    bcd = cd
+                    bcs = cs
+        ok[gi] = True
+        out[gi, 0] = nd_grid[bi]
+        out[gi, 1] = ns_grid[bk]
+        out[gi, 2] = bcd
+        out[gi, 3] = bcs
+    return out, ok
+
+
+@njit(cache=True)
+def _two_columns(gdd, gss, gds, rd, rs, yy):
+    """model._two_column_nnls for one grid node."""
+    det = gdd * gss - gds * gds
+    good = det > 1e-12 * gdd * gss
+    cd = (gss * rd - gds * rs) / det if good else -1.0
+    cs = (gdd * rs - gds * rd) / det if good else -1.0
+    cost_both = yy - cd * rd - cs * rs if (cd >= 0.0 and cs >= 0.0) else math.inf
+    d_only = max(rd, 0.0) / gdd if gdd > 0.0 else 0.0
+    s_only = max(rs, 0.0) / gss if gss > 0.0 else 0.0
+    cost_d = yy - d_only * rd
+    cost_s = yy - s_only * rs
+    if cost_d <= cost_s:
+        cost_single, c1, c2 = cost_d, d_only, 0.0
+    else:
+        cost_single, c1, c2 = cost_s, 0.0, s_only
+    if cost_both < cost_single:
+        cost, c1, c2 = cost_both, cd, cs
+    else:
+        cost = cost_single
+    if not math.isfinite(cost):
+        cost = math.inf
+    return cost, c1, c2
+
+
+@njit(cache=True)
+def _trend(x, y, valid):
+    """model._trend for one row: (intercept, slope); NaN without a valid entry."""
+    count = 0.0
+    sx = 0.0
+    sy = 0.0
+    for i in range(x.size):
+        if valid[i]:
+            count += 1.0
+            sx += x[i]
+            sy += y[i]
+    if count == 0.0:
+        return math.nan, math.nan
+    xm = sx / count
+    ym = sy / count
+    sxx = 0.0
+    sxy = 0.0
+    for i in range(x.size):
+        if valid[i]:
+            dx = x[i] - xm
+            sxx += dx * dx
+            sxy += dx * (y[i] - ym)
+    slope = sxy / sxx if sxx > 1e-12 else 0.0
+    return ym - slope * xm, slope
+
+
+@njit(cache=True)
+def _profile_starts(levels, prof, ok):
+    """model.two_lobe_profile_starts for one profile: (5, 5)."""
+    g_count = levels.size
+    x = np.empty(g_count)
+    zero = np.zeros(g_count)
+    ln_nd = np.empty(g_count)
+    ln_ns = np.empty(g_count)
+    ln_as = np.empty(g_count)
+    spec = np.empty(g_count, np.bool_)
+    spec_share = np.empty(g_count, np.bool_)
+    for g in range(g_count):
+        x[g] = math.log(math.cos(levels[g]))
+        d, s = prof[g, 2], prof[g, 3]
+        spec[g] = ok[g] and s > 0.0
+        total = d + s
+        share = s / total if total > 0.0 else math.nan
+        spec_share[g] = spec[g] and share > 0.0
+        ln_nd[g] = math.log(prof[g, 0]) if ok[g] else math.nan
+        ln_ns[g] = math.log(prof[g, 1]) if ok[g] else math.nan
+        ln_as[g] = math.log(share) if share > 0.0 else math.nan
+    a_nd, b_nd = _trend(x, ln_nd, ok)
+    a_ns, b_ns = _trend(x, ln_ns, spec)
+    _, b_as = _trend(x, ln_as, spec_share)
+    c_nd, _ = _trend(zero, ln_nd, ok)
+    c_ns, _ = _trend(zero, ln_ns, spec)
+    fallback = np.array([0.0, 0.0, 0.3, math.log(30.0), 0.0])
+    rows = np.empty((5, 5))
+    ln4 = math.log(4.0)
+    vals = ((b_as, a_nd, b_nd, a_ns, b_ns), (0.0, c_nd, 0.0, c_ns, 0.0),
+            (b_as, a_nd, b_nd, a_ns + ln4, b_ns), (b_as, a_nd, b_nd, a_ns - ln4, b_ns),
+            (b_as, a_nd, b_nd, c_ns, 0.0))
+    for r in range(5):
+        row = vals[r]
+        for c in range(5):
+            v = row[c]
+            rows[r, c] = v if math.isfinite(v) else fallback[c]
+    return rows
+
+
+@njit(cache=True)
+def _median_specular(prof, ok):
+    count = 0
+    for g in range(ok.size):
+        if ok[g] and prof[g, 3] > 0.0:
+            count += 1
+    if count == 0:
+        return 20.0
+    vals = np.empty(count)
+    k = 0
+    for g in range(ok.size):
+        if ok[g] and prof[g, 3] > 0.0:
+            vals[k] = prof[g, 1]
+            k += 1
+    return np.median(vals)
+
+
+@njit(cache=True)
+def _own_starts(geo, power, levels, group, nd_grid, ns_grid, jitter, lo, hi, ext_start, extra):
+    """The caller's ``extra`` starts, then the model's data-driven starts (profile rows,
+    fixed rows), random perturbations of the first row, clipped and made unique (sorted
+    rows, as numpy.unique(axis=0))."""
+    weights = np.ones(power.size)
+    prof, ok = _profile(geo, power, weights, levels, group, nd_grid, ns_grid)
+    prow = _profile_starts(levels, prof, ok)
+    n_est = _median_specular(prof, ok)
+    p = lo.size
+    n_rows = extra.shape[0] + 9 + ext_start.shape[0] - 1 + jitter.shape[0]
+    rows = np.empty((n_rows, p))
+    r = 0
+    for i in range(extra.shape[0]):
+        rows[r] = extra[i]
+        r += 1
+    for i in range(5):
+        rows[r, :5] = prow[i]
+        rows[r, 5:] = ext_start[0]
+        r += 1
+    for ln_ns in (math.log(n_est), math.log(30.0)):
+        for v_as in (-2.5, 0.5):
+            rows[r, 0] = v_as
+            rows[r, 1] = 0.0
+            rows[r, 2] = 0.3
+            rows[r, 3] = ln_ns
+            rows[r, 4] = 0.0
+            rows[r, 5:] = ext_start[0]
+            r += 1
+    for e in range(1, ext_start.shape[0]):  # the first base start with the other new values
+        rows[r, :5] = prow[0]
+        rows[r, 5:] = ext_start[e]
+        r += 1
+    first = rows[0].copy()
+    for i in range(jitter.shape[0]):
+        for q in range(p):
+            rows[r, q] = first[q] + jitter[i, q]
+        r += 1
+    for i in range(n_rows):
+        for q in range(p):
+            rows[i, q] = min(max(rows[i, q], lo[q]), hi[q])
+    return _unique_rows(rows)
+
+
+@njit(cache=True)
+def _row_less(a, b):
+    for q in range(a.size):
+        if a[q] < b[q]:
+            return True
+        if a[q] > b[q]:
+            return False
+    return False
+
+
+@njit(cache=True)
+def _unique_rows(rows):
+    m = rows.shape[0]
+    order = np.arange(m)
+    for i in range(1, m):  # insertion sort: a handful of rows
+        k = order[i]
+        j = i - 1
+        while j >= 0 and _row_less(rows[k], rows[order[j]]):
+            order[j + 1] = order[j]
+            j -= 1
+        order[j + 1] = k
+    keep = np.ones(m, np.bool_)
+    for i in range(1, m):
+        same = True
+        for q in range(rows.shape[1]):
+            if rows[order[i], q] != rows[order[i - 1], q]:
+                same = False
+                break
+        keep[i] = not same
+    out = np.empty((keep.sum(), rows.shape[1]))
+    k = 0
+    for i in range(m):
+        if keep[i]:
+            out[k] = rows[order[i]]
+            k += 1
+    return out
+
+
+@njit(cache=True)
+def _stable_order(values):
+    return np.argsort(values, kind="mergesort")
+
+
+@njit(cache=True)
+def _diverse(cands, costs, k, lo, hi, min_distance):
+    """fitting._diverse_best: indices of up to k low-cost candidates apart from each other."""
+    p = lo.size
+    width = np.empty(p)
+    for q in range(p):
+        width[q] = hi[q] - lo[q] if hi[q] > lo[q] else 1.0
+    chosen = np.empty(k, np.int64)
+    count = 0
+    for i in _stable_order(costs):
+        if count == k or not math.isfinite(costs[i]):
+            break
+        ok = True
+        for c in range(count):
+            j = chosen[c]
+            d = 0.0
+            for q in range(p):
+                u = (cands[i, q] - lo[q]) / width[q] - (cands[j, q] - lo[q]) / width[q]
+                d += u * u
+            if math.sqrt(d / p) < min_distance:
+                ok = False
+                break
+        if ok:
+            chosen[count] = i
+            count += 1
+    return chosen[:count]
+
+
+@njit(cache=True)
+def _scan_candidates(z, axes):
+    """One row per value of every coordinate's scan axis, the others held at ``z``."""
+    p, m = axes.shape
+    out = np.empty((p * m, p))
+    for q in range(p):
+        for i in range(m):
+            out[q * m + i] = z
+            out[q * m + i, q] = axes[q, i]
+    return out
+
+
+@njit(cache=True)
+def _scan_costs_two_lobe(z, axes, geo, glcg, sw, yw, nonneg, residual):
+    """Projected costs of the one-coordinate scans through ``z`` of the plain two-lobe
+    model (the same numbers as :func:`_costs` of :func:`_scan_candidates`): along v_as the
+    lobes do not change, along the diffuse (specular) coordinates only the diffuse
+    (specular) lobe does, so each point costs at most one exponential."""
+    p, m = axes.shape
+    n = sw.size
+    g_count = glcg.size
+    lcg_all, lct_all, pt_all, lcp_all, pp_all, group = geo[2], geo[3], geo[4], geo[5], \
+        geo[6], geo[7]
+    gval = np.empty((g_count, 3))
+    _group_values(z, glcg, gval)
+    ld0 = np.empty(n)
+    ls0 = np.empty(n)
+    for j in range(n):
+        g = group[j]
+        nd = gval[g, 1]
+        ns = gval[g, 2]
+        ld0[j] = (nd + 1.0) / TWO_PI * math.exp(nd * lct_all[j]) if pt_all[j] else 0.0
+        ls0[j] = (ns + 1.0) / TWO_PI * math.exp(ns * lcp_all[j]) if pp_all[j] else 0.0
+    bw = np.empty((n, 2))
+    alpha = np.empty(2)
+    free = np.empty(2, np.bool_)
+    inv = np.empty((2, 2))
+    out = np.empty(p * m)
+    zc = z.copy()
+    gv = np.empty(g_count)
+    for q in range(p):
+        for i in range(m):
+            zc[:] = z
+            zc[q] = axes[q, i]
+            for g in range(g_count):
+                lc = glcg[g]
+                if q == 0:
+                    gv[g] = math.exp(zc[0] * lc)
+                elif q <= 2:
+                    gv[g] = math.exp(zc[1] + zc[2] * lc)
+                else:
+                    gv[g] = math.exp(zc[3] + zc[4] * lc)
+            for j in range(n):
+                g = group[j]
+                if q == 0:
+                    sj = gv[g]
+                    ld = ld0[j]
+                    ls = ls0[j]
+                elif q <= 2:
+                    sj = gval[g, 0]
+                    nd = gv[g]
+                    ld = (nd + 1.0) / TWO_PI * math.exp(nd * lct_all[j]) if pt_all[j] else 0.0
+                    ls = ls0[j]
+                else:
+                    sj = gval[g, 0]
+                    ns = gv[g]
+                    ld = ld0[j]
+                    ls = (ns + 1.0) / TWO_PI * math.exp(ns * lcp_all[j]) if pp_all[j] else 0.0
+                w = sw[j]
+                bw[j, 0] = ld * w
+                bw[j, 1] = (ld + sj * (ls - ld)) * w
+            _solve_linear(bw, yw, nonneg, residual, alpha, free, inv)
+            cost = 0.0
+            for j in range(n):
+                acc = yw[j] - bw[j, 0] * alpha[0] - bw[j, 1] * alpha[1]
+                cost += acc * acc
+            cost *= 0.5
+            out[q * m + i] = cost if math.isfinite(cost) else math.inf
+    return out
+
+
+# ----------------------------------------------------------------------------- the search
+@njit(cache=True)
+def global_search(codes, nonneg, residual, geo, glcg, power, weights, levels, group, nd_grid,
+                  ns_grid, jitter, ext_start, extra, screen, lo, hi, zlo, zhi, axes, hops,
+                  n_data_starts, n_keep, max_iter, max_rounds):
+    """fitting._global_search_unit for one (normalised) table. Returns
+    (z, alpha, cost, reason, n_starts, n_evals); cost inf when no start is finite.
+    ``geo``: :func:`make_geometry`; ``glcg``: log cos of its exact angles of incidence;
+    ``levels``/``group``: the rounded ones of the per-angle decomposition."""
+    p = zlo.size
+    pp, ll = _sizes(codes, codes.size)
+    sw = np.sqrt(weights)
+    yw = sw * power
+    own = _own_starts(geo, power, levels, group, nd_grid, ns_grid, jitter, zlo, zhi,
+                      ext_start, extra)
+    n_own = own.shape[0]
+    m = n_own + screen.shape[0]
+    cands = np.empty((m, p))
+    cands[:n_own] = own
+    for i in range(screen.shape[0]):
+        for q in range(p):
+            cands[n_own + i, q] = min(max(screen[i, q], zlo[q]), zhi[q])
+    costs = _costs(codes, nonneg, residual, cands, geo, glcg, sw, yw)
+    n_evals = m
+    first = _diverse(own, costs[:n_own], n_data_starts, lo, hi, 1e-9)
+    others = _diverse(cands, costs, n_keep, lo, hi, 0.08)
+    picks = np.unique(np.concatenate((first, others)))
+    if picks.size == 0:
+        picks = np.zeros(1, np.int64)
+    zb = np.empty(p)
+    ab = np.empty(ll)
+    cb = math.inf
+    rb = STOP_NONFINITE
+    zt = np.empty(p)
+    at = np.empty(ll)
+    n_starts = picks.size
+    for i in picks:
+        c, r, nf = _lm(codes, nonneg, residual, cands[i], zlo, zhi, geo, glcg, sw, yw,
+                       max_iter, 1e-10, 1e-9, zt, at)
+        n_evals += nf
+        if c < cb:
+            cb = c
+            rb = r
+            zb[:] = zt
+            ab[:] = at
+    if not math.isfinite(cb):
+        return zb, ab, cb, rb, n_starts, n_evals
+    n_hops = hops.shape[1]
+    width = np.empty(p)
+    for q in range(p):
+        width[q] = hi[q] - lo[q] if hi[q] > lo[q] else 1.0
+    for rnd in range(max_rounds):
+        scan = _scan_candidates(zb, axes)
+        if codes.size == 0:
+            sc = _scan_costs_two_lobe(zb, axes, geo, glcg, sw, yw, nonneg, residual)
+        else:
+            sc = _costs(codes, nonneg, residual, scan, geo, glcg, sw, yw)
+        n_evals += scan.shape[0]
+        n_axis = axes.shape[1]
+        extra = np.empty((p + n_hops, p))
+        k = 0
+        for q in range(p):
+            j = q * n_axis + np.argmin(sc[q * n_axis:(q + 1) * n_axis])
+            if sc[j] < cb * (1.0 - 1e-9):
+                extra[k] = scan[j]
+                k += 1
+        for h in range(n_hops):
+            for q in range(p):
+                extra[k, q] = min(max(zb[q] + hops[rnd, h, q] * width[q], zlo[q]), zhi[q])
+            k += 1
+        if k == 0:
+            break
+        best_c = math.inf
+        best_r = 0
+        zc = np.empty(p)
+        ac = np.empty(ll)
+        for i in range(k):
+            for q in range(p):
+                extra[i, q] = min(max(extra[i, q], zlo[q]), zhi[q])
+            c, r, nf = _lm(codes, nonneg, residual, extra[i], zlo, zhi, geo, glcg, sw, yw,
+                           max_iter, 1e-10, 1e-9, zt, at)
+            n_evals += nf
+            n_starts += 1
+            if c < best_c:
+                best_c = c
+                best_r = r
+                zc[:] = zt
+                ac[:] = at
+        if not best_c < cb * (1.0 - 1e-12):
+            break
+        cb = best_c
+        rb = best_r
+        zb[:] = zc
+        ab[:] = ac
+    return zb, ab, cb, rb, n_starts, n_evals
+
+
+@njit(cache=True)
+def jacobian_full(codes, z, alpha, geo, glcg, sw):
+    """The Jacobian in (z, alpha) of the weighted model, for the covariance: (n, P + L)."""
+    n = sw.size
+    p = z.size
+    pp, ll = _sizes(codes, codes.size)
+    b = np.empty(ll)
+    db = np.empty((ll, p))
+    bp = np.empty(ll)
+    dbp = np.empty((ll, p))
+    gval = np.empty((glcg.size, 3))
+    _group_values(z, glcg, gval)
+    out = np.empty((n, p + ll))
+    for j in range(n):
+        _point(codes, z, j, geo, gval, True, b, db, bp, dbp)
+        for q in range(p):
+            acc = 0.0
+            for col in range(ll):
+                acc += db[col, q] * alpha[col]
+            out[j, q] = acc * sw[j]
+        for col in range(ll):
+            out[j, p + col] = b[col] * sw[j]
+    return out
+
+
+@njit(cache=True)
+def predict(codes, z, alpha, geo, glcg):
+    """The model (unweighted) at every point of ``geo``."""
+    n = geo[0].size
+    p = z.size
+    pp, ll = _sizes(codes, codes.size)
+    b = np.empty(ll)
+    db = np.empty((ll, p))
+    gval = np.empty((glcg.size, 3))
+    _group_values(z, glcg, gval)
+    out = np.empty(n)
+    for j in range(n):
+        _point(codes, z, j, geo, gval, False, b, db, b, db)
+        acc = 0.0
+        for col in range(ll):
+            acc += b[col] * alpha[col]
+        out[j] = acc
+    return out
+
+
+@njit(cache=True)
+def _take(geo, idx):
+    """The geometry of the points ``idx``."""
+    return (geo[0][idx], geo[1][idx], geo[2][idx], geo[3][idx], geo[4][idx], geo[5][idx],
+            geo[6][idx], geo[7][idx])
+
+
+@njit(cache=True)
+def subset_search(codes, nonneg, residual, geo, glcg, power, weights, masks, levels, group,
+                  nd_grid, ns_grid, ext_first, screen, zlo, zhi, n_keep, n_data_starts,
+                  max_iter, ftol):
+    """fitting.fit_subsets' batched search for every mask row: the profile starts of each
+    subset's points and the shared screening candidates, scored on the subset's points;
+    Levenberg-Marquardt from the best ``n_keep`` candidates and the best
+    ``n_data_starts`` data-driven starts. One thread (parallel runs use processes, see
+    irreflect.selection.parallel). Returns (z (B, P), alpha (B, L), cost (B,),
+    converged (B,), nfev)."""
+    b_count, n = masks.shape
+    p = zlo.size
+    pp, ll = _sizes(codes, codes.size)
+    z_out = np.full((b_count, p), np.nan)
+    a_out = np.full((b_count, ll), np.nan)
+    c_out = np.full(b_count, math.inf)
+    conv = np.zeros(b_count, np.bool_)
+    nfev_each = np.zeros(b_count, np.int64)
+    n_screen = screen.shape[0]
+    clipped = np.empty((n_screen, p))
+    for i in range(n_screen):
+        for q in range(p):
+            clipped[i, q] = min(max(screen[i, q], zlo[q]), zhi[q])
+    for bi in range(b_count):
+        _one_subset(codes, nonneg, residual, geo, glcg, power, weights, masks[bi], levels,
+                    group, nd_grid, ns_grid, ext_first, clipped, zlo, zhi, n_keep,
+                    n_data_starts, max_iter, ftol, z_out[bi], a_out[bi], c_out, conv,
+                    nfev_each, bi)
+    return z_out, a_out, c_out, conv, nfev_each.sum()
+
+
+@njit(cache=True)
+def _one_subset(codes, nonneg, residual, geo, glcg, power, weights, mask, levels, group,
+                nd_grid, ns_grid, ext_first, clipped, zlo, zhi, n_keep, n_data_starts, max_iter,
+                ftol, z_row, a_row, c_out, conv, nfev_each, bi):
+    n = mask.size
+    p = zlo.size
+    pp, ll = _sizes(codes, codes.size)
+    count = 0
+    for j in range(n):
+        if mask[j]:
+            count += 1
+    idx = np.empty(count, np.int64)
+    k = 0
+    for j in range(n):
+        if mask[j]:
+            idx[k] = j
+            k += 1
+    sub = _take(geo, idx)
+    sw = np.sqrt(weights[idx])
+    yw = sw * power[idx]
+    full_w = np.zeros(n)
+    for j in idx:
+        full_w[j] = weights[j]
+    prof, ok = _profile(geo, power, full_w, levels, group, nd_grid, ns_grid)
+    data = _profile_starts(levels, prof, ok)
+    n_data = data.shape[0]
+    n_screen = clipped.shape[0]
+    cands = np.empty((n_data + n_screen, p))
+    for i in range(n_data):
+        for q in range(p):
+            v = data[i, q] if q < 5 else ext_first[q - 5]
+            cands[i, q] = min(max(v, zlo[q]), zhi[q])
+    cands[n_data:] = clipped
+    costs = _costs(codes, nonneg, residual, cands, sub, glcg, sw, yw)
+    nfev = cands.shape[0]
+    order = _stable_order(costs)
+    data_order = _stable_order(costs[:n_data])
+    n1 = min(n_keep, cands.shape[0])
+    n2 = min(n_data_starts, n_data)
+    best = math.inf
+    zt = np.empty(p)
+    at = np.empty(ll)
+    for k in range(n1 + n2):
+        s = order[k] if k < n1 else data_order[k - n1]
+        c, r, nf = _lm(codes, nonneg, residual, cands[s], zlo, zhi, sub, glcg, sw, yw,
+                       max_iter, ftol, 1e-9, zt, at)
+        nfev += nf
+        if c < best:
+            best = c
+            z_row[:] = zt
+            a_row[:] = at
+            conv[bi] = r == STOP_FTOL or r == STOP_XTOL or r == STOP_STUCK
+    c_out[bi] = best
+    nfev_each[bi] = nfev
+
+
+def warm() -> None:
+    """Compile (or load from the on-disk cache) every entry point once: a fit, a batch of
+    subset fits and an extended model's fit of a small generated table. ``make`` runs it
+    after installing so that test workers and commands find the cache warm."""
+    import warnings
+
+    from .data import Measurements
+    from .errors import FitWarning
+    from .fitting import fit, fit_subsets
+    from .model import two_lobe_power
+
+    g = np.repeat([-20.0, -40.0, -60.0], 9)
+    t = np.tile(np.linspace(-60.0, 80.0, 9), 3)
+    p = two_lobe_power(np.radians(g), np.radians(t), 0.05, -1.0, 1.0, 0.4, 80.0, 0.2, 1.0)
+    meas = Measurements(g, t, p * (1.0 + 0.01 * np.sin(np.arange(p.size))))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", FitWarning)
+        fit(meas, engine="compiled")
+        from .diagnose.extensions import extend
+
+        fit(meas, extend("two-lobe", ["background"]), engine="compiled")
+        masks = np.ones((2, p.size), bool)
+        masks[0, ::2] = False
+        fit_subsets(g, t, p, masks, engine="compiled")
