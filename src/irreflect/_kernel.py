@@ -985,8 +985,7 @@ def _scan_costs_two_lobe(z, axes, geo, glcg, sw, yw, nonneg, residual):
     p, m = axes.shape
     n = sw.size
     g_count = glcg.size
-    lcg_all, lct_all, pt_all, lcp_all, pp_all, group = geo[2], geo[3], geo[4], geo[5], \
-        geo[6], geo[7]
+    lct_all, pt_all, lcp_all, pp_all, group = geo[3], geo[4], geo[5], geo[6], geo[7]
     gval = np.empty((g_count, 3))
     _group_values(z, glcg, gval)
     ld0 = np.empty(n)
