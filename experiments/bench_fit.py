@@ -1,38 +1,37 @@
-"""Benchmark: one two-lobe fit, irreflect vs a plain ``scipy.optimize.curve_fit``.
+"""Benchmark: one global fit, irreflect (compiled and numpy engines) vs scipy's curve_fit.
 
-Both fit the same bundled 132-point terrazzo table in the same run, repeatedly; the
-script prints both medians, their ratio and the R^2 each reaches (a fast fit that
-stops in a local optimum is no bargain).
+In one run, on the same tables:
 
-* irreflect: ``irreflect.fit`` with everything it does for a user (data-driven and
-  seeded random starts, variable projection, bounded LM, standard errors).
-* baseline: ``curve_fit(two_lobe_power, ...)`` with default settings (LM, numerical
-  Jacobian) from ``p0 = ones`` (curve_fit's default), plus a second baseline from a
-  sensible physical start (Table 3's order of magnitude), since p0 = ones is unfair.
+* the bundled 132-point terrazzo table: ``irreflect.fit`` with everything it does for a
+  user (data-driven starts, screening, Levenberg-Marquardt, scans, standard errors,
+  checks), with the compiled kernel and with the numpy reference implementation, against
+  ``scipy.optimize.curve_fit(two_lobe_power)`` from a physical start (Table 3's order of
+  magnitude) and from its default start ``p0 = ones``; medians, ratios and the R^2 each
+  reaches (a fast fit that stops in a local optimum is no bargain);
+* generated glossy materials (``irreflect.synthetic``, seeds 0-39): median and worst fit
+  time per engine, and how often each reaches the generating curve's R^2;
+* every real set in ``../shared/datasets/real``: median and worst per engine.
 
-Run: ``python experiments/bench_fit.py [--repeats 200]`` (single core is enough; the
-numbers in README.md come from this script).
+Run: ``.venv/bin/python experiments/bench_fit.py [--repeats 200]`` on a quiet machine (it
+measures wall time; the README quotes its output). Peak memory (max RSS) is printed last.
 """
 
 from __future__ import annotations
 
 import argparse
-import os
+import resource
 import statistics
-import sys
 import time
 import warnings
-from pathlib import Path
 
 import numpy as np
 from scipy.optimize import curve_fit
 
-ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT / "src"))
-
-from irreflect import fit, metrics  # noqa: E402
-from irreflect.data import load_bundled  # noqa: E402
-from irreflect.model import two_lobe_power  # noqa: E402
+from irreflect import fit, metrics
+from irreflect.data import load_bundled, read_measurements, real_datasets
+from irreflect.errors import FitError, FitWarning
+from irreflect.model import two_lobe_power
+from irreflect.synthetic import synthetic_material
 
 
 def _two_lobe_xy(x, *p):
@@ -40,8 +39,7 @@ def _two_lobe_xy(x, *p):
 
 
 def time_curve_fit(x, y, p0, repeats):
-    times, r2 = [], float("nan")
-    failures = 0
+    times, r2, failures = [], float("nan"), 0
     for _ in range(repeats):
         t0 = time.perf_counter()
         try:
@@ -55,37 +53,75 @@ def time_curve_fit(x, y, p0, repeats):
     return statistics.median(times) * 1e3, r2, failures
 
 
+def time_fit(meas, engine, repeats=1, model="two-lobe"):
+    """(median ms, last result) of ``repeats`` fits, warnings silenced."""
+    times, result = [], None
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", FitWarning)
+        for i in range(repeats):
+            t0 = time.perf_counter()
+            try:
+                result = fit(meas, model, seed=i, engine=engine)
+            except FitError:
+                result = None
+            times.append(time.perf_counter() - t0)
+    return statistics.median(times) * 1e3, result
+
+
 def main(argv=None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--repeats", type=int, default=200)
-    parser.add_argument("--dataset", default="terrazzo")
+    parser.add_argument("--glossy", type=int, default=40, help="generated glossy materials")
     args = parser.parse_args(argv)
 
-    meas = load_bundled(args.dataset)
+    meas = load_bundled("terrazzo")
+    for engine in ("compiled", "numpy"):  # warm-up: imports, the kernel's cache
+        time_fit(meas, engine)
     x = np.radians(np.vstack([meas.gamma_deg, meas.theta_deg]))
     y = meas.power
-    fit(meas)  # warm-up (imports, caches)
-    times = []
-    for i in range(args.repeats):
-        t0 = time.perf_counter()
-        result = fit(meas, seed=i)
-        times.append(time.perf_counter() - t0)
-    ours = statistics.median(times) * 1e3
-
+    ms_c, res_c = time_fit(meas, "compiled", args.repeats)
+    ms_n, res_n = time_fit(meas, "numpy", max(args.repeats // 4, 5))
+    base_phys, r2_phys, fail_phys = time_curve_fit(x, y, [0.02, -2.0, 1.0, 0.5, 30.0, 0.0, 0.4],
+                                                   args.repeats)
     base_ones, r2_ones, fail_ones = time_curve_fit(x, y, np.ones(7), args.repeats)
-    p0 = [0.02, -2.0, 1.0, 0.5, 30.0, 0.0, 0.4]
-    base_phys, r2_phys, fail_phys = time_curve_fit(x, y, p0, args.repeats)
+    print(f"terrazzo: {meas.n_points} points, {args.repeats} repeats")
+    print(f"  irreflect.fit, compiled kernel : median {ms_c:8.2f} ms   R^2 {res_c.r2:.6f}")
+    print(f"  irreflect.fit, numpy reference : median {ms_n:8.2f} ms   R^2 {res_n.r2:.6f}")
+    print(f"  curve_fit, physical p0 (local) : median {base_phys:8.2f} ms   R^2 {r2_phys:.6f}   "
+          f"failures {fail_phys}/{args.repeats}")
+    print(f"  curve_fit, default p0 = ones   : median {base_ones:8.2f} ms   R^2 {r2_ones:.6f}   "
+          f"failures {fail_ones}/{args.repeats}")
+    print(f"  ratios: numpy / compiled {ms_n / ms_c:.1f}x; curve_fit(physical p0) / compiled "
+          f"{base_phys / ms_c:.2f}x; curve_fit(p0 = ones) / compiled {base_ones / ms_c:.2f}x")
 
-    print(f"dataset {args.dataset}: {meas.n_points} points, {args.repeats} repeats, "
-          f"pid {os.getpid()}, one process")
-    print(f"irreflect.fit (two-lobe, {result.n_starts} starts, std. errors)  median "
-          f"{ours:8.2f} ms   R^2 {result.r2:.6f}")
-    print(f"curve_fit, default p0 = ones                           median {base_ones:8.2f} ms"
-          f"   R^2 {r2_ones:.6f}   failures {fail_ones}/{args.repeats}")
-    print(f"curve_fit, physical p0                                 median {base_phys:8.2f} ms"
-          f"   R^2 {r2_phys:.6f}   failures {fail_phys}/{args.repeats}")
-    print(f"ratio curve_fit(p0=ones) / irreflect: {base_ones / ours:.2f}x;  "
-          f"curve_fit(physical p0) / irreflect: {base_phys / ours:.2f}x")
+    rows = {"compiled": [], "numpy": []}
+    reached = {"compiled": 0, "numpy": 0}
+    for seed in range(args.glossy):
+        case = synthetic_material(seed, "glossy")
+        for engine in rows:
+            ms, res = time_fit(case.measurements, engine)
+            rows[engine].append(ms)
+            reached[engine] += res is not None and res.r2 >= case.r2_truth - 1e-4
+    print(f"generated glossy materials (seeds 0-{args.glossy - 1}, "
+          f"{', '.join(sorted({synthetic_material(s, 'glossy').grid for s in range(5)}))} "
+          "grids, ...):")
+    for engine, ms in rows.items():
+        print(f"  {engine:<8}: median {np.median(ms):7.2f} ms, worst {np.max(ms):7.1f} ms; "
+              f"reaches the generating curve's R^2 on {reached[engine]}/{args.glossy}")
+
+    sets = real_datasets()
+    if sets:
+        print("real sets (one fit each, after the warm-up):")
+        for name, path in sets.items():
+            table = read_measurements(path)
+            line = []
+            for engine in ("compiled", "numpy"):
+                ms, res = time_fit(table, engine, 3)
+                line.append(f"{engine} {ms:7.1f} ms")
+            print(f"  {name:<26} {table.n_points:5d} points: " + ", ".join(line)
+                  + f"  R^2 {res.r2:.4f}" if res is not None else "")
+    peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+    print(f"peak memory (max RSS of this process): {peak:.0f} MB")
     print("paper (Table 4, MATLAB R2015, Core 2 Duo E8400): 273-660 ms per fit")
 
 

@@ -1121,8 +1121,8 @@ def _subset_data_starts(model, gamma, theta, power, weights, g, t, y, valid):
 def fit_subsets(gamma_deg, theta_deg, power, masks, model="two-lobe", *, sigma=None,
                 max_iter: int = 40, ftol: float = 1e-8, n_screen: int = 32, n_keep: int = 2,
                 data_starts: bool = True, n_data_starts: int = 1, scan: bool = False,
-                exhaustive: bool = False, seed: int = 0,
-                engine: str | None = None) -> SubsetFits:
+                exhaustive: bool = False, seed: int = 0, engine: str | None = None,
+                shared_starts=None) -> SubsetFits:
     """Fit the model to every subset in ``masks`` (B, n) independently, in one batch.
 
     Each subset fit sees only its own points. Its starts are chosen as in :func:`fit`:
@@ -1141,6 +1141,10 @@ def fit_subsets(gamma_deg, theta_deg, power, masks, model="two-lobe", *, sigma=N
     With ``exhaustive``, every subset gets the complete search of :func:`fit` (one
     subset at a time; the screening options above are then ignored): the subset fit is
     then exactly ``fit`` on the subset's table, for the final check of reported subsets.
+
+    ``shared_starts`` (S, P): more shape candidates scored on every subset beside the
+    screening ones (the optimiser passes the optima of the best subsets it has seen:
+    starts only, each subset's optimum is still that of its own points).
     """
     model_obj = get_model(model)
     seed = check_seed(seed)
@@ -1161,7 +1165,7 @@ def fit_subsets(gamma_deg, theta_deg, power, masks, model="two-lobe", *, sigma=N
         return _fit_subsets_compiled(model_obj, codes, gamma, theta, power, masks, weights_all,
                                      ok, n_screen=n_screen, n_keep=n_keep,
                                      n_data_starts=n_data_starts, max_iter=max_iter,
-                                     ftol=ftol, seed=seed)
+                                     ftol=ftol, seed=seed, shared_starts=shared_starts)
     n_max = max(int(counts.max()) if b else 0, 1)
     # gather every subset into a padded (B, n_max) problem with zero weight on padding
     order = np.argsort(~masks, axis=1, kind="stable")[:, :n_max]
@@ -1170,6 +1174,8 @@ def fit_subsets(gamma_deg, theta_deg, power, masks, model="two-lobe", *, sigma=N
     sw = np.sqrt(np.where(valid, weights_all[order], 0.0))
     geom = plane_geometry(g, t)
     cands = screen_samples(model_obj, n_screen, seed) if n_screen else np.empty((0, p_dim))
+    if shared_starts is not None and len(shared_starts):
+        cands = np.vstack([cands, np.asarray(shared_starts, float).reshape(-1, p_dim)])
     cands = np.clip(cands, model_obj.z_lower, model_obj.z_upper)
     parts_z, parts_cost = [], []
     n_data = 0
@@ -1233,7 +1239,7 @@ def fit_subsets(gamma_deg, theta_deg, power, masks, model="two-lobe", *, sigma=N
 
 
 def _fit_subsets_compiled(model, codes, gamma, theta, power, masks, weights, ok, *, n_screen,
-                          n_keep, n_data_starts, max_iter, ftol, seed):
+                          n_keep, n_data_starts, max_iter, ftol, seed, shared_starts=None):
     """The batched subset search in the compiled kernel (see :func:`fit_subsets`)."""
     from . import _kernel
 
@@ -1241,6 +1247,8 @@ def _fit_subsets_compiled(model, codes, gamma, theta, power, masks, weights, ok,
     geo, glcg, levels, group = _kernel_geometry(gamma, theta)
     p = model.n_nonlinear
     screen = screen_samples(model, n_screen, seed) if n_screen else np.zeros((0, p))
+    if shared_starts is not None and len(shared_starts):
+        screen = np.vstack([screen, np.asarray(shared_starts, float).reshape(-1, p)])
     z, alpha, cost, conv, nfev = _kernel.subset_search(
         codes, st["nonneg"], st["residual"], geo, glcg, np.ascontiguousarray(power, float),
         np.ascontiguousarray(weights, float), np.ascontiguousarray(masks), levels, group,

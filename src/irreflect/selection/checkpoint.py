@@ -29,7 +29,7 @@ from .._atomic import atomic_path
 from ..errors import IrreflectError
 
 FORMAT = "irreflect-selection-checkpoint"
-VERSION = 2
+VERSION = 3  # 3: the shared elite optima of the search
 _ARRAYS = {
     # name: (dtype kind(s), ndim)
     "meta": ("U", 0),
@@ -37,7 +37,7 @@ _ARRAYS = {
     "pop_rank": ("iu", 1), "pop_crowding": ("f", 1),
     "cache_keys": ("u", 2), "cache_scores": ("f", 1),
     "archive_n": ("iu", 1), "archive_score": ("f", 1), "archive_serial": ("iu", 1),
-    "archive_keys": ("u", 2),
+    "archive_keys": ("u", 2), "elite_scores": ("f", 1), "elites": ("f", 2),
 }
 _COUNTERS = ("evaluations", "failed_fits", "cache_hits", "fit_seconds", "_serial")
 
@@ -79,6 +79,8 @@ def save_checkpoint(path, fingerprint: str, algorithm, evaluator, generation: in
         "archive_keys": (np.frombuffer(b"".join(a[3] for a in archive), np.uint8)
                          .reshape(len(archive), nbytes) if archive
                          else np.zeros((0, nbytes), np.uint8)),
+        "elite_scores": np.asarray(evaluator.elite_scores, float),
+        "elites": np.asarray(evaluator.elites, float),
     }
     with atomic_path(Path(path), "--checkpoint") as tmp, open(tmp, "wb") as fh:
         np.savez(fh, **arrays)
@@ -167,6 +169,9 @@ def restore(state: dict, algorithm, evaluator) -> int:
         evaluator.archive.setdefault(int(k), []).append((float(score), int(serial), key.tobytes()))
     for entries in evaluator.archive.values():
         entries.sort()
+    evaluator.elite_scores = np.asarray(state["elite_scores"], float)
+    evaluator.elites = np.asarray(state["elites"], float).reshape(
+        len(evaluator.elite_scores), evaluator.model.n_nonlinear)
     for k in _COUNTERS:
         setattr(evaluator, k, type(getattr(evaluator, k))(meta["counters"][k]))
     pop = Population.new("X", state["pop_X"].astype(bool))
