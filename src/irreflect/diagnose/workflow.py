@@ -530,14 +530,7 @@ def _fit_candidate(meas, model, current: FitResult, seed: int) -> FitResult:
     z_cur, _ = current.model_object.from_natural(current.values[None])
     gamma, theta = np.radians(meas.gamma_deg), np.radians(meas.theta_deg)
     warm = warm_starts(model, z_cur[0], gamma, theta, meas.power)
-    if warm is not None:
-        own = model.starts
-
-        def starts(g, t, p):
-            return np.vstack([warm, np.atleast_2d(own(g, t, p))])
-
-        model = dataclasses.replace(model, starts=starts)
-    return fit(meas, model, seed=seed)
+    return fit(meas, model, seed=seed, extra_starts=warm)
 
 
 def _share(before: Assessment, after: Assessment) -> float:
