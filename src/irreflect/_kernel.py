@@ -1304,3 +1304,32 @@ def warm() -> None:
         masks = np.ones((2, p.size), bool)
         masks[0, ::2] = False
         fit_subsets(g, t, p, masks, engine="compiled")
+
+
+@njit(cache=True)
+def r2_rows(codes, zs, alphas, geo, glcg, power):
+    """R^2 against ``power`` of the model at every row of (zs, alphas) (NaN rows: NaN)."""
+    b = zs.shape[0]
+    n = power.size
+    mean = 0.0
+    for j in range(n):
+        mean += power[j]
+    mean /= n
+    ss_tot = 0.0
+    for j in range(n):
+        ss_tot += (power[j] - mean) ** 2
+    out = np.full(b, np.nan)
+    for i in range(b):
+        ok = True
+        for q in range(zs.shape[1]):
+            ok = ok and math.isfinite(zs[i, q])
+        for q in range(alphas.shape[1]):
+            ok = ok and math.isfinite(alphas[i, q])
+        if not ok:
+            continue
+        pred = predict(codes, zs[i], alphas[i], geo, glcg)
+        ss = 0.0
+        for j in range(n):
+            ss += (power[j] - pred[j]) ** 2
+        out[i] = 1.0 - ss / ss_tot if ss_tot > 0.0 else math.nan
+    return out

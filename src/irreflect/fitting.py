@@ -1255,21 +1255,26 @@ def _fit_subsets_compiled(model, codes, gamma, theta, power, masks, weights, ok,
         PROFILE_DIFFUSE_INDICES, PROFILE_SPECULAR_INDICES,
         np.ascontiguousarray(st["ext_rows"][0]), np.ascontiguousarray(screen, float),
         st["zlo"], st["zhi"], int(n_keep), int(n_data_starts), int(max_iter), float(ftol))
-    return _subset_result(model, gamma, theta, power, z, alpha, cost, conv, ok, int(nfev))
+    r2 = _kernel.r2_rows(codes, np.ascontiguousarray(z), np.ascontiguousarray(alpha), geo, glcg,
+                         np.ascontiguousarray(power, float))
+    return _subset_result(model, gamma, theta, power, z, alpha, cost, conv, ok, int(nfev), r2)
 
 
-def _subset_result(model, gamma, theta, power, z, alpha, cost, conv, ok, nfev) -> SubsetFits:
+def _subset_result(model, gamma, theta, power, z, alpha, cost, conv, ok, nfev,
+                   r2=None) -> SubsetFits:
     """SubsetFits from the per-subset optimum (z, alpha, cost): natural parameters, R^2 on
-    all points, failures (too few points, no finite optimum) marked."""
+    all points (computed here unless given), failures (too few points, no finite
+    optimum) marked."""
     b = z.shape[0]
     finite = np.isfinite(cost) & np.all(np.isfinite(z), axis=1) & np.all(np.isfinite(alpha),
                                                                           axis=1)
     params = model.to_natural(np.where(finite[:, None], z, 0.0),
                               np.where(finite[:, None], alpha, 0.0))
     failed = ~ok | ~finite | ~np.all(np.isfinite(params), axis=1)
-    safe = np.where(failed[:, None], _placeholder_params(model, params), params)
-    r2_all = np.asarray(metrics.r2(power, model.predict(safe, gamma, theta)), float).reshape(b)
-    r2_all = np.where(failed | ~np.isfinite(r2_all), 0.0, r2_all)
+    if r2 is None:
+        safe = np.where(failed[:, None], _placeholder_params(model, params), params)
+        r2 = np.asarray(metrics.r2(power, model.predict(safe, gamma, theta)), float).reshape(b)
+    r2_all = np.where(failed | ~np.isfinite(r2), 0.0, r2)
     return SubsetFits(params=np.where(failed[:, None], np.nan, params), r2_all=r2_all,
                       cost=np.where(failed, np.inf, cost), failed=failed, nfev=nfev,
                       converged=np.asarray(conv, bool) & ~failed)

@@ -27,6 +27,7 @@ from pymoo.core.mutation import Mutation
 from pymoo.core.problem import Problem
 from pymoo.core.repair import Repair
 from pymoo.core.sampling import Sampling
+from pymoo.core.survival import Survival
 
 from ..errors import IrreflectError
 from ..fitting import fit_subsets
@@ -442,3 +443,59 @@ def check_sizes(n: int, n_params: int, max_points: int | None, candidates) -> tu
             f"--max-points must be at least the {n_params} model parameters; found {n_max}"
         )
     return n_params, min(n_max, n_allowed)
+
+
+class FeasibleRankAndCrowding(Survival):
+    """NSGA-II's survival (pymoo's rank and crowding distance) for a population that is
+    feasible by construction (:class:`SizeRepair` keeps every mask within the size limits):
+    the per-generation split into feasible and infeasible individuals, which costs as much
+    as the sorting itself, is skipped while every constraint holds (pymoo's own survival
+    serves otherwise), and rank and crowding are stored in one call per attribute."""
+
+    def __init__(self):
+        super().__init__(filter_infeasible=False)
+        from pymoo.operators.survival.rank_and_crowding.classes import RankAndCrowding
+
+        self._general = RankAndCrowding()
+        from pymoo.operators.survival.rank_and_crowding.metrics import get_crowding_function
+        from pymoo.util.nds.non_dominated_sorting import NonDominatedSorting
+
+        self._nds = NonDominatedSorting()
+        self._crowding = get_crowding_function("cd")
+
+    def do(self, problem, pop, *args, n_survive=None, random_state=None,
+           return_indices=False, **kwargs):
+        cv = pop.get("CV")
+        if return_indices or (cv is not None and np.any(np.asarray(cv) > 0)):
+            return self._general.do(problem, pop, *args, n_survive=n_survive,
+                                    random_state=random_state, return_indices=return_indices,
+                                    **kwargs)
+        if len(pop) == 0:
+            return pop
+        n_survive = len(pop) if n_survive is None else min(n_survive, len(pop))
+        return self._do(problem, pop, n_survive=n_survive, random_state=random_state)
+
+    def _do(self, problem, pop, *args, random_state=None, n_survive=None, **kwargs):
+        from pymoo.util.randomized_argsort import randomized_argsort
+
+        F = pop.get("F").astype(float, copy=False)
+        fronts = self._nds.do(F, n_stop_if_ranked=n_survive)
+        survivors = []
+        ranks = np.zeros(len(pop), int)
+        crowd = np.zeros(len(pop))
+        for k, front in enumerate(fronts):
+            keep = np.arange(len(front))
+            if len(survivors) + len(front) > n_survive:
+                n_remove = len(survivors) + len(front) - n_survive
+                distance = self._crowding.do(F[front, :], n_remove=n_remove)
+                keep = randomized_argsort(distance, order="descending", method="numpy",
+                                          random_state=random_state)[:-n_remove]
+            else:
+                distance = self._crowding.do(F[front, :], n_remove=0)
+            ranks[front] = k
+            crowd[front] = distance
+            survivors.extend(np.asarray(front)[keep])
+        survivors = np.asarray(survivors, int)
+        out = pop[survivors]
+        out.set("rank", ranks[survivors], "crowding", crowd[survivors])
+        return out

@@ -26,6 +26,7 @@ import numpy as np
 
 from ..errors import IrreflectError, unknown_name
 from .problem import (
+    FeasibleRankAndCrowding,
     MaskDuplicateElimination,
     SizeRepair,
     SizeVariedSampling,
@@ -97,6 +98,7 @@ def nsga2(spec: SearchSpec) -> None:
         mutation=SubsetMutation(),
         repair=SizeRepair(),
         eliminate_duplicates=MaskDuplicateElimination(),
+        survival=FeasibleRankAndCrowding(),
     )
     algorithm.setup(problem, termination=("n_gen", spec.generations), seed=spec.seed,
                     verbose=False)
