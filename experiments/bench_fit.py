@@ -30,7 +30,7 @@ from scipy.optimize import curve_fit
 from irreflect import fit, metrics
 from irreflect.data import load_bundled, read_measurements, real_datasets
 from irreflect.errors import FitError, FitWarning
-from irreflect.model import two_lobe_power
+from irreflect.models import two_lobe_power
 from irreflect.synthetic import synthetic_material
 
 

@@ -30,7 +30,7 @@ import numpy as np
 import pandas as pd
 import psutil
 
-from irreflect.model import two_lobe_power
+from irreflect.models import two_lobe_power
 
 #: Table 3 of the paper for terrazzo (u_as, v_as, u_nd, v_nd, u_ns, v_ns, K)
 TERRAZZO = (0.01713, -2.379, 1.021, 0.4283, 34.55, -0.3772, 0.4142)

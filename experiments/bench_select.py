@@ -28,7 +28,7 @@ from scipy.optimize import least_squares
 
 from irreflect import metrics
 from irreflect.data import load_bundled, read_measurements, real_data_dir
-from irreflect.model import estimate_specular_index, get_model, two_lobe_power
+from irreflect.models import estimate_specular_index, get_model, two_lobe_power
 from irreflect.selection import hypervolume, non_dominated, run_selection
 from irreflect.selection.problem import (
     VERIFY_FIT,

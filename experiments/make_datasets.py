@@ -31,7 +31,7 @@ sys.path.insert(0, str(ROOT / "src"))
 
 from irreflect import fit  # noqa: E402
 from irreflect.data import Measurements, write_measurements  # noqa: E402
-from irreflect.model import two_lobe_power  # noqa: E402
+from irreflect.models import two_lobe_power  # noqa: E402
 
 PAPER = ROOT.parent / "shared" / "paper" / "tables"
 SEED = 20170919  # fixed: the bundled files are reproducible bit for bit

@@ -7,7 +7,7 @@ import pandas as pd
 import pytest
 
 from irreflect.data import BUNDLED, Measurements, load_bundled, real_data_dir
-from irreflect.model import two_lobe_power
+from irreflect.models import two_lobe_power
 
 #: Table 3 of the paper (u_as, v_as, u_nd, v_nd, u_ns, v_ns, K)
 TABLE3 = {

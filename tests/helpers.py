@@ -7,7 +7,7 @@ import warnings
 import numpy as np
 from scipy.optimize import least_squares
 
-from irreflect.model import get_model, plane_geometry
+from irreflect.models import Geometry, get_model
 
 
 def least_squares_reference(model, meas, n_starts: int = 50, seed: int = 0,
@@ -24,7 +24,7 @@ def least_squares_reference(model, meas, n_starts: int = 50, seed: int = 0,
     """
     model = get_model(model)
     g, t, y = np.radians(meas.gamma_deg), np.radians(meas.theta_deg), np.asarray(meas.power)
-    geom = plane_geometry(g[None], t[None])
+    geom = Geometry.of(g[None], t[None])
     p, n_lin = model.n_nonlinear, model.n_linear
     zlo, zhi = np.maximum(model.z_lower, -15.0), np.minimum(model.z_upper, 15.0)
     lo = np.concatenate([zlo, np.where(model.alpha_nonneg, 0.0, -np.inf)])

@@ -17,7 +17,7 @@ from irreflect.compare import (
 )
 from irreflect.data import Measurements, bundled_dir, load_bundled, read_measurements
 from irreflect.errors import IrreflectError, UnknownNameError
-from irreflect.model import get_model, phong_power
+from irreflect.models import get_model, phong_power
 
 
 def phong_table(noise=0.0, seed=0, params=(0.4, 40.0, 0.5)) -> Measurements:

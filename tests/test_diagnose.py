@@ -27,7 +27,7 @@ from irreflect.diagnose import (
 )
 from irreflect.diagnose.hidden import hidden_case
 from irreflect.errors import IrreflectError, UnknownNameError
-from irreflect.model import Parameter, get_model, plane_geometry, two_lobe_power
+from irreflect.models import Geometry, Parameter, get_model, two_lobe_power
 
 TERRAZZO = (0.01713, -2.379, 1.021, 0.4283, 34.55, -0.3772, 0.4142)
 
@@ -44,7 +44,7 @@ def _angles(seed=0, n=60):
 def test_extension_derivatives_match_central_differences(spec, base):
     model = extend(base, spec)
     g, t = _angles()
-    geom = plane_geometry(g[None], t[None])
+    geom = Geometry.of(g[None], t[None])
     rng = np.random.default_rng(1)
     z0 = np.asarray(model.starts(g, t, np.ones_like(g)), float)[:3]
     z = np.clip(z0 + rng.normal(0, 0.05, z0.shape), model.z_lower + 1e-3, model.z_upper - 1e-3)
@@ -211,7 +211,7 @@ def test_user_registered_extension_is_tried_and_identified(monkeypatch):
 
     def slope_eval(base, geom, zb, ze, derivatives):
         bb, dbb = base.basis(geom, zb, derivatives)
-        col = np.broadcast_to(geom["theta"], bb.shape[:2])[..., None]
+        col = np.broadcast_to(geom.theta, bb.shape[:2])[..., None]
         basis = np.concatenate([bb, col], axis=-1)
         if not derivatives:
             return basis, None

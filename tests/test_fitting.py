@@ -11,7 +11,7 @@ from scipy.optimize import least_squares
 from irreflect import fit, fit_subsets
 from irreflect.data import Measurements
 from irreflect.errors import DataError, FitError
-from irreflect.model import get_model, two_lobe_power
+from irreflect.models import get_model, two_lobe_power
 from tests.conftest import TABLE3, synthetic
 
 
@@ -156,7 +156,7 @@ def test_standard_errors_match_a_monte_carlo_of_the_noise():
 
 def test_fit_error_when_no_start_is_finite():
     def nan_basis(geom, z, derivatives=True):
-        shape = (z.shape[0], geom["gamma"].shape[1], 1)
+        shape = (z.shape[0], geom.gamma.shape[1], 1)
         return np.full(shape, np.nan), np.full(shape + (1,), np.nan)
 
     broken = dataclasses.replace(get_model("single-lobe"), basis=nan_basis)

@@ -16,7 +16,7 @@ from irreflect import fit, fit_subsets
 from irreflect.cli import main
 from irreflect.data import Measurements, read_measurements
 from irreflect.errors import DataError, FitError, FitWarning
-from irreflect.model import get_model, model_names, two_lobe_power
+from irreflect.models import get_model, model_names, two_lobe_power
 from irreflect.synthetic import GRIDS, KINDS, synthetic_for_model, synthetic_material
 from tests.helpers import least_squares_reference
 

@@ -9,10 +9,10 @@ import pytest
 
 from irreflect import fit, fit_subsets
 from irreflect.data import load_bundled
-from irreflect.diagnose.extensions import CATALOGUE, extend
 from irreflect.errors import UnknownNameError
 from irreflect.fitting import _extension_start_rows, _kernel_codes
-from irreflect.model import get_model
+from irreflect.models import get_model
+from irreflect.models.extensions import CATALOGUE, extend
 from irreflect.synthetic import synthetic_material
 
 pytest.importorskip("numba")

@@ -6,11 +6,11 @@ import numpy as np
 import pytest
 from conftest import paper_grid
 
-from irreflect import literature as lit
+from irreflect.models import literature as lit
 from irreflect.data import Measurements
 from irreflect.errors import IrreflectError
 from irreflect.fitting import fit
-from irreflect.model import get_model, model_names, phong_power, plane_geometry
+from irreflect.models import Geometry, get_model, model_names, phong_power
 
 RNG_SEED = 20240605
 
@@ -76,14 +76,14 @@ def test_analytic_derivatives_match_central_differences(name):
     rng = np.random.default_rng(3)
     lo, hi = np.maximum(model.z_lower, -6.0), np.minimum(model.z_upper, 6.0)
     z = lo + rng.uniform(0.2, 0.8, (3, lo.size)) * (hi - lo)
-    _, dbasis = model.basis(plane_geometry(g[None], t[None]), z, True)
+    _, dbasis = model.basis(Geometry.of(g[None], t[None]), z, True)
     for k in range(z.shape[1]):
         h = 1e-6 * max(1.0, abs(z[:, k]).max())
         zp, zm = z.copy(), z.copy()
         zp[:, k] += h
         zm[:, k] -= h
-        bp, _ = model.basis(plane_geometry(g[None], t[None]), zp, False)
-        bm, _ = model.basis(plane_geometry(g[None], t[None]), zm, False)
+        bp, _ = model.basis(Geometry.of(g[None], t[None]), zp, False)
+        bm, _ = model.basis(Geometry.of(g[None], t[None]), zm, False)
         numeric = (bp - bm) / (2 * h)
         scale = np.abs(numeric).max() + 1e-12
         assert np.abs(numeric - dbasis[..., k]).max() / scale < 1e-6, (name, k)

@@ -6,12 +6,12 @@ import numpy as np
 import pytest
 
 from irreflect.errors import IrreflectError, UnknownNameError
-from irreflect.model import (
+from irreflect.models import (
+    Geometry,
     get_model,
     model_names,
     n_lobe_power,
     phong_power,
-    plane_geometry,
     single_lobe_power,
     two_lobe_power,
 )
@@ -41,7 +41,7 @@ def test_separable_two_lobe_equals_eq19(material):
 def test_basis_derivatives_match_finite_differences(name):
     model = get_model(name)
     rng = np.random.default_rng(1)
-    geom = plane_geometry(np.radians(-rng.uniform(5, 65, (1, 60))),
+    geom = Geometry.of(np.radians(-rng.uniform(5, 65, (1, 60))),
                           np.radians(rng.uniform(-75, 75, (1, 60))))
     frac = rng.uniform(0.3, 0.6, (4, model.n_nonlinear))
     z = model.z_lower + frac * (np.minimum(model.z_upper, 8) - np.maximum(model.z_lower, -8))

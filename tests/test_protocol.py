@@ -19,7 +19,7 @@ from irreflect.cli import main
 from irreflect.data import bundled_dir, load_bundled, read_measurements
 from irreflect.errors import IrreflectError
 from irreflect.fitting import fit
-from irreflect.model import two_lobe_power
+from irreflect.models import two_lobe_power
 from irreflect.protocol import (
     Protocol,
     as_protocol,

@@ -61,7 +61,7 @@ def test_reflected_power_equals_reflectance(spec):
     if isinstance(source, str):
         mat = load_material(ROOMS / source, reflectance=0.6)
     elif source is None:
-        from irreflect.model import get_model
+        from irreflect.models import get_model
 
         m = get_model(model)
         params = {p.name: (min(max(0.3, p.lower), p.upper) if np.isfinite(p.upper) else 1.0)
@@ -81,7 +81,7 @@ def test_3d_extension_keeps_the_fitted_curve_in_the_plane_of_incidence():
     model at every theta (only the overall scale changes with gamma)."""
     doc = json.loads((ROOMS / "terrazzo.json").read_text())
     mat = load_material(ROOMS / "terrazzo.json", reflectance=0.3)
-    from irreflect.model import get_model
+    from irreflect.models import get_model
 
     model = get_model("two-lobe")
     params = [doc["params"][k] for k in model.param_names]

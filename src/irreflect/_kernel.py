@@ -13,7 +13,7 @@ stopping rules), so the two reach the same optimum; sums are taken in another or
 the numbers agree to rounding, not to the bit (tests hold R^2 to 1e-9).
 
 Models: the paper's two-lobe model (Eqs. 19-22) with any chain of the diagnosis
-catalogue's extensions (:mod:`irreflect.diagnose.extensions`), described by
+catalogue's extensions (:mod:`irreflect.models.extensions`), described by
 :func:`model_code`; other models use the numpy path. Angles in radians.
 """
 
@@ -45,7 +45,7 @@ GEOMETRY_STEP = 1e-7  # the numpy path's central-difference step along geometric
 def model_code(model) -> np.ndarray | None:
     """The kernel's description of ``model``: extension codes innermost first, or None when
     the kernel does not cover the model (then the numpy path fits it)."""
-    from .diagnose.extensions import applied_extensions, base_of
+    from .models.extensions import applied_extensions, base_of
 
     if base_of(model).name != "two-lobe":
         return None
@@ -1289,7 +1289,7 @@ def warm() -> None:
     from .data import Measurements
     from .errors import FitWarning
     from .fitting import fit, fit_subsets
-    from .model import two_lobe_power
+    from .models import two_lobe_power
 
     g = np.repeat([-20.0, -40.0, -60.0], 9)
     t = np.tile(np.linspace(-60.0, 80.0, 9), 3)
@@ -1298,7 +1298,7 @@ def warm() -> None:
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", FitWarning)
         fit(meas, engine="compiled")
-        from .diagnose.extensions import extend
+        from .models.extensions import extend
 
         fit(meas, extend("two-lobe", ["background"]), engine="compiled")
         masks = np.ones((2, p.size), bool)

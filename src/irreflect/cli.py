@@ -159,7 +159,7 @@ def _cmd_fit(args) -> int:
 
 def _fit(args) -> int:
     from .fitting import fit
-    from .model import get_model
+    from .models import get_model
 
     model = get_model(args.model)
     if args.save and args.reflectance is not None:
@@ -191,7 +191,7 @@ def _fit(args) -> int:
 def _cmd_plot(args) -> int:
     from ._atomic import claim_output
     from .fitting import fit
-    from .model import get_model
+    from .models import get_model
     from .plots import plot_polar, save_figure
 
     model = get_model(args.model)
@@ -209,7 +209,7 @@ def _cmd_plot(args) -> int:
 
 
 def _cmd_models(args) -> int:
-    from .model import get_model, model_names
+    from .models import get_model, model_names
 
     for name in model_names():
         m = get_model(name)

@@ -177,7 +177,7 @@ def parse_model_list(text=None, phong_at_deg: float = 10.0) -> list[str]:
     (``irreflect models``) or ``MODEL@G`` (fitted at ``|gamma| = G`` deg only);
     ``MODEL@`` without a number takes ``phong_at_deg``.
     """
-    from .model import MODELS, get_model, model_names
+    from .models import MODELS, get_model, model_names
 
     g_text = f"{float(phong_at_deg):g}"
     if text is None or not str(text).strip():
@@ -476,7 +476,7 @@ def _generating_curve(meas, paper3: pd.DataFrame | None):
     datasets or without the paper's tables)."""
     from dataclasses import replace
 
-    from .model import get_model
+    from .models import get_model
 
     if paper3 is None or meas.name not in set(paper3["material"]):
         return None, None

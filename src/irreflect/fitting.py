@@ -23,13 +23,12 @@ import numpy as np
 
 from . import metrics
 from .errors import FitError, FitWarning, IrreflectError
-from .model import (
+from .models import (
     PROFILE_DIFFUSE_INDICES,
     PROFILE_SPECULAR_INDICES,
+    Geometry,
     ReflectionModel,
     get_model,
-    plane_geometry,
-    take_geometry,
 )
 from .validation import check_angles_deg, check_seed, check_subset_inputs
 
@@ -148,7 +147,7 @@ def _kaufman_jacobian(state, sw):
 def _levenberg_marquardt(model, geom, z0, sw, yw, max_iter=200, ftol=1e-10, xtol=1e-9):
     """Bounded LM for a batch of M problems; returns z, state, nfev (M,), converged (M,).
 
-    ``geom`` is :func:`~irreflect.model.plane_geometry` of arrays ``(1, n)`` shared by
+    ``geom`` is a :class:`~irreflect.models.Geometry` of arrays ``(1, n)`` shared by
     every problem or ``(M, n)``, one row per problem."""
     with np.errstate(over="ignore", under="ignore", invalid="ignore", divide="ignore"):
         return _lm_loop(model, geom, z0, sw, yw, max_iter, ftol, xtol)
@@ -162,7 +161,7 @@ def _lm_loop(model, geom, z0, sw, yw, max_iter, ftol, xtol):
     lo, hi = model.z_lower, model.z_upper
     z = np.clip(np.asarray(z0, float), lo, hi)
     m, p = z.shape
-    shared_geometry = geom["gamma"].shape[0] == 1
+    shared_geometry = geom.rows == 1
     state = _evaluate(model, geom, z, sw, yw)
     nfev = np.ones(m, int)
     lam = np.full(m, 1e-3)
@@ -181,7 +180,7 @@ def _lm_loop(model, geom, z0, sw, yw, max_iter, ftol, xtol):
                 break
             st = {k: v[idx] for k, v in state.items()}
             zi, swi, ywi, lam_i = z[idx], sw[idx], yw[idx], lam[idx]
-            geom_i = geom if shared_geometry else take_geometry(geom, idx)
+            geom_i = geom if shared_geometry else geom.take(idx)
         jac = _kaufman_jacobian(st, swi)
         jact = jac.swapaxes(1, 2)
         grad = (jact @ st["resid"][:, :, None])[:, :, 0]
@@ -423,7 +422,7 @@ def _fitted_and_jacobian(model, z, alpha, gamma, theta, weights, engine=None, kg
         return (_kernel.predict(codes, z, alpha, geo, glcg),
                 _kernel.jacobian_full(codes, z, alpha, geo, glcg, np.sqrt(weights)))
     with np.errstate(over="ignore", under="ignore", invalid="ignore", divide="ignore"):
-        basis, dbasis = model.basis(plane_geometry(gamma[None], theta[None]), z[None], True)
+        basis, dbasis = model.basis(Geometry.of(gamma[None], theta[None]), z[None], True)
     jz = np.einsum("mnlp,ml->mnp", dbasis, alpha[None])[0]
     return basis[0] @ alpha, np.concatenate([jz, basis[0]], axis=1) * np.sqrt(weights)[:, None]
 
@@ -859,7 +858,7 @@ def _extension_start_rows(model) -> np.ndarray:
     """The starting values of the extensions' coordinates, as the extended models' own
     ``starts`` combine them (the first row with every extension's first value, then, one
     extension at a time, its other values): ``(rows, P - 5)``."""
-    from .diagnose.extensions import Extension, _start_rows
+    from .models.extensions import Extension, _start_rows
 
     chain = []
     m = model
@@ -903,7 +902,7 @@ def _global_search_unit(model_obj, gamma, theta, power, weights, *, seed, n_rand
                         n_screen=None, n_keep=None, n_data_starts=None, max_iter=200,
                         max_rounds=3, polish=True, engine=None, extra_starts=None,
                         kgeo=None):
-    geom = plane_geometry(gamma[None], theta[None])
+    geom = Geometry.of(gamma[None], theta[None])
     sw1 = np.sqrt(weights)[None]
     yw1 = sw1 * power
     n_screen = default_screen(model_obj) if n_screen is None else int(n_screen)
@@ -945,7 +944,7 @@ def fit(measurements, model="two-lobe", *, seed: int = 0, n_random_starts: int =
     """Fit a reflection model to a measurement table by global least squares.
 
     The search: (1) the model's data-driven starts (for the paper's models, from the
-    per-angle-of-incidence decomposition of :func:`irreflect.model.lobe_profile`: the
+    per-angle-of-incidence decomposition of `irreflect.models.lobe_profile`: the
     mirror peak, its width, the diffuse floor) and seeded random perturbations of them;
     (2) a screening of the model's whole shape space (a grid for one or two nonlinear
     coordinates, a Latin hypercube beyond); the projected cost of every candidate is
@@ -961,7 +960,7 @@ def fit(measurements, model="two-lobe", *, seed: int = 0, n_random_starts: int =
     measurements : Measurements, pandas.DataFrame or path
         Table with ``gamma_deg, theta_deg, power`` (degrees) and optional ``sigma``.
     model : str or ReflectionModel
-        Registry name (see :func:`irreflect.model.model_names`).
+        Registry name (see `irreflect.models.model_names`).
     seed : int
         Seeds the random extra starts and the screening; the same seed gives the same result.
     n_random_starts : int
@@ -1172,7 +1171,7 @@ def fit_subsets(gamma_deg, theta_deg, power, masks, model="two-lobe", *, sigma=N
     valid = np.take_along_axis(masks, order, axis=1)
     g, t, y = gamma[order], theta[order], power[order]
     sw = np.sqrt(np.where(valid, weights_all[order], 0.0))
-    geom = plane_geometry(g, t)
+    geom = Geometry.of(g, t)
     cands = screen_samples(model_obj, n_screen, seed) if n_screen else np.empty((0, p_dim))
     if shared_starts is not None and len(shared_starts):
         cands = np.vstack([cands, np.asarray(shared_starts, float).reshape(-1, p_dim)])
@@ -1185,7 +1184,7 @@ def fit_subsets(gamma_deg, theta_deg, power, masks, model="two-lobe", *, sigma=N
         extra = np.clip(extra, model_obj.z_lower, model_obj.z_upper)  # (B, S, P)
         n_data = extra.shape[1]
         rep_e = lambda a: np.repeat(a, n_data, axis=0)  # noqa: E731
-        cost_extra = _screen_costs(model_obj, {key: rep_e(v) for key, v in geom.items()},
+        cost_extra = _screen_costs(model_obj, geom.repeat(n_data),
                                    extra.reshape(b * n_data, -1), rep_e(sw),
                                    rep_e(sw * y)).reshape(b, n_data)
         parts_z.append(extra)
@@ -1194,7 +1193,7 @@ def fit_subsets(gamma_deg, theta_deg, power, masks, model="two-lobe", *, sigma=N
         # the shared candidates' basis is computed once on all points and gathered per
         # subset (the same numbers as on each subset, without the repeated trigonometry)
         with np.errstate(over="ignore", under="ignore", invalid="ignore", divide="ignore"):
-            basis_all, _ = model_obj.basis(plane_geometry(gamma[None], theta[None]), cands, False)
+            basis_all, _ = model_obj.basis(Geometry.of(gamma[None], theta[None]), cands, False)
         gathered = basis_all[:, order, :].transpose(1, 0, 2, 3)  # (B, C, n_max, L)
         k = len(cands)
         rep_k = lambda a: np.repeat(a, k, axis=0)  # noqa: E731
@@ -1213,7 +1212,7 @@ def fit_subsets(gamma_deg, theta_deg, power, masks, model="two-lobe", *, sigma=N
     starts = np.take_along_axis(all_cands, best_idx[:, :, None], axis=1)  # (B, keep, P)
     rep = lambda a: np.repeat(a, keep, axis=0)  # noqa: E731
     z, state, nfev, reason = _levenberg_marquardt(
-        model_obj, {k: rep(v) for k, v in geom.items()}, starts.reshape(b * keep, -1),
+        model_obj, geom.repeat(keep), starts.reshape(b * keep, -1),
         rep(sw), rep(sw * y), max_iter=max_iter, ftol=ftol,
     )
     nfev_total = int(nfev.sum()) + b * c
@@ -1308,7 +1307,7 @@ def _scan_subsets(model, geom, zb, ab, cost, conv, sw, y, max_iter, ftol, rounds
     for _ in range(rounds):
         cand = np.stack([_block_candidates(zb[i], blocks) for i in range(b)])  # (B, m, P)
         m = cand.shape[1]
-        sc = _screen_costs(model, {k: np.repeat(v, m, axis=0) for k, v in geom.items()},
+        sc = _screen_costs(model, geom.repeat(m),
                            cand.reshape(b * m, -1), np.repeat(sw, m, axis=0),
                            np.repeat(sw * y, m, axis=0)).reshape(b, m)
         nfev += b * m
@@ -1317,7 +1316,7 @@ def _scan_subsets(model, geom, zb, ab, cost, conv, sw, y, max_iter, ftol, rounds
         if not improve.any():
             break
         rows = np.flatnonzero(improve)
-        sub = {k: v[rows] for k, v in geom.items()}
+        sub = geom.take(rows)
         z2, st2, nf2, reason2 = _levenberg_marquardt(model, sub, cand[rows, j[rows]], sw[rows],
                                                      sw[rows] * y[rows], max_iter=max_iter,
                                                      ftol=ftol)

@@ -49,7 +49,7 @@ import numpy as np
 from . import metrics
 from .data import Measurements
 from .errors import IrreflectError, unknown_name
-from .model import get_model, two_lobe_power
+from .models import get_model, two_lobe_power
 
 KINDS = ("glossy", "matte")
 GRIDS = ("paper", "goniometer", "uneven", "sparse", "mirror")

@@ -24,17 +24,16 @@ section
     The report section (:func:`reproduce_section`).
 """
 
-from .command import register
-from .extensions import (
+from ..models.extensions import (
     CATALOGUE,
     EXTENSIONS,
     Extension,
     extend,
     extension_names,
     get_extension,
-    parse_model,
     register_extension,
 )
+from .command import register
 from .workflow import (
     EFFECTS_FOUND,
     NO_MISSING_EFFECT,
@@ -56,5 +55,5 @@ def reproduce_section(ctx):
 __all__ = [
     "CATALOGUE", "EFFECTS_FOUND", "EXTENSIONS", "NO_MISSING_EFFECT", "UNEXPLAINED", "Diagnosis",
     "Extension", "diagnose", "estimate_noise", "extend", "extension_names", "get_extension",
-    "parse_model", "register", "register_extension", "reproduce_section", "structure_tests",
+    "register", "register_extension", "reproduce_section", "structure_tests",
 ]

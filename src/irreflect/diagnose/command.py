@@ -8,13 +8,14 @@ import sys
 
 from ..cli import json_default
 from ..errors import IrreflectError
-from .extensions import get_extension, parse_model
+from ..models import get_model
+from ..models.extensions import get_extension
 
 
 def register(sub) -> None:
     """Add the ``diagnose`` subcommand to the CLI's subparsers."""
     from ..cli import FINITE, NON_NEGATIVE_INT, SEED, add_data_argument
-    from .extensions import EXTENSIONS
+    from ..models.extensions import EXTENSIONS
 
     p = sub.add_parser(
         "diagnose",
@@ -55,7 +56,7 @@ def _cmd_diagnose(args: argparse.Namespace) -> int:
         extensions = [e.strip() for e in args.extensions.split(",") if e.strip()]
         for name in extensions:
             get_extension(name)
-    parse_model(args.model)
+    get_model(args.model)
     claim = claim_output(args.out, "dir", "--out") if args.out else contextlib.nullcontext()
     with claim:
         return _diagnose(args, extensions)

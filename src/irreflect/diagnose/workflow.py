@@ -38,12 +38,11 @@ from scipy import stats
 from ..data import Measurements, as_measurements
 from ..errors import FitError, FitWarning, IrreflectError
 from ..fitting import FitResult, fit
-from ..model import ReflectionModel
-from .extensions import (
+from ..models import ReflectionModel, get_model
+from ..models.extensions import (
     EXTENSIONS,
     applied_extensions,
     get_extension,
-    parse_model,
     warm_starts,
 )
 
@@ -576,7 +575,7 @@ def diagnose(measurements, model="two-lobe", *, extensions: Sequence[str] | None
     """
     t0 = time.perf_counter()
     meas = as_measurements(measurements)
-    base_model = parse_model(model)
+    base_model = get_model(model)
     names = list(EXTENSIONS) if extensions is None else list(extensions)
     for name in names:
         get_extension(name)  # validates the names before any work

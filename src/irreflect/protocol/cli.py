@@ -112,7 +112,7 @@ def _protocol(args, fmt: str) -> int:
 
 def _cmd_evaluate(args) -> int:
     from ..cli import load_data, print_json
-    from ..model import get_model
+    from ..models import get_model
     from .evaluate import evaluate_protocol
     from .export import read_protocol
 

@@ -24,7 +24,7 @@ import pandas as pd
 from ..data import as_measurements
 from ..errors import IrreflectError
 from ..fitting import fit_subsets
-from ..model import get_model
+from ..models import get_model
 from .core import Protocol, measurement_permutation, normalise_gammas
 
 #: Above this many gamma combinations, gamma settings are chosen greedily.

@@ -24,7 +24,7 @@ from .. import metrics
 from ..data import Measurements, as_measurements
 from ..errors import FitError, FitWarning, IrreflectError
 from ..fitting import FitResult, fit
-from ..model import get_model
+from ..models import get_model
 from .core import Protocol
 from .export import as_protocol
 
@@ -240,7 +240,7 @@ def evaluate_protocol(protocol, dense, model="two-lobe", *, tolerance_deg: float
     dense : Measurements, table or path
         A dense scan of the material (gamma_deg, theta_deg in degrees).
     model : str
-        Registry name (see :func:`irreflect.model.model_names`).
+        Registry name (see `irreflect.models.model_names`).
     tolerance_deg : float, degrees
         Largest distance from a protocol angle to the nearest measured theta of the same
         gamma that may be bridged (see the module docstring).
@@ -306,8 +306,8 @@ def specular_half_widths(dense, reference: FitResult | None = None) -> dict[floa
     """Half width at half maximum (deg) of the specular lobe per angle of incidence of a
     dense scan: from the reference's ``n_s(gamma) = u_ns cos^v_ns(gamma)`` when it is a
     two-lobe fit, else from the per-angle decomposition of the data
-    (:func:`irreflect.model.lobe_profile`). Keys: gamma in degrees."""
-    from ..model import lobe_profile
+    (`irreflect.models.lobe_profile`). Keys: gamma in degrees."""
+    from ..models import lobe_profile
     from .core import lobe_half_width_deg
 
     gammas = np.asarray(dense.gammas, float)

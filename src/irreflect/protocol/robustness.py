@@ -29,7 +29,7 @@ from .. import metrics
 from ..data import Measurements, as_measurements
 from ..errors import IrreflectError
 from ..fitting import FitResult, fit, fit_subsets
-from ..model import get_model
+from ..models import get_model
 from .evaluate import (
     CORRELATION_LIMIT,
     RELATIVE_ERROR_LIMIT,

@@ -214,7 +214,7 @@ def from_model(model, params: dict, reflectance, *, name: str = "material",
         Largest measured angle of incidence: the share and index laws are held constant
         beyond it (default: used up to 89.5 deg).
     """
-    from ..model import get_model
+    from ..models import get_model
 
     model_obj = get_model(model)
     spec = model if isinstance(model, str) else model_obj.name

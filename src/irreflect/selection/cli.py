@@ -99,7 +99,7 @@ def _print_run(result: SelectionResult, methods: dict | None) -> None:
 def _cmd_select(args) -> int:
     from .._atomic import claim_output
     from ..cli import load_data
-    from ..model import get_model
+    from ..models import get_model
     from ..validation import check_selection_budget, short_list
     from .parallel import check_scheduler_address
 

@@ -31,7 +31,7 @@ from pymoo.core.survival import Survival
 
 from ..errors import IrreflectError
 from ..fitting import fit_subsets
-from ..model import get_model
+from ..models import get_model
 
 #: Score given to a subset whose fit failed (R^2 = 0: no better than the mean).
 FAILED_SCORE = 1.0
@@ -195,16 +195,21 @@ class SubsetEvaluator:
         options = settings.kwargs()
         share = not options.get("exhaustive", False)
         per_point = values_per_point(options)
+        # the shared optima are those known before this call: every piece of the batch
+        # gets the same (the scores do not depend on how the batch is split)
+        extra = {"shared_starts": self.elites} if share and len(self.elites) else {}
+        found = []
         for idx in _chunks(counts[fittable]):
             for piece in _bounded(fittable[idx], counts, per_point):
-                extra = {"shared_starts": self.elites} if share and len(self.elites) else {}
                 res = fit_subsets(self.gamma_deg, self.theta_deg, self.power, masks[piece],
                                   self.model, sigma=self.sigma, **options, **extra)
                 ok = ~res.failed & np.isfinite(res.r2_all)
                 scores[piece] = np.where(ok, 1.0 - res.r2_all, FAILED_SCORE)
                 failed[piece] = ~ok
-                if share:
-                    self._update_elites(scores[piece], res.params, ok)
+                found.append((scores[piece], res.params, ok))
+        if share:
+            for piece_scores, params, ok in found:
+                self._update_elites(piece_scores, params, ok)
         return scores, failed
 
     def _update_elites(self, scores, params, ok) -> None:

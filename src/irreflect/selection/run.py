@@ -27,7 +27,7 @@ from .._atomic import claim_output
 from ..data import Measurements, as_measurements, project_root
 from ..errors import IrreflectError
 from ..fitting import fit
-from ..model import get_model
+from ..models import get_model
 from ..validation import check_int, check_masks, check_seed, check_selection_budget
 from .problem import SEARCH_FIT, VERIFY_FIT, FitSettings, SubsetEvaluator, check_sizes, unpack
 from .selectors import SearchSpec, get_selector

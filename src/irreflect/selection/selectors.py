@@ -178,11 +178,11 @@ def _jacobian(model, params, gamma_rad, theta_rad, sigma):
     """Jacobian (n, P+L) of the model power in its internal coordinates (z, alpha) at the
     pilot parameters, weighted by 1/sigma; D-optimality does not depend on the
     parametrisation (a reparametrisation multiplies every det by the same factor)."""
-    from ..model import plane_geometry
+    from ..models import Geometry
 
     z, alpha = model.from_natural(np.atleast_2d(params))
     with np.errstate(all="ignore"):
-        basis, dbasis = model.basis(plane_geometry(gamma_rad[None], theta_rad[None]), z, True)
+        basis, dbasis = model.basis(Geometry.of(gamma_rad[None], theta_rad[None]), z, True)
     jz = np.einsum("mnlp,ml->mnp", dbasis, alpha)[0]
     jac = np.concatenate([jz, basis[0]], axis=1)
     if sigma is not None:

@@ -56,7 +56,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import IrreflectError, unknown_name
-from ..model import Parameter, ReflectionModel, _lobe_from_log, get_model, plane_geometry
+from .base import Parameter, ReflectionModel, _lobe_from_log
 
 GEOMETRY_STEP = 1e-7  # rad, central-difference step along geometric shifts
 
@@ -116,6 +116,8 @@ class Extension:
     reference: str = ""
 
     def __call__(self, base) -> ReflectionModel:
+        from .registry import get_model
+
         return apply_extension(get_model(base), self)
 
 
@@ -278,7 +280,7 @@ def _lobe_about(cos_angle, n):
 
 # ----------------------------------------------------------------------------- the catalogue
 def _incidence_evaluate(base, geom, zb, ze, derivatives):
-    log_cg = geom["log_cos_gamma"]
+    log_cg = geom.log_cos_gamma
     w = ze[:, :1]
     factor = np.exp(w * log_cg)  # cos^w(gamma)
     bb, dbb = base.basis(geom, zb, derivatives)
@@ -308,18 +310,8 @@ INCIDENCE_REFLECTANCE = Extension(
 
 
 def _tilt_geometry(geom, tilt):
-    gamma = geom["gamma"]
-    s = np.sin(gamma)
-    # from the geometry's own phi, so that a shift applied outside (angle_offset) stays
-    phi = geom["phi"] - tilt * s * np.abs(s)
-    cos_phi = np.cos(phi)
-    pos = cos_phi > 0
-    out = dict(geom)
-    out["phi"] = phi
-    out["cos_phi"] = cos_phi
-    out["pos_phi"] = pos
-    out["log_cos_phi"] = np.log(np.where(pos, cos_phi, 1.0))
-    return out
+    s = np.sin(geom.gamma)
+    return geom.tilted(tilt * s * np.abs(s))
 
 
 OFFSPECULAR_PEAK = Extension(
@@ -342,16 +334,7 @@ OFFSPECULAR_PEAK = Extension(
 
 
 def _offset_geometry(geom, delta):
-    gamma = geom["gamma"]
-    theta = geom["theta"] + delta
-    out = plane_geometry(np.broadcast_to(gamma, theta.shape), theta)
-    # phi moves with theta, and keeps a tilt applied outside (offspecular_peak)
-    phi = geom["phi"] - delta
-    cos_phi = np.cos(phi)
-    pos = cos_phi > 0
-    out.update(phi=phi, cos_phi=cos_phi, pos_phi=pos,
-               log_cos_phi=np.log(np.where(pos, cos_phi, 1.0)))
-    return out
+    return geom.shifted(delta)
 
 
 ANGLE_OFFSET = Extension(
@@ -372,7 +355,7 @@ ANGLE_OFFSET = Extension(
 
 
 def _background_evaluate(base, geom, zb, ze, derivatives):
-    ones = np.ones(geom["gamma"].shape)
+    ones = np.ones(np.broadcast_shapes(geom.gamma.shape, geom.theta.shape))
     return _extra_columns(base, geom, zb, derivatives, [ones], [])
 
 
@@ -393,7 +376,7 @@ BACKGROUND = Extension(
 
 def _retro_evaluate(base, geom, zb, ze, derivatives):
     n = np.exp(ze[:, :1])
-    lobe, dlobe = _lobe_about(np.cos(geom["theta"] - geom["gamma"]), n)
+    lobe, dlobe = _lobe_about(np.cos(geom.theta - geom.gamma), n)
     return _extra_columns(base, geom, zb, derivatives, [lobe], [(0, 0, dlobe)])
 
 
@@ -428,7 +411,7 @@ RETROREFLECTION = Extension(
 def _halo_evaluate(base, geom, zb, ze, derivatives):
     n = np.exp(ze[:, :1])
     with np.errstate(under="ignore", over="ignore"):
-        lobe, dlobe = _lobe_from_log(geom["log_cos_phi"], geom["pos_phi"], n)
+        lobe, dlobe = _lobe_from_log(geom.log_cos_phi, geom.pos_phi, n)
     return _extra_columns(base, geom, zb, derivatives, [lobe], [(0, 0, dlobe * n)])
 
 
@@ -490,6 +473,8 @@ def get_extension(name: str) -> Callable[[ReflectionModel], ReflectionModel]:
 
 
 def extend(base, names: str | Sequence[str]) -> ReflectionModel:
+    from .registry import get_model
+
     """Apply extensions in order: ``extend("two-lobe", ["background", "angle_offset"])``.
 
     ``names`` may also be one string joined with ``+`` (``"background+angle_offset"``).
@@ -504,16 +489,6 @@ def extend(base, names: str | Sequence[str]) -> ReflectionModel:
                 f"extension '{name}' returned {type(model).__name__}, expected a ReflectionModel"
             )
     return model
-
-
-def parse_model(spec) -> ReflectionModel:
-    """A model from ``"base+ext1+ext2"`` (e.g. ``"two-lobe+background"``) or a model object."""
-    if isinstance(spec, ReflectionModel):
-        return spec
-    if not isinstance(spec, str) or not spec:
-        raise IrreflectError(f"model must be a name like 'two-lobe+background', got {spec!r}")
-    base, *exts = spec.split("+")
-    return extend(base, exts)
 
 
 def warm_starts(model: ReflectionModel, base_z, gamma=None, theta=None, power=None):
@@ -543,6 +518,6 @@ def warm_starts(model: ReflectionModel, base_z, gamma=None, theta=None, power=No
 
 __all__ = [
     "CATALOGUE", "EXTENSIONS", "Extension", "applied_extensions", "apply_extension", "base_of",
-    "extend", "extension_names", "get_extension", "parse_model", "register_extension",
+    "extend", "extension_names", "get_extension", "register_extension",
     "warm_starts",
 ]

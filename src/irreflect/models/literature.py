@@ -27,24 +27,20 @@ reflected power at normal incidence.
 Registered names: ``blinn-phong``, ``lafortune`` (``lafortune:N`` for N lobes, default 2),
 ``ward``, ``torrance-sparrow`` (Beckmann slope distribution),
 ``torrance-sparrow-gaussian`` (Gaussian slope-angle distribution, as Torrance and Sparrow
-1967) and ``oren-nayar``. They are registered when this module is imported, which
-:func:`irreflect.model.get_model` does on first use.
+1967) and ``oren-nayar``, in :data:`irreflect.models.registry.MODELS`.
+
+The specular parts see the geometry's ``theta_spec`` (so that an extension that tilts the
+specular axis tilts them too); the diffuse parts and the receiver's ``cos(theta)`` see
+``theta``.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-from .errors import IrreflectError, unknown_name
-from .model import (
-    MAX_LOBE_INDEX,
-    Parameter,
-    ReflectionModel,
-    _col,
-    estimate_specular_index,
-    peak_directions,
-    register_model,
-)
+from ..errors import IrreflectError, unknown_name
+from .base import Parameter, ReflectionModel, _col
+from .guesses import MAX_LOBE_INDEX, estimate_specular_index, peak_directions
 
 INV_PI = 1.0 / np.pi
 #: The narrowest Gaussian-type lobe: RMS slope 1 / sqrt(2 n) at the cosine-lobe mirror
@@ -54,9 +50,7 @@ TS_DISTRIBUTIONS = ("beckmann", "gaussian")
 
 
 def _screen(lower, upper) -> dict:
-    """Plausible box of ``z`` for the fitter's global screening, when the core supports it."""
-    if "screen_lower" not in getattr(ReflectionModel, "__dataclass_fields__", {}):
-        return {}
+    """Plausible box of ``z`` for the fitter's global screening."""
     return {"screen_lower": np.asarray(lower, float), "screen_upper": np.asarray(upper, float)}
 
 
@@ -71,39 +65,24 @@ def source_half_angle(gamma, theta):
     return 0.5 * (np.asarray(theta, float) - np.asarray(gamma, float))
 
 
-def _extra_geometry(geom: dict) -> dict:
-    """Half-vector quantities of a :func:`~irreflect.model.plane_geometry` dict.
+def _vgroove(geom):
+    """:func:`vgroove_attenuation` of a geometry's specular receiver angle."""
+    cos_t = np.clip(np.cos(geom.theta_spec), 0.0, None)
+    cos_g = np.clip(geom.cos_gamma, 0.0, None)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        g = np.minimum(2.0 * geom.cos_half * np.minimum(cos_t, cos_g) / geom.cos_source_half,
+                       1.0)
+    return np.where(np.isfinite(g), np.clip(g, 0.0, 1.0), 0.0)
 
-    Cached in the dict itself (keys ``lit_*``) because the geometry does not change while a
-    fit runs; :func:`~irreflect.model.take_geometry` carries the cached arrays along."""
-    if "lit_cos_h" not in geom:
-        gamma, theta = geom["gamma"], geom["theta"]
-        th = half_angle(gamma, theta)
-        beta = source_half_angle(gamma, theta)
-        cos_t = np.clip(geom["cos_theta"], 0.0, None)
-        cos_g = np.cos(gamma)
-        cos_h = np.cos(th)
-        cos_b = np.cos(beta)
-        abs_g, abs_t = np.abs(gamma), np.abs(theta)
-        # Oren-Nayar: alpha = max(theta_i, theta_r), beta = min(...); the azimuth term
-        # max(0, cos(phi_r - phi_i)) is 1 with the receiver on the source side, else 0
-        same_side = (gamma * theta) > 0
-        on_term = np.where(same_side, np.sin(np.maximum(abs_g, abs_t))
-                           * np.tan(np.minimum(abs_g, abs_t)), 0.0)
-        geom.update({
-            "lit_cos_t": cos_t,
-            "lit_cos_g": cos_g,
-            "lit_theta_h": th,
-            "lit_cos_h": cos_h,
-            "lit_log_cos_h": np.log(cos_h),
-            "lit_tan2_h": np.tan(th) ** 2,
-            "lit_cos_b": cos_b,
-            "lit_sin_sin": np.sin(gamma) * np.sin(theta),
-            "lit_cos_cos": cos_g * cos_t,
-            "lit_vgroove": vgroove_attenuation(gamma, theta),
-            "lit_on_term": on_term,
-        })
-    return geom
+
+def _oren_nayar_term(geom):
+    """``max(0, cos dphi) sin(a) tan(b)`` of the Oren-Nayar diffuse part (receiver angle)."""
+    gamma, theta = geom.gamma, geom.theta
+    abs_g, abs_t = np.abs(gamma), np.abs(theta)
+    # alpha = max(theta_i, theta_r), beta = min(...); the azimuth term max(0, cos(phi_r -
+    # phi_i)) is 1 with the receiver on the source side, else 0
+    return np.where((gamma * theta) > 0, np.sin(np.maximum(abs_g, abs_t))
+                    * np.tan(np.minimum(abs_g, abs_t)), 0.0)
 
 
 # --------------------------------------------------------------------------- building blocks
@@ -340,26 +319,24 @@ def _dbasis_spec(shape, derivs):
 
 
 def _blinn_basis(geom, z, derivatives=True):
-    g = _extra_geometry(geom)
     n = np.exp(_col(z, 0))
-    cos_t = g["lit_cos_t"]
+    cos_t = geom.receiver_cos
     with np.errstate(under="ignore", over="ignore"):
-        pw = np.exp(n * g["lit_log_cos_h"]) * cos_t
+        pw = np.exp(n * geom.log_cos_half) * cos_t
     spec = (n + 8.0) / (8.0 * np.pi) * pw
     basis = _stack2(cos_t * INV_PI, spec)
     if not derivatives:
         return basis, None
-    d_ln_n = n * (pw / (8.0 * np.pi) + spec * g["lit_log_cos_h"])
+    d_ln_n = n * (pw / (8.0 * np.pi) + spec * geom.log_cos_half)
     return basis, _dbasis_spec(basis.shape[:-1], [d_ln_n])
 
 
 def _ward_basis(geom, z, derivatives=True):
-    g = _extra_geometry(geom)
     alpha = np.exp(_col(z, 0))
-    cos_t = g["lit_cos_t"]
+    cos_t = geom.receiver_cos
     with np.errstate(under="ignore", divide="ignore", invalid="ignore"):
-        shape_fn = np.sqrt(cos_t / g["lit_cos_g"])
-        ratio = g["lit_tan2_h"] / alpha**2
+        shape_fn = np.sqrt(cos_t / geom.cos_gamma)
+        ratio = geom.tan2_half / alpha**2
         spec = np.exp(-ratio) / (4.0 * np.pi * alpha**2) * shape_fn
     basis = _stack2(cos_t * INV_PI, spec)
     if not derivatives:
@@ -372,24 +349,23 @@ def _make_ts_basis(distribution):
         raise unknown_name("facet distribution", str(distribution), TS_DISTRIBUTIONS)
 
     def basis_fn(geom, z, derivatives=True):
-        g = _extra_geometry(geom)
         m = np.exp(_col(z, 0))
         eta = _col(z, 1)
-        cos_t = g["lit_cos_t"]
+        cos_t = geom.receiver_cos
         with np.errstate(under="ignore", divide="ignore", invalid="ignore", over="ignore"):
             if distribution == "beckmann":
-                ratio = g["lit_tan2_h"] / m**2
-                d = np.exp(-ratio) / (np.pi * m**2 * g["lit_cos_h"] ** 4)
+                ratio = geom.tan2_half / m**2
+                d = np.exp(-ratio) / (np.pi * m**2 * geom.cos_half ** 4)
             else:
-                ratio = g["lit_theta_h"] ** 2 / m**2
+                ratio = geom.half_angle ** 2 / m**2
                 d = np.exp(-ratio) / (np.pi * m**2)
-            f, df = _fresnel_and_derivative(g["lit_cos_b"], eta)
+            f, df = _fresnel_and_derivative(geom.cos_source_half, eta)
             f0 = ((eta - 1.0) / (eta + 1.0)) ** 2
             df0 = 4.0 * (eta - 1.0) / (eta + 1.0) ** 3
             fr = f / f0
             dfr = (df * f0 - f * df0) / f0**2
             # f_s cos(theta) = F/F0 D G / (4 cos gamma): cos(theta) cancels
-            geo = g["lit_vgroove"] / (4.0 * g["lit_cos_g"]) * (cos_t > 0)
+            geo = _vgroove(geom) / (4.0 * geom.cos_gamma) * (cos_t > 0)
             spec = fr * d * geo
         basis = _stack2(cos_t * INV_PI, spec)
         if not derivatives:
@@ -402,15 +378,14 @@ def _make_ts_basis(distribution):
 
 
 def _oren_nayar_basis(geom, z, derivatives=True):
-    g = _extra_geometry(geom)
     sigma = _col(z, 0)
     n = np.exp(_col(z, 1))
-    cos_t = g["lit_cos_t"]
+    cos_t = geom.receiver_cos
     a, b = oren_nayar_ab(sigma)
-    term = g["lit_on_term"]
+    term = _oren_nayar_term(geom)
     diffuse = (a + b * term) * INV_PI * cos_t
     with np.errstate(under="ignore", over="ignore"):
-        pw = np.exp(n * geom["log_cos_phi"]) * geom["pos_phi"] * cos_t
+        pw = np.exp(n * geom.log_cos_phi) * geom.pos_phi * cos_t
     spec = (n + 2.0) / (2.0 * np.pi) * pw
     basis = _stack2(diffuse, spec)
     if not derivatives:
@@ -418,7 +393,7 @@ def _oren_nayar_basis(geom, z, derivatives=True):
     da, db = _oren_nayar_ab_derivative(sigma)
     out = np.zeros(basis.shape[:-1] + (2, 2))
     out[..., 0, 0] = (da + db * term) * INV_PI * cos_t
-    out[..., 1, 1] = n * (pw / (2.0 * np.pi) + spec * geom["log_cos_phi"])
+    out[..., 1, 1] = n * (pw / (2.0 * np.pi) + spec * geom.log_cos_phi)
     return basis, out
 
 
@@ -590,13 +565,12 @@ def make_lafortune(n_lobes: int = 2) -> ReflectionModel:
     params.append(_K)
 
     def basis_fn(geom, z, derivatives=True):
-        g = _extra_geometry(geom)
-        cos_t = g["lit_cos_t"]
+        cos_t = geom.receiver_cos
         cols, dcols = [cos_t * INV_PI], []
         for i in range(n_lobes):
             c = _col(z, 2 * i)
             n = np.exp(_col(z, 2 * i + 1))
-            s = c * g["lit_sin_sin"] + g["lit_cos_cos"]
+            s = c * geom.sin_sin + geom.cos_cos
             pos = s > 0
             with np.errstate(under="ignore", over="ignore", divide="ignore", invalid="ignore"):
                 log_s = np.log(np.where(pos, s, 1.0))
@@ -605,7 +579,7 @@ def make_lafortune(n_lobes: int = 2) -> ReflectionModel:
                 lobe = norm * pw
                 cols.append(lobe)
                 if derivatives:
-                    d_c = np.where(pos, lobe * n / np.where(pos, s, 1.0), 0.0) * g["lit_sin_sin"]
+                    d_c = np.where(pos, lobe * n / np.where(pos, s, 1.0), 0.0) * geom.sin_sin
                     d_ln_n = n * (pw / (2.0 * np.pi) + lobe * log_s)
                     dcols.append((d_c, d_ln_n))
         basis = np.stack(np.broadcast_arrays(*cols), axis=-1)
@@ -684,15 +658,6 @@ def make_lafortune(n_lobes: int = 2) -> ReflectionModel:
     )
 
 
-#: The literature models this module adds to :data:`irreflect.model.MODELS`.
-LITERATURE_MODELS = {
-    "blinn-phong": make_blinn_phong,
-    "lafortune": make_lafortune,
-    "ward": make_ward,
-    "torrance-sparrow": make_torrance_sparrow,
-    "torrance-sparrow-gaussian": lambda: make_torrance_sparrow("gaussian"),
-    "oren-nayar": make_oren_nayar,
-}
-
-for _name, _factory in LITERATURE_MODELS.items():
-    register_model(_name, _factory)
+def make_torrance_sparrow_gaussian() -> ReflectionModel:
+    """Torrance-Sparrow with the Gaussian slope-angle distribution of the 1967 paper."""
+    return make_torrance_sparrow("gaussian")
