@@ -15,7 +15,6 @@ import concurrent.futures as cf
 import multiprocessing as mp
 import os
 import re
-import sys
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -102,9 +101,9 @@ def run_many(datasets, seeds=(0,), *, scheduler=None, workers: int | None = None
     tasks = _tasks(datasets, seeds, kwargs, with_methods, checkpoint_dir)
     bar = None
     if progress:
-        from tqdm import tqdm
+        from .._progress import progress as progress_display
 
-        bar = tqdm(total=len(tasks), desc="select runs", unit="run", file=sys.stderr)
+        bar = progress_display(total=len(tasks), desc="select runs", unit="run")
     try:
         if scheduler is not None:
             return _run_dask(tasks, scheduler, bar)
