@@ -340,3 +340,17 @@ def test_bad_inputs_raise(noisy):
         run_selection(noisy, selector="genetic", **SMALL)
     with pytest.raises(IrreflectError, match="distinct names"):
         run_many([noisy, noisy], seeds=[0], **SMALL)
+
+
+def test_default_workers_and_one_library_thread_each(monkeypatch):
+    import os
+
+    from irreflect.selection import parallel
+
+    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
+    assert parallel.default_workers(64) == cores and parallel.default_workers(1) == 1
+    monkeypatch.delenv("OPENBLAS_NUM_THREADS", raising=False)
+    monkeypatch.setenv("OMP_NUM_THREADS", "3")  # a user's own setting is kept
+    with parallel.one_thread_per_worker():  # what the workers inherit
+        assert os.environ["OPENBLAS_NUM_THREADS"] == "1" and os.environ["OMP_NUM_THREADS"] == "3"
+    assert "OPENBLAS_NUM_THREADS" not in os.environ and os.environ["OMP_NUM_THREADS"] == "3"

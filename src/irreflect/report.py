@@ -212,8 +212,9 @@ def fits_section(ctx: ReportContext) -> Section:
                     "and 5; " + (f"{len(snaps)} of them snapped to the nearest measured "
                                  f"angles, up to {far:.2g} deg away" if snaps
                                  else "every point measured") +
-                    f") the model predicts all points with R^2 = {r2_12:.4g}, against "
-                    f"{r2_all:.4g} for the fit on all points"), key="paper-protocol"))
+                    f") the model predicts all points with R^2 = {round(r2_12, 4):.4g}, "
+                    f"against {round(r2_all, 4):.4g} for the fit on all points"),
+                    key="paper-protocol"))
         if snaps:
             notes.append(f"{name}: protocol points snapped to the nearest measured point: "
                          + ", ".join(f"({g:g}, {t:g}) -> ({g2:g}, {t2:g})"
@@ -287,7 +288,7 @@ def fits_section(ctx: ReportContext) -> Section:
               "Different machines and languages: the paper's figure is MATLAB R2015 on a "
               "Core 2 Duo E8400; ours is the median wall time of `irreflect.fit` (with its "
               "global screening and restarts) on this machine. "
-              "`python experiments/bench_fit.py` compares with scipy's curve_fit in one run.\n")
+              "`.venv/bin/python experiments/bench_fit.py` compares with scipy's curve_fit in one run.\n")
     if notes:
         md.append("\n" + "\n".join(f"- {n}" for n in notes) + "\n")
     md.append("\n### Figures\n\nResiduals are *measured - model* everywhere in this report "

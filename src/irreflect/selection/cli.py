@@ -65,7 +65,7 @@ def write_selection(result: SelectionResult, methods: dict | None, directory) ->
     with open(directory / "summary.json", "w") as fh:
         json.dump(summary_dict(result, methods), fh, indent=2, default=json_default)
         fh.write("\n")
-    ax = plot_pareto(result, methods=methods,
+    ax = plot_pareto(result, methods=methods, legend_below=True,
                      title=f"{meas.name}: Pareto frontier ({result.selector}, seed {result.seed})")
     save_figure(ax.figure, directory / "pareto.png")
     masks = {f"best {n_opt}": result.best_mask(n_opt)}
@@ -247,7 +247,8 @@ def register(sub) -> None:
                    help="dask.distributed scheduler (e.g. tcp://host:8786) for the runs "
                         "(default: local processes)")
     p.add_argument("--workers", type=POSITIVE_INT, default=None,
-                   help="local worker processes for several runs (default: CPU count)")
+                   help="local worker processes for several runs, one library thread each "
+                        "(default: one per core, at most one per run)")
     p.add_argument("--quiet", action="store_true",
                    help="no progress display (a bar on a terminal, one line per stage through "
                         "a pipe)")

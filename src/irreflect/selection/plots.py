@@ -20,8 +20,9 @@ from .run import PAPER_N  # noqa: E402
 def _log_n_axis(ax, lo: float, hi: float) -> None:
     """Logarithmic N axis with plain integer ticks (7, 10, 12, 20, 50, ...)."""
     ax.set_xscale("log")
-    ticks = [t for t in (7, 8, 10, 12, 15, 20, 30, 50, 100, 200, 500, 1000, 2000)
-             if lo <= t <= hi]
+    steps = ((7, 8, 10, 12, 15, 20, 30, 50, 100, 200, 500, 1000, 2000) if hi < 300 else
+             (7, 12, 20, 50, 100, 200, 500, 1000, 2000))
+    ticks = [t for t in steps if lo <= t <= hi]
     ax.set_xticks(ticks)
     ax.xaxis.set_major_formatter(FuncFormatter(lambda v, _: f"{v:g}"))
     ax.xaxis.set_minor_formatter(FuncFormatter(lambda v, _: ""))
@@ -49,7 +50,7 @@ def plot_pareto(result, ax=None, *, title=None, label=None, log_y: bool = True, 
     points, and the all-points fit. N is on a logarithmic axis.
     """
     if ax is None:
-        _, ax = plt.subplots(figsize=(6.4, 4.2))
+        _, ax = plt.subplots(figsize=(6.4, 5.6 if legend_below else 4.2))
     front = result if not hasattr(result, "front") else result.front
     summary = getattr(result, "front_summary", None)
     knee_n = getattr(result, "knee_n", knee_n)
@@ -73,6 +74,7 @@ def plot_pareto(result, ax=None, *, title=None, label=None, log_y: bool = True, 
         ax.plot([x[k]], [y[k]], "o", ms=11, mfc="none", mew=2, color="tab:red",
                 label=f"knee: N = {knee_n} (closest to the ideal point)", zorder=5)
     enough = getattr(result, "enough", None)
+    threshold = None
     if enough is not None:
         threshold = enough.threshold_one_minus_r2(result.measurements.power)
         ax.axhline(threshold, color="tab:green", ls="--", lw=1,
@@ -87,14 +89,24 @@ def plot_pareto(result, ax=None, *, title=None, label=None, log_y: bool = True, 
         b = result.best_score(PAPER_N)
         ax.plot([PAPER_N], [b], "s", ms=9, mfc="none", mew=1.8, color="tab:purple",
                 label=f"best {PAPER_N} points: R$^2$ = {1 - b:.5f}", zorder=5)
+    # the vertical range follows the frontier (and the lines drawn across it), not a
+    # protocol that fails: that one is drawn at the top edge when it lies above
+    finite = y[np.isfinite(y) & (y > 0)]
+    levels = list(finite) + ([summary.reference] if summary is not None else []) \
+        + ([threshold] if threshold is not None and np.isfinite(threshold) else [])
+    levels = [v for v in levels if v > 0]
+    y_lo, y_hi = (min(levels) / 1.08, max(levels) * 1.25) if levels else (None, None)
     if methods is not None and methods.get("12", {}).get("r2") is not None:
         e12 = 1.0 - methods["12"]["r2"]
-        shown = min(max(e12, np.nanmin(y) * 0.5), 1.0)
-        ax.plot([PAPER_N], [shown], "X", ms=8, color="tab:brown", zorder=5,
+        above = y_hi is not None and e12 > y_hi
+        ax.plot([PAPER_N], [y_hi / 1.03 if above else e12], "^" if above else "X", ms=8,
+                color="tab:brown", zorder=5,
                 label=f"paper's protocol: R$^2$ = {methods['12']['r2']:.4g}"
-                      + (" (off the axis)" if shown != e12 else ""))
-    if log_y and np.any(np.isfinite(y) & (y > 0)):
+                      + (" (above the axis)" if above else ""))
+    if log_y and finite.size:
         ax.set_yscale("log")
+    if y_lo is not None:
+        ax.set_ylim(y_lo, y_hi)
     ax.set_xlabel("number of points N (logarithmic)")
     ax.set_ylabel("1 - R$^2$ (fit on N points, judged on all)")
     ax.grid(True, alpha=0.3, which="both")
@@ -157,7 +169,7 @@ def plot_selection(result, fig=None, *, methods: dict | None = None, protocol_ma
     if result.knee_n != PAPER_N and result.best_mask(result.knee_n) is not None:
         masks["knee"] = result.best_mask(result.knee_n)
     if enough is not None and enough.n is not None and enough.n not in (PAPER_N, result.knee_n) \
-            and enough.n in result.masks:
+            and enough.n in result.masks and enough.n <= 3 * PAPER_N:  # more would hide the rest
         masks["enough points"] = result.masks[enough.n]
     if protocol_mask is not None:
         masks["paper's protocol"] = protocol_mask

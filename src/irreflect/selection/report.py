@@ -265,9 +265,9 @@ def _why_text(ctx: ReportContext, results: dict) -> str:
         out.append(
             "On the measured tables the best subsets' R^2 rises with N as follows: "
             + "; ".join(rises) + "."
-            + (" Where it is flat (" + ", ".join(flat) + "), a handful of well-placed points "
-               "predict all points as well as all of them do; this says the search found "
-               "such points in this scan, not that any 7 points will do."
+            + (" Where it rises by less than 0.001 (" + ", ".join(flat) + "), a handful of "
+               "well-placed points come within 0.001 of the all-points R^2; this says the "
+               "search found such points in this scan, not that any 7 points will do."
                if flat else ""))
         far = [n for n in real if results[n].enough is not None
                and (results[n].enough.n is None or results[n].enough.n > PAPER_N)]
@@ -278,6 +278,14 @@ def _why_text(ctx: ReportContext, results: dict) -> str:
                 "noise, sets the error and each added point moves the compromise fit; the knee "
                 "(which weighs R^2 against the share of the table measured) is then the "
                 "practical answer.")
+        resampled = [n for n in real if n.startswith("rgl_") and results[n].enough is not None
+                     and not results[n].enough.noise.startswith("the table's")]
+        if resampled:
+            out.append(
+                "The noise of " + ", ".join(resampled) + " is estimated from differences along "
+                "theta; these RGL-EPFL tables are interpolated between the lab's samples, so "
+                "the estimate is smaller than the instrument's noise and 'enough points' larger "
+                "than a raw scan would give.")
     return " ".join(out)
 
 
