@@ -102,10 +102,11 @@ def _print_run(result: SelectionResult, methods: dict | None) -> None:
     else:
         print(f"  knee: N = {result.knee_n}")
     if enough is not None:
+        spread = ("" if enough.sigma_low == enough.sigma_high else
+                  f", 68 % interval {enough.sigma_low:.3g}-{enough.sigma_high:.3g}")
         print(f"  enough points: {enough.range_text()}: the fewest whose fit's RMSE on all "
-              f"points is within the noise sigma = {enough.sigma:.4g} "
-              f"({enough.sigma_low:.3g}-{enough.sigma_high:.3g}; {enough.noise}) of the "
-              f"all-points fit's {enough.rmse_all:.4g}")
+              f"points is within the noise sigma = {enough.sigma:.4g} ({enough.noise}"
+              f"{spread}) of the all-points fit's {enough.rmse_all:.4g}")
     elif summary is not None and summary.enough_note:
         print(f"  {summary.enough_note}")
     if methods is not None:
