@@ -76,3 +76,52 @@ def test_every_command_is_listed_and_each_builds_alone():
     for command in COMMANDS:
         alone = build_parser(command)
         assert command in alone._subparsers._group_actions[0].choices
+
+
+def test_every_option_says_what_it_does_and_its_default():
+    import argparse
+
+    from irreflect.cli import build_parser
+
+    sub = build_parser()._subparsers._group_actions[0]
+    missing = []
+    for command, parser in sub.choices.items():
+        for action in parser._actions:
+            if not action.option_strings or isinstance(action, argparse._HelpAction):
+                continue
+            text = action.help or ""
+            flag = isinstance(action, argparse._StoreTrueAction | argparse._StoreFalseAction)
+            if not text or not (flag or action.required or "default" in text
+                                or "required" in text):
+                missing.append(f"{command} {action.option_strings[0]}: {text!r}")
+    assert not missing, missing
+
+
+def test_progress_is_lines_through_a_pipe_and_a_bar_on_a_terminal(capsys):
+    import io
+
+    from irreflect._progress import progress
+
+    bar = progress(total=8, desc="reproduce", unit="step")  # stderr is captured: no tty
+    for stage in ("fit a", "fit b", "selection: a"):
+        bar.set_postfix_str(stage)
+        bar.update(1)
+    bar.set_postfix_str("search status", refresh=False)  # a status, not a stage
+    bar.update(5)
+    bar.close()
+    err = capsys.readouterr().err
+    assert "\r" not in err
+    lines = err.splitlines()
+    assert lines[:3] == ["reproduce: [1/8] fit a", "reproduce: [2/8] fit b",
+                         "reproduce: [3/8] selection: a"]
+    assert lines[-1].startswith("reproduce: done (8/8 step") and len(lines) == 4
+
+    class Terminal(io.StringIO):
+        def isatty(self):
+            return True
+
+    tty = Terminal()
+    bar = progress(total=2, desc="x", stream=tty)
+    bar.update(2)
+    bar.close()
+    assert "\r" in tty.getvalue() and "100%" in tty.getvalue()

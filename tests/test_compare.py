@@ -180,7 +180,12 @@ def test_real_ptfe_comparison(real_dir):
     with pytest.raises(IrreflectError, match="found |gamma| = 0, 15, 30, 45, 60, 75"):
         compare_models(meas, ["phong@10"])
     comp = compare_models(meas, None, phong_at_deg=15)
-    assert list(comp.scores)[:2] == ["two-lobe", "phong@15"]
+    assert list(comp.scores)[:2] == ["two-lobe", "phong@15"] and comp.notes == ()
+    # with the default, phong@ moves to the nearest measured incidence and says so
+    default = compare_models(meas, ["two-lobe", "phong@"])
+    assert list(default.scores) == ["two-lobe", "phong@15"]
+    assert "nearest measured angle of incidence, 15 deg" in default.notes[0]
+    assert default.scores["phong@15"].r2 == pytest.approx(comp.scores["phong@15"].r2)
     assert comp.gammas == [0.0, 15.0, 30.0, 45.0, 60.0, 75.0]
     # a near-Lambertian diffuser: every model fits it reasonably, the two-lobe model best
     for s in comp.scores.values():
@@ -205,7 +210,8 @@ def test_reproduce_section_quick(tmp_path):
     paper = project_root().parent / "shared" / "paper" / "tables"
     ctx = ReportContext(datasets=datasets, fits={n: fit(m) for n, m in datasets.items()},
                         out_dir=tmp_path, quick=True, seed=0,
-                        paper_dir=paper if paper.is_dir() else None)
+                        paper_dir=paper if paper.is_dir() else None,
+                        reconstructions=frozenset(datasets))
     section = reproduce_section(ctx)
     for name in section.tables:
         assert f"{{table:{name}}}" in section.markdown
@@ -237,3 +243,24 @@ def test_models_with_more_parameters_than_points_are_skipped_when_asked():
     assert list(comp.scores) == ["phong"] and "at least 8" in comp.skipped["lafortune"]
     assert comp.scores["phong"].r2 == pytest.approx(1.0, abs=1e-9)
     assert "skipped lafortune" in comp.format()
+
+
+@pytest.mark.real
+def test_compare_with_defaults_works_on_every_real_table(real_dir, capsys):
+    tables = sorted(real_dir.glob("*/*.csv"))
+    assert len(tables) >= 11
+    for path in tables:
+        meas = read_measurements(path)
+        gammas = np.unique(np.abs(meas.gamma_deg))
+        has_10 = bool(np.any(np.isclose(gammas, 10.0)))
+        nonzero = gammas[gammas > 0]
+        expected = 10.0 if has_10 else float(nonzero[np.argmin(np.abs(nonzero - 10.0))])
+        comp = compare_models(meas, ["phong@"])  # phong@ alone: one incidence, a quick fit
+        assert list(comp.scores) == [f"phong@{expected:g}"], (path.name, list(comp.scores))
+        assert bool(comp.notes) == (not has_10)
+    # the command line, with its defaults, on a table without a 10 deg incidence
+    rgl = real_dir / "rgl_epfl" / "rgl_paper_white.csv"
+    assert main(["compare", str(rgl), "--models", "two-lobe,phong@,phong"]) == 0
+    out = capsys.readouterr().out
+    assert "note: rgl_paper_white has no measurements at |gamma| = 10 deg" in out
+    assert "phong@27.668" in out

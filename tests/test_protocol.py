@@ -465,16 +465,21 @@ def test_reproduce_section_quick(tmp_path):
                 "plaster-like": synthetic(TABLE3["plasterboard"], 0.002, name="plaster-like")}
     ctx = ReportContext(datasets=datasets, fits={"terrazzo": fit(datasets["terrazzo"])},
                         out_dir=tmp_path, quick=True,
-                        paper_dir=PAPER_TABLES if PAPER_TABLES.exists() else None)
+                        paper_dir=PAPER_TABLES if PAPER_TABLES.exists() else None,
+                        reconstructions=frozenset({"terrazzo"}))
     section = reproduce_section(ctx)
     assert section.key == "protocol"
+    assert "The reconstructions (terrazzo)" in section.markdown
+    assert "On the measured tables the protocol fails 0 of 1" in section.markdown
     t1 = section.tables["protocol_table1"]
-    assert list(zip(t1["gamma_deg"], t1["theta_deg"], strict=True)) == TABLE1
+    assert list(zip(t1["gamma (deg)"], t1["theta (deg)"], strict=True)) == TABLE1
     ev = section.tables["protocol_evaluation"]
     assert list(ev["dataset"]) == ["terrazzo", "plaster-like"]
-    assert (ev["r2_protocol"] <= ev["r2_all_points"]).all()
+    assert (ev["R^2 protocol"] <= ev["R^2 all points"]).all()
+    assert not ev["fails"].any()  # the two-lobe model on its own data: the protocol holds
     rob = section.tables["protocol_robustness"]
-    assert (rob["trials"] == 40).all() and (rob["r2_p5"] <= rob["r2_p95"]).all()
+    assert (rob["trials"] == 40).all()
+    assert (rob["R^2 5th percentile"] <= rob["R^2 95th percentile"]).all()
     for name in section.figures:
         assert f"{{figure:{name}}}" in section.markdown
         assert section.figures[name].read_bytes()[:4] == b"\x89PNG"

@@ -76,8 +76,8 @@ def test_paper_columns_equal_the_paper_tables(report_dir):
 SECTION_TABLES = ["selection_table5", "selection_fronts", "selection_best12", "protocol_table1",
                   "protocol_evaluation", "protocol_robustness", "compare_table6", "compare_models",
                   "diagnose_summary", "diagnose_candidates"]
-SECTION_FIGURES = ["selection_pareto_fronts", "selection_optimal_points", "compare_fig25",
-                   "compare_errors", "protocol_points", "diagnose_residuals"]
+SECTION_FIGURES = ["selection_terrazzo", "selection_foam_board", "selection_optimal_points",
+                   "compare_fig25", "compare_errors", "protocol_points", "diagnose_residuals"]
 
 
 def test_every_capability_has_its_tables_and_figures(report_dir):
@@ -98,10 +98,10 @@ def test_table5_and_table6_paper_columns_equal_the_paper(report_dir):
     p5 = pd.read_csv(paper / "table5_methods_r2.csv")
     merged = t5.merge(p5, left_on=["dataset", "method"], right_on=["material", "method"])
     assert len(merged) == 9
-    assert (merged["r2_paper"] == merged["r2"]).all()
+    assert (merged["R^2 paper"] == merged["r2"]).all()
     # our Method A is the global optimum on all points: never below B or 12
     for _, rows in t5.groupby("dataset"):
-        r2 = rows.set_index("method")["r2_ours"]
+        r2 = rows.set_index("method")["R^2 ours"]
         assert r2["A"] >= r2["B"] >= r2["12"]
     t6 = pd.read_csv(report_dir / "tables" / "compare_table6.csv")
     p6 = pd.read_csv(paper / "table6_polar_error_pct.csv")
@@ -125,3 +125,103 @@ def test_bad_data_dir_is_a_one_line_error(tmp_path, capsys):
                  "--no-progress"]) == 2
     assert "not a folder" in capsys.readouterr().err
     assert not (tmp_path / "o").exists()
+
+
+# ----------------------------------------------------------------------------- HTML layout
+def _rendered_images(html: str) -> list[dict]:
+    """Every embedded figure with its natural size and the width the page gives it."""
+    from irreflect.report import PAGE_WIDTH_PX
+
+    out = []
+    for tag in re.findall(r"<img [^>]*>", html):
+        attrs = dict(re.findall(r'(\w[\w-]*)="([^"]*)"', tag))
+        if "fig" not in attrs.get("class", "").split():
+            continue
+        width, height = int(attrs["width"]), int(attrs["height"])
+        share = float(re.search(r"max-width:(\d+)%", attrs["style"]).group(1))
+        out.append({"alt": attrs["alt"], "width": width, "height": height,
+                    "shown": min(width, PAGE_WIDTH_PX * share / 100)})
+    return out
+
+
+def test_html_gives_wide_figures_a_full_row_and_opens_them_full_size(report_dir):
+    html = (report_dir / "report.html").read_text()
+    images = _rendered_images(html)
+    assert len(images) >= 20
+    by_name = {i["alt"]: i for i in images}
+    # the multi-panel figures get the page's full width, the others about half of it
+    for name in ("selection_terrazzo", "diagnose_residuals", "compare_errors"):
+        assert by_name[name]["width"] >= 1000 and by_name[name]["shown"] >= 1100, by_name[name]
+    for image in images:  # nothing is shrunk to less than 80 % of its size
+        assert image["shown"] >= 0.8 * min(image["width"], 1200), image
+    assert "document.getElementById('zoom')" in html and "img.fig{cursor:zoom-in" in html
+
+
+def test_contents_are_linked_to_the_sections(report_dir):
+    md = (report_dir / "report.md").read_text()
+    links = re.findall(r"^\d+\. \[[^\]]+\]\(#([\w-]+)\)", md, flags=re.M)
+    assert links[0] == "sec-findings" and len(links) >= 7
+    for anchor in links:
+        assert f'<a id="{anchor}"></a>' in md
+    html = (report_dir / "report.html").read_text()
+    assert f'href="#{links[1]}"' in html and f'id="{links[1]}"' in html
+
+
+#: column names that are symbols rather than words: angles and the model's coefficients
+ALLOWED_NAMES = {"gamma_deg", "theta_deg", "u_as", "v_as", "u_nd", "v_nd", "u_ns", "v_ns"}
+
+
+def test_columns_have_one_number_format(report_dir):
+    for path in (report_dir / "tables").glob("*.csv"):
+        table = pd.read_csv(path, dtype=str, keep_default_na=False)
+        for column in table.columns:
+            assert "_" not in column or column in ALLOWED_NAMES, (path.name, column)
+            cells = [c for c in table[column] if re.fullmatch(r"-?\d+\.\d+(e[+-]\d+)?", c)]
+            fixed = [c for c in cells if "e" not in c]
+            if fixed and len(fixed) == len(cells):  # one number of decimals per column
+                assert len({len(c.split(".")[1]) for c in fixed}) == 1, (path.name, column)
+            elif cells:
+                assert not fixed, (path.name, column, cells[:4])  # all scientific
+
+
+# ----------------------------------------------------------------------------- real data
+@pytest.fixture(scope="module")
+def real_report_dir(tmp_path_factory):
+    from irreflect.data import real_data_dir
+
+    root = real_data_dir()
+    if root is None:
+        pytest.skip("real data not found: ../shared/datasets/real is absent")
+    data = tmp_path_factory.mktemp("cornell")
+    # the glossy Cayman paint: the paper's protocol misses its sub-degree specular lobe
+    (data / "cornell_cayman.csv").write_bytes(
+        (root / "cornell" / "cornell_cayman.csv").read_bytes())
+    out = tmp_path_factory.mktemp("real_report")
+    assert main(["reproduce", "--quick", "--data-dir", str(data), "--out", str(out),
+                 "--no-progress"]) == 0
+    return out
+
+
+@pytest.mark.real
+def test_report_on_measured_data_speaks_of_measurements(real_report_dir):
+    md = (real_report_dir / "report.md").read_text()
+    for wording in ("reconstruct", "bundled", "noise floor", "Gaussian noise",
+                    "(no bundled material"):
+        assert wording.lower() not in md.lower(), wording
+    assert "**measured** tables" in md
+
+
+@pytest.mark.real
+def test_report_on_measured_data_names_the_failed_protocol_first(real_report_dir):
+    md = (real_report_dir / "report.md").read_text()
+    findings = md.split('<a id="sec-findings"></a>', 1)[1].split("\n## ", 1)[0]
+    assert findings.index("**What failed**") < findings.index("**Results**")
+    failed = findings.split("**What failed**", 1)[1].split("**", 1)[1]
+    assert failed.startswith("cornell_cayman**: the paper's 12-point protocol fails")
+    # both evaluations of the protocol, with their numbers, and the cause
+    t2 = pd.read_csv(real_report_dir / "tables" / "table2_fit_quality.csv")
+    ev = pd.read_csv(real_report_dir / "tables" / "protocol_evaluation.csv")
+    assert f"R^2 = {t2['R^2 ours'].iloc[0]:.4g}" in findings
+    assert f"R^2 = {ev['R^2 protocol'].iloc[0]:.4g}" in findings
+    assert "specular lobe" in findings and ev["fails"].iloc[0] == "yes"
+    assert t2["R^2 ours"].iloc[0] < t2["R^2 all-points fit"].iloc[0] - 0.5

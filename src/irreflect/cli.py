@@ -223,23 +223,27 @@ def register(sub) -> None:
                                    "errors, R^2, RMSE, MSE and the per-gamma polar-area error.")
     add_data_argument(p)
     add_model_argument(p)
-    p.add_argument("--seed", type=SEED, default=0, help="seed of the random extra starts")
+    p.add_argument("--seed", type=SEED, default=0,
+                   help="seed of the random extra starts (default 0)")
     p.add_argument("--json", action="store_true", help="one JSON object on stdout")
     p.add_argument("--save", metavar="MATERIAL.json",
-                   help="also write the fit as a material file for room scenes")
+                   help="also write the fit as a material file for room scenes (default: no)")
     p.add_argument("--reflectance", default=None, metavar="RHO|K",
                    help="with --save: total reflectance of the material (0..1), or K when the "
-                        "power column is BRDF x cos(theta) in 1/sr")
+                        "power column is BRDF x cos(theta) in 1/sr (default: none, the scene "
+                        "gives it)")
     p.add_argument("--wavelength", type=float, default=None, metavar="NM",
-                   help="with --save: wavelength of the measurement (nm)")
-    p.add_argument("--notes", default=None, help="with --save: free text kept in the file")
+                   help="with --save: wavelength of the measurement (nm; default: none)")
+    p.add_argument("--notes", default=None,
+                   help="with --save: free text kept in the file (default: none)")
     p.set_defaults(handler=_cmd_fit)
 
     p = sub.add_parser("plot", help="polar diagram per angle of incidence (Figs. 15-17)")
     add_data_argument(p)
     add_model_argument(p)
     p.add_argument("--fit", action="store_true", help="draw the fitted model over the markers")
-    p.add_argument("--seed", type=SEED, default=0)
+    p.add_argument("--seed", type=SEED, default=0,
+                   help="seed of the fit's random extra starts, with --fit (default 0)")
     p.add_argument("--out", required=True, metavar="FILE.png",
                    help="figure file (.png, .svg or .pdf)")
     p.set_defaults(handler=_cmd_plot)

@@ -62,7 +62,8 @@ def plot_polar(measurements, predict=None, ax=None, *, label="fit", title=None):
 
 def plot_polar_per_gamma(measurements, curves: dict, fig=None, *, title=None, styles=None):
     """One polar panel per angle of incidence: measured markers and one line per model
-    (``curves``: label -> ``predict(gamma_deg, theta_deg)``), as in the paper's Fig. 25."""
+    (``curves``: label -> ``predict(gamma_deg, theta_deg)``), as in the paper's Fig. 25.
+    ``styles``: label -> a format string ("--") or a dict of line keywords."""
     gammas = measurements.gammas
     ncols = min(3, len(gammas))
     nrows = int(np.ceil(len(gammas) / ncols))
@@ -72,11 +73,18 @@ def plot_polar_per_gamma(measurements, curves: dict, fig=None, *, title=None, st
         ax = _polar_axes(fig.add_subplot(nrows, ncols, i + 1, projection="polar"))
         sel = measurements.gamma_deg == g
         th = measurements.theta_deg[sel]
-        ax.plot(np.radians(th), measurements.power[sel], "o", ms=3, color="k", label="measured")
+        ax.plot(np.radians(th), measurements.power[sel], "o", ms=3, color="k", label="measured",
+                zorder=5)
         grid = np.linspace(th.min(), th.max(), 301)
         for label, predict in curves.items():
-            ax.plot(np.radians(grid), predict(np.full_like(grid, g), grid),
-                    styles.get(label, "-"), lw=1.2, label=label)
+            style = styles.get(label, "-")
+            if isinstance(style, dict):  # line keywords: ls, lw, color, alpha, zorder
+                kw = {"ls": "-", "lw": 1.2} | style
+                ax.plot(np.radians(grid), predict(np.full_like(grid, g), grid), label=label,
+                        **kw)
+            else:
+                ax.plot(np.radians(grid), predict(np.full_like(grid, g), grid), style, lw=1.2,
+                        label=label)
         ax.set_title(f"gamma = {g:g} deg", fontsize=9)
         if i == 0:
             ax.legend(loc="lower left", bbox_to_anchor=(-0.2, -0.25), fontsize=7, frameon=False)
@@ -125,34 +133,76 @@ def plot_surface(measurements, predict, ax=None, *, highlight=None, title=None):
     return ax
 
 
-def plot_residual_map(measurements, values, ax=None, *, title=None, label="residual",
-                      symmetric=True):
-    """Residuals (or normalised residuals) over the (gamma, theta) plane (Figs. 21-22)."""
+def robust_limit(values, coverage: float = 0.98):
+    """Symmetric colour / bin limit: the ``coverage`` quantile of |values|, or their
+    maximum when nothing sticks out beyond 1.5 times that quantile (or fewer than 20
+    values)."""
+    v = np.abs(np.asarray(values, float))
+    v = v[np.isfinite(v)]
+    if not v.size:
+        return 1.0
+    full = float(v.max())
+    limit = float(np.quantile(v, coverage)) if v.size >= 20 else full
+    if limit <= 0 or full <= 1.5 * limit:
+        return full if full > 0 else 1.0
+    return limit
+
+
+def plot_residual_map(measurements, values, ax=None, *, title=None,
+                      label="measured - model", symmetric=True, robust: bool = False):
+    """Residuals (or normalised residuals) over the (gamma, theta) plane (Figs. 21-22).
+
+    ``values`` should be *measured - model* (the sign used everywhere in irreflect; say
+    so in ``label``, the colour bar's label). With ``robust``, the colour scale covers the
+    central 98 % of |values| and the rest is drawn at the limit (a single point with a
+    near-zero measured power no longer flattens the map); the colour bar then has arrows.
+    The legend sits above the axes, clear of every row of points.
+    """
     if ax is None:
-        ax = plt.figure(figsize=(6.4, 3.6)).add_subplot()
+        ax = plt.figure(figsize=(6.4, 4.0)).add_subplot()
     values = np.asarray(values, float)
-    vmax = np.nanmax(np.abs(values)) if symmetric else None
-    sc = ax.scatter(measurements.theta_deg, measurements.gamma_deg, c=values, cmap="coolwarm",
-                    vmin=-vmax if symmetric else None, vmax=vmax, s=28, edgecolor="k",
-                    linewidth=0.3)
+    if symmetric:
+        vmax = robust_limit(values) if robust else float(np.nanmax(np.abs(values)))
+        vmin = -vmax
+    else:
+        vmin = vmax = None
+    shown = np.clip(values, vmin, vmax) if symmetric else values
+    sc = ax.scatter(measurements.theta_deg, measurements.gamma_deg, c=shown, cmap="coolwarm",
+                    vmin=vmin, vmax=vmax, s=28 if measurements.n_points <= 400 else 6,
+                    edgecolor="k" if measurements.n_points <= 400 else "none", linewidth=0.3)
     mirror = np.unique(measurements.gamma_deg)
     ax.plot(-mirror, mirror, ":", color="0.4", lw=1, label="mirror direction theta = -gamma")
-    ax.figure.colorbar(sc, ax=ax, label=label)
+    clipped = symmetric and robust and np.nanmax(np.abs(values)) > vmax
+    ax.figure.colorbar(sc, ax=ax, label=label, extend="both" if clipped else "neither")
     ax.set_xlabel("receiver angle theta (deg)")
     ax.set_ylabel("angle of incidence gamma (deg)")
-    ax.legend(fontsize=7, loc="lower left")
+    ax.legend(fontsize=7, loc="lower left", bbox_to_anchor=(0.0, 1.0), frameon=False,
+              borderaxespad=0.2)
     if title:
-        ax.set_title(title, fontsize=10)
+        ax.set_title(title, fontsize=10, pad=16)
     return ax
 
 
-def plot_residual_histogram(values, ax=None, *, title=None, label="relative residual (%)"):
-    """Histogram of (normalised) residuals (the paper's Fig. 23)."""
+def plot_residual_histogram(values, ax=None, *, title=None,
+                            label="(measured - model) / measured (%)", robust: bool = False):
+    """Histogram of (normalised) residuals (the paper's Fig. 23). With ``robust``, the
+    bins cover the central 98 % of |values| and values beyond fall into the end bins
+    (their count is written on the figure)."""
     if ax is None:
         ax = plt.figure(figsize=(5.0, 3.2)).add_subplot()
     values = np.asarray(values, float)
     values = values[np.isfinite(values)]
-    ax.hist(values, bins=min(30, max(8, values.size // 5)), color="tab:blue", edgecolor="white")
+    bins = min(30, max(8, values.size // 5))
+    if robust and values.size:
+        limit = robust_limit(values)
+        outside = int(np.sum(np.abs(values) > limit))
+        ax.hist(np.clip(values, -limit, limit), bins=bins, range=(-limit, limit),
+                color="tab:blue", edgecolor="white")
+        if outside:
+            ax.text(0.99, 0.97, f"{outside} value(s) beyond +-{limit:.3g}\nin the end bins",
+                    transform=ax.transAxes, ha="right", va="top", fontsize=7)
+    else:
+        ax.hist(values, bins=bins, color="tab:blue", edgecolor="white")
     ax.set_xlabel(label)
     ax.set_ylabel("number of points")
     if title:

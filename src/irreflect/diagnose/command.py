@@ -32,14 +32,16 @@ def register(sub) -> None:
                         "e.g. two-lobe+background)")
     p.add_argument("--json", action="store_true", help="one JSON object on stdout")
     p.add_argument("--out", metavar="DIR",
-                   help="write residual maps before/after, polar fits and diagnosis.json here")
+                   help="write residual maps before/after, polar fits and diagnosis.json here "
+                        "(default: print only)")
     p.add_argument("--extensions", metavar="A,B",
                    help="candidate extensions, comma-separated (default: all registered)")
     p.add_argument("--max-effects", type=NON_NEGATIVE_INT, default=3, metavar="N",
                    help="add at most N effects (default 3)")
     p.add_argument("--alpha", type=FINITE, default=0.01,
                    help="significance level of the lack-of-fit and structure tests (default 0.01)")
-    p.add_argument("--seed", type=SEED, default=0, help="seed of the fits' random starts")
+    p.add_argument("--seed", type=SEED, default=0,
+                   help="seed of the fits' random starts (default 0)")
     p.set_defaults(handler=_cmd_diagnose)
 
 

@@ -49,7 +49,8 @@ def plot_residual_map(gamma_deg, theta_deg, normalized_residuals, ax=None, *, ti
     ax.legend(loc="lower center", bbox_to_anchor=(0.5, 1.0), ncol=2, fontsize=7,
               frameon=False, borderaxespad=0.2)
     if colorbar:
-        ax.figure.colorbar(sc, ax=ax, label="residual / sigma", shrink=0.9)
+        ax.figure.colorbar(sc, ax=ax, label="(measured - model) / sigma", shrink=0.9,
+                           extend="both" if np.nanmax(np.abs(z)) > limit else "neither")
     if title:
         ax.set_title(title, fontsize=10, pad=18)
     return ax

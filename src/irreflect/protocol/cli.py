@@ -150,17 +150,19 @@ def register(sub) -> None:
                     "negative on the source side (magnitudes also accepted).")
     src = p.add_mutually_exclusive_group(required=True)
     src.add_argument("--gammas", nargs="+", type=ANGLE, metavar="G",
-                     help="three angles of incidence in degrees, e.g. -20 -40 -60 (or 20 40 60)")
+                     help="three angles of incidence in degrees, e.g. -20 -40 -60 (or 20 40 60); "
+                          "one of --gammas, --design-from, --lobe-from is required")
     src.add_argument("--design-from", metavar="DENSE.csv",
-                     help="design from a pilot dense scan of the material (CSV or Parquet)")
+                     help="design from a pilot dense scan of the material (CSV or Parquet; "
+                          "default: none)")
     src.add_argument("--lobe-from", metavar="PILOT.csv",
                      help="glossy-aware 12 points designed from a pilot scan: lobe-width "
                           "offsets from its fitted specular lobe, points at its receiver "
-                          "angles, the layout that predicts it best")
+                          "angles, the layout that predicts it best (default: none)")
     p.add_argument("--specular-index", type=POSITIVE, default=None, metavar="N",
                    help="with --gammas: glossy-aware 12 points for a specular lobe index N "
                         "(lobe-width points at its half width acos(2^(-1/N)) instead of "
-                        "--mirror-offset)")
+                        "--mirror-offset; default: none, the paper's offsets)")
     p.add_argument("--layout", choices=("paper", "balanced"), default="paper",
                    help="with --specular-index: 'paper' (5+2+5 points, default) or 'balanced' "
                         "(4 per gamma: mirror, lobe width, two diffuse)")
@@ -181,18 +183,22 @@ def register(sub) -> None:
     p.add_argument("--n", type=POSITIVE_INT, default=None,
                    help="--design-from: number of points (default: the knee of the front)")
     p.add_argument("--gamma-settings", type=POSITIVE_INT, default=None, metavar="K",
-                   help="--design-from: use only K angle-of-incidence settings")
+                   help="--design-from: use only K angle-of-incidence settings (default: any)")
     p.add_argument("--model", default="two-lobe", help="--design-from: model (default two-lobe)")
     p.add_argument("--selector", default="nsga2", help="--design-from: optimiser (default nsga2)")
-    p.add_argument("--pop-size", type=int_at_least(2), default=100)
-    p.add_argument("--generations", type=POSITIVE_INT, default=200)
-    p.add_argument("--seed", type=SEED, default=0)
+    p.add_argument("--pop-size", type=int_at_least(2), default=100,
+                   help="--design-from: NSGA-II population (default 100)")
+    p.add_argument("--generations", type=POSITIVE_INT, default=200,
+                   help="--design-from: NSGA-II generations (default 200)")
+    p.add_argument("--seed", type=SEED, default=0,
+                   help="seed of the optimiser and of the fits' random starts (default 0)")
     p.add_argument("--average-duplicates", action="store_true",
-                   help="--design-from: average duplicated (gamma, theta) rows")
+                   help="--design-from / --lobe-from: average duplicated (gamma, theta) rows")
     p.add_argument("--format", choices=("csv", "json", "md"), default=None,
                    help="output format (default: from --out's extension .csv, .json or .md; "
                         "csv on stdout)")
-    p.add_argument("--out", metavar="FILE", help="write here (atomically) instead of stdout")
+    p.add_argument("--out", metavar="FILE",
+                   help="write here (atomically) instead of stdout (default: stdout)")
     p.set_defaults(handler=_cmd_protocol)
 
     p = sub.add_parser(
@@ -203,18 +209,24 @@ def register(sub) -> None:
                     "within --tolerance degrees, and listed.")
     p.add_argument("protocol", metavar="PROTOCOL", help="protocol CSV or JSON")
     p.add_argument("dense", metavar="DENSE", help="dense measurement table (CSV or Parquet)")
-    p.add_argument("--model", default="two-lobe")
+    p.add_argument("--model", default="two-lobe",
+                   help="reflection model fitted on the protocol's points (default two-lobe; "
+                        "see 'irreflect models')")
     p.add_argument("--tolerance", type=NON_NEGATIVE, default=5.0,
-                   help="largest gap (deg) to the nearest measured theta that may be bridged")
+                   help="largest gap (deg) to the nearest measured theta that may be bridged "
+                        "(default 5)")
     p.add_argument("--snap", action="store_true",
                    help="use the nearest measured angle instead of interpolating")
     p.add_argument("--monte-carlo", type=NON_NEGATIVE_INT, default=0, metavar="TRIALS",
-                   help="also run a Monte Carlo of goniometer errors with this many trials")
+                   help="also run a Monte Carlo of goniometer errors with this many trials "
+                        "(default 0: none)")
     p.add_argument("--angle-error", type=NON_NEGATIVE, default=1.0,
                    help="Monte Carlo: half-width of the uniform angle error (deg, default 1)")
     p.add_argument("--power-noise", type=NON_NEGATIVE, default=0.01,
                    help="Monte Carlo: relative power noise, 1-sigma (default 0.01)")
-    p.add_argument("--seed", type=SEED, default=0)
-    p.add_argument("--average-duplicates", action="store_true")
+    p.add_argument("--seed", type=SEED, default=0,
+                   help="seed of the fit's random starts and of the Monte Carlo (default 0)")
+    p.add_argument("--average-duplicates", action="store_true",
+                   help="average the power of duplicated (gamma, theta) rows of DENSE")
     p.add_argument("--json", action="store_true", help="one JSON object on stdout")
     p.set_defaults(handler=_cmd_evaluate)

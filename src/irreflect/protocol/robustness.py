@@ -257,8 +257,10 @@ def protocol_robustness(protocol, reference, *, model=None, dense=None, n_trials
     params = np.empty((rows.shape[0], model_obj.n_params))
     failed = np.empty(rows.shape[0], bool)
     chunks = range(0, rows.shape[0], _CHUNK)
-    if progress:
-        from tqdm.auto import tqdm
+    from .._progress import on_terminal
+
+    if progress and on_terminal():  # a transient bar; nothing through a pipe
+        from tqdm import tqdm
 
         chunks = tqdm(chunks, desc="Monte Carlo", unit="batch", leave=False)
     for start in chunks:

@@ -96,11 +96,13 @@ def register(sub) -> None:
     p.add_argument("--dt", type=POSITIVE, default=None, metavar="NS",
                    help="h(t) bin width in ns (default 0.25)")
     p.add_argument("--scheduler", default=None, metavar="ADDRESS",
-                   help="dask.distributed scheduler (e.g. tcp://host:8786) for the receivers")
+                   help="dask.distributed scheduler (e.g. tcp://host:8786) for the receivers "
+                        "(default: local)")
     p.add_argument("--workers", type=POSITIVE_INT, default=None,
                    help="local worker processes for the receivers (default 1)")
     p.add_argument("--no-figures", action="store_true", help="numbers only")
-    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    p.add_argument("--quiet", action="store_true",
+                   help="no progress display (a bar on a terminal, lines through a pipe)")
     p.set_defaults(handler=_cmd_room)
 
 

@@ -26,7 +26,6 @@ from __future__ import annotations
 
 import math
 import os
-import sys
 import time
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
@@ -211,10 +210,9 @@ def simulate(scene: Scene, *, method=None, bounces=None, cell_m=None, rays=None,
     pairs = [(e, r) for e in range(len(scene.emitters)) for r in range(len(scene.receivers))]
     bar = None
     if progress:
-        from tqdm import tqdm
+        from .._progress import progress as progress_display
 
-        bar = tqdm(total=len(pairs), desc=f"room ({s['method']})", unit="link", file=sys.stderr,
-                   dynamic_ncols=True)
+        bar = progress_display(total=len(pairs), desc=f"room ({s['method']})", unit="link")
     try:
         if s["method"] == "recursive" and K_ >= 1:
             ctx.cells = discretize(scene, s["cell_m"])

@@ -242,7 +242,7 @@ def validation_page(quick: bool):
     md = ("### Validation\n\nBarry et al. (1993), configuration A (5 x 5 x 3 m, walls and ceiling "
           "0.8, floor 0.3, emitter at the ceiling centre facing down, receiver at (0.5, 1, 0), "
           "1 cm^2, 85 deg): DC gain per order. The vlc-rm column is the independent "
-          "implementation run by `python experiments/bench_room.py` (not by this report); "
+          "implementation run by `.venv/bin/python experiments/bench_room.py` (not by this report); "
           "Barry's paper publishes h(t) curves, not gains; the line of sight is the closed form "
           f"(Eq. 5), {los:.5g} at {tau * 1e9:.3f} ns.\n\n{{table:room_barry_a}}\n\n"
           "One reflection off a single Lambertian floor (every other surface black): the "

@@ -2,7 +2,8 @@
 
 A multi-objective search over subsets of a dense goniometer scan: minimise the number of
 points N and 1 - R^2 of the model fitted on those points only, evaluated on all points
-(Fig. 18), pick the knee, and compare Method A (all points), B (the search's best 12) and
+(Fig. 18), pick the knee (in a fixed normalisation) and the noise-aware "enough points"
+(:mod:`.front`), and compare Method A (all points), B (the search's best 12) and
 12 (the paper's protocol, Table 1) as in Table 5.
 
 >>> from irreflect.selection import run_selection
@@ -10,6 +11,7 @@ points N and 1 - R^2 of the model fitted on those points only, evaluated on all 
 >>> res.front, res.knee_n, res.best_mask(12)                          # doctest: +SKIP
 """
 
+from .front import EnoughPoints, enough_points, knee_coordinates
 from .problem import SEARCH_FIT, VERIFY_FIT, FitSettings, SubsetEvaluator, SubsetProblem
 from .run import (
     HV_REFERENCE,
@@ -27,6 +29,9 @@ from .run import (
 from .selectors import SELECTORS, get_selector
 
 __all__ = [
+    "EnoughPoints",
+    "enough_points",
+    "knee_coordinates",
     "HV_REFERENCE",
     "SEARCH_FIT",
     "SELECTORS",

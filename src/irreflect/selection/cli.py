@@ -4,8 +4,9 @@ One DATA file and one seed write straight into ``--out DIR``::
 
     DIR/pareto.csv           n_points, one_minus_r2, r2, points ("(gamma,theta);...", degrees)
     DIR/optimal_points.csv   gamma_deg, theta_deg of the best 12-point subset
-    DIR/summary.json         knee_n, methods A/B/12, evaluations, failed_fits, seconds, ...
-    DIR/pareto.png           the frontier with the ideal point and the knee (Fig. 18)
+    DIR/summary.json         knee_n, enough_points, methods A/B/12, evaluations, seconds, ...
+    DIR/pareto.png           the frontier with the ideal point, the knee, "enough points"
+                             and the best 12 points (Fig. 18)
     DIR/optimal_points.png   the chosen points in the (gamma, theta) plane (Fig. 19)
 
 Several DATA files and/or ``--seeds`` run in parallel (local processes, or a Dask cluster
@@ -64,8 +65,8 @@ def write_selection(result: SelectionResult, methods: dict | None, directory) ->
     with open(directory / "summary.json", "w") as fh:
         json.dump(summary_dict(result, methods), fh, indent=2, default=json_default)
         fh.write("\n")
-    ax = plot_pareto(result.front, title=f"{meas.name}: Pareto frontier ({result.selector}, "
-                                         f"seed {result.seed})")
+    ax = plot_pareto(result, methods=methods, legend_below=True,
+                     title=f"{meas.name}: Pareto frontier ({result.selector}, seed {result.seed})")
     save_figure(ax.figure, directory / "pareto.png")
     masks = {f"best {n_opt}": result.best_mask(n_opt)}
     if result.knee_n != n_opt:
@@ -83,10 +84,31 @@ def _print_run(result: SelectionResult, methods: dict | None) -> None:
           f"{result.seconds:.1f} s, {result.fits_per_second:.0f} fits/s; "
           f"hypervolume {result.hypervolume:.5f}")
     front = result.front
-    shown = front[front["n_points"] <= max(result.knee_n, PAPER_N) + 3]
+    enough = result.enough
+    last = max(result.knee_n, PAPER_N,
+               ((enough.n_high or enough.n or 0) if enough is not None else 0))
+    shown = front[front["n_points"] <= last + 3]
+    more = len(front) - len(shown)
     print("  frontier: " + ", ".join(f"N={int(r.n_points)}: R2={r.r2:.5f}"
-                                     for r in shown.itertuples()))
-    print(f"  knee: N = {result.knee_n}")
+                                     for r in shown.itertuples())
+          + (f" ... ({more} more up to N={int(front['n_points'].max())}, in pareto.csv)"
+             if more else ""))
+    summary = result.front_summary
+    if summary is not None:
+        print(f"  knee: N = {result.knee_n} (closest to the ideal point with N scaled over "
+              f"{summary.n_min}..{summary.n_total} and 1 - R^2 over {summary.reference:.4g}..1; "
+              f"frontier completed for every N up to {summary.completed_up_to}, "
+              f"{summary.completion_fits} extra fits)")
+    else:
+        print(f"  knee: N = {result.knee_n}")
+    if enough is not None:
+        spread = ("" if enough.sigma_low == enough.sigma_high else
+                  f", 68 % interval {enough.sigma_low:.3g}-{enough.sigma_high:.3g}")
+        print(f"  enough points: {enough.range_text()}: the fewest whose fit's RMSE on all "
+              f"points is within the noise sigma = {enough.sigma:.4g} ({enough.noise}"
+              f"{spread}) of the all-points fit's {enough.rmse_all:.4g}")
+    elif summary is not None and summary.enough_note:
+        print(f"  {summary.enough_note}")
     if methods is not None:
         parts = []
         for key in ("A", "B", "12"):
@@ -94,6 +116,8 @@ def _print_run(result: SelectionResult, methods: dict | None) -> None:
             parts.append(f"{key}: R2={r2:.5f} ({methods[key]['n_points']} points)"
                          if r2 is not None else f"{key}: n/a")
         print("  methods: " + "; ".join(parts) + f"  [{methods['note']}]")
+        if methods["12"].get("how"):
+            print(f"  method 12: {methods['12']['how']}")
 
 
 def _cmd_select(args) -> int:
@@ -163,7 +187,11 @@ def _run_and_write(args, tables, seeds, kwargs, out: Path, flat: bool) -> int:
             write_selection(o.result, o.methods, tmp / o.dataset / f"seed{o.seed}")
             s = summary_dict(o.result, o.methods)
             summaries.append(s)
+            e = o.result.enough
             row = {"dataset": o.dataset, "seed": o.seed, "knee_n": o.result.knee_n,
+                   "enough_n": None if e is None else e.n,
+                   "enough_n_low": None if e is None else e.n_low,
+                   "enough_n_high": None if e is None else e.n_high,
                    f"r2_at_{PAPER_N}": 1 - o.result.best_score(PAPER_N),
                    "hypervolume": o.result.hypervolume, "evaluations": o.result.evaluations,
                    "failed_fits": o.result.failed_fits, "seconds": round(o.result.seconds, 2),
@@ -207,18 +235,23 @@ def register(sub) -> None:
                         "generations fits")
     p.add_argument("--seed", type=SEED, default=0, help="seed (default 0)")
     p.add_argument("--seeds", type=SEED, nargs="+", metavar="S",
-                   help="several seeds: one run per DATA and seed")
+                   help="several seeds: one run per DATA and seed (default: --seed only)")
     p.add_argument("--max-points", type=POSITIVE_INT, default=None,
                    help="largest number of points considered (default: all)")
     p.add_argument("--checkpoint", metavar="FILE",
                    help="save the search every few generations and resume from it if it "
-                        "exists (with several runs or --scheduler: a folder of per-run files)")
+                        "exists (with several runs or --scheduler: a folder of per-run files; "
+                        "default: no checkpoints)")
     p.add_argument("--checkpoint-every", type=POSITIVE_INT, default=10, metavar="G",
                    help="generations between checkpoints (default 10)")
     p.add_argument("--scheduler", metavar="ADDRESS",
-                   help="dask.distributed scheduler (e.g. tcp://host:8786) for the runs")
+                   help="dask.distributed scheduler (e.g. tcp://host:8786) for the runs "
+                        "(default: local processes)")
     p.add_argument("--workers", type=POSITIVE_INT, default=None,
-                   help="local worker processes for several runs (default: CPU count)")
-    p.add_argument("--quiet", action="store_true", help="no progress bar")
+                   help="local worker processes for several runs, one library thread each "
+                        "(default: one per core, at most one per run)")
+    p.add_argument("--quiet", action="store_true",
+                   help="no progress display (a bar on a terminal, one line per stage through "
+                        "a pipe)")
     p.add_argument("--out", required=True, metavar="DIR", help="output folder")
     p.set_defaults(handler=_cmd_select)

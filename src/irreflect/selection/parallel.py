@@ -12,10 +12,10 @@ Ctrl-C: the runs in progress stop at their next generation and return what they 
 from __future__ import annotations
 
 import concurrent.futures as cf
+import contextlib
 import multiprocessing as mp
 import os
 import re
-import sys
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -77,6 +77,36 @@ def _tasks(datasets, seeds, kwargs, with_methods, checkpoint_dir) -> list[_Task]
     return out
 
 
+#: Thread pools of the numerical libraries: one thread per worker process (a user's own
+#: setting of these variables is kept), so that N workers use N cores, not N x cores.
+WORKER_THREAD_VARIABLES = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS",
+                           "VECLIB_MAXIMUM_THREADS", "NUMBA_NUM_THREADS")
+
+
+@contextlib.contextmanager
+def one_thread_per_worker():
+    """While worker processes start, their libraries' thread counts default to 1."""
+    added = [k for k in WORKER_THREAD_VARIABLES if k not in os.environ]
+    for k in added:
+        os.environ[k] = "1"
+    try:
+        yield
+    finally:
+        for k in added:
+            os.environ.pop(k, None)
+
+
+def default_workers(n_runs: int) -> int:
+    """Local worker processes when ``--workers`` is not given: one per core this process
+    may use, at most one per run. With one library thread per worker
+    (:func:`one_thread_per_worker`) the pool was faster than one process both on a quiet
+    2-core machine (1.8x) and with one core kept busy by another process (1.3x); with the
+    libraries' own threads it was slower (1.5x and 1.2x): ``experiments/bench_workers.py``."""
+    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (
+        os.cpu_count() or 1)
+    return max(1, min(cores, n_runs))
+
+
 def run_many(datasets, seeds=(0,), *, scheduler=None, workers: int | None = None,
              progress: bool = False, with_methods: bool = True, checkpoint_dir=None,
              **kwargs) -> tuple[list[RunOutcome], bool]:
@@ -87,8 +117,9 @@ def run_many(datasets, seeds=(0,), *, scheduler=None, workers: int | None = None
     datasets : Measurements, DataFrames or paths (names, i.e. file stems, must differ)
     seeds : seeds, one run per dataset and seed
     scheduler : None (local), a ``dask.distributed`` scheduler address or a ``Client``
-    workers : local worker processes (default: CPU count, at most the number of runs;
-        1 runs everything in this process)
+    workers : local worker processes (default: :func:`default_workers`, one per core, at
+        most one per run; 1 runs everything in this process). Each worker's numerical
+        libraries use one thread (:func:`one_thread_per_worker`).
     checkpoint_dir : folder for one checkpoint per run (``<name>_seed<S>.ckpt``); with a
         Dask cluster it must be visible to the workers
     kwargs : passed to :func:`run_selection` (model, selector, pop_size, generations, ...)
@@ -102,13 +133,13 @@ def run_many(datasets, seeds=(0,), *, scheduler=None, workers: int | None = None
     tasks = _tasks(datasets, seeds, kwargs, with_methods, checkpoint_dir)
     bar = None
     if progress:
-        from tqdm import tqdm
+        from .._progress import progress as progress_display
 
-        bar = tqdm(total=len(tasks), desc="select runs", unit="run", file=sys.stderr)
+        bar = progress_display(total=len(tasks), desc="select runs", unit="run")
     try:
         if scheduler is not None:
             return _run_dask(tasks, scheduler, bar)
-        n_workers = min(workers or os.cpu_count() or 1, len(tasks))
+        n_workers = min(workers, len(tasks)) if workers else default_workers(len(tasks))
         if n_workers <= 1:
             return _run_serial(tasks, bar)
         return _run_pool(tasks, n_workers, bar)
@@ -148,8 +179,9 @@ def _collect(futures, results):
 def _run_pool(tasks, n_workers, bar):
     results: dict[int, RunOutcome] = {}
     ctx = mp.get_context("forkserver")
-    pool = cf.ProcessPoolExecutor(max_workers=n_workers, mp_context=ctx)
-    futures = {pool.submit(_run_task, t): i for i, t in enumerate(tasks)}
+    with one_thread_per_worker():  # the workers (and a forkserver started now) inherit it
+        pool = cf.ProcessPoolExecutor(max_workers=n_workers, mp_context=ctx)
+        futures = {pool.submit(_run_task, t): i for i, t in enumerate(tasks)}
     try:
         for fut in cf.as_completed(futures):
             results[futures[fut]] = fut.result()

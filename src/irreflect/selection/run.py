@@ -14,7 +14,6 @@ from __future__ import annotations
 import contextlib
 import hashlib
 import numbers
-import sys
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -29,6 +28,13 @@ from ..errors import IrreflectError
 from ..fitting import fit
 from ..models import get_model
 from ..validation import check_int, check_masks, check_seed, check_selection_budget
+from .front import (  # noqa: F401  (knee_index, knee_point, non_dominated re-exported)
+    FrontSummary,
+    finish_front,
+    knee_index,
+    knee_point,
+    non_dominated,
+)
 from .problem import SEARCH_FIT, VERIFY_FIT, FitSettings, SubsetEvaluator, check_sizes, unpack
 from .selectors import SearchSpec, get_selector
 
@@ -39,42 +45,7 @@ PAPER_N = 12
 
 
 # ----------------------------------------------------------------------------- front tools
-def knee_index(n_points, one_minus_r2) -> int:
-    """Index of the frontier point closest to the ideal point in normalised objective space
-    (the paper's Fig. 18): both objectives are scaled to [0, 1] over the frontier, the
-    ideal point is (0, 0) (fewest points, best fit); ties go to fewer points."""
-    x = np.asarray(n_points, float)
-    y = np.asarray(one_minus_r2, float)
-    if x.size == 0:
-        raise IrreflectError("the frontier is empty: no subset could be fitted")
-    span_x = np.ptp(x) or 1.0
-    span_y = np.ptp(y) or 1.0
-    dist = np.hypot((x - x.min()) / span_x, (y - y.min()) / span_y)
-    best = np.flatnonzero(dist <= dist.min() + 1e-12)
-    return int(best[np.argmin(x[best])])
-
-
-def knee_point(n_points, one_minus_r2=None) -> int:
-    """Number of points of the knee (see :func:`knee_index`). Accepts a front DataFrame
-    (columns ``n_points, one_minus_r2``) or the two arrays."""
-    if isinstance(n_points, pd.DataFrame):
-        one_minus_r2 = n_points["one_minus_r2"].to_numpy()
-        n_points = n_points["n_points"].to_numpy()
-    return int(np.asarray(n_points)[knee_index(n_points, one_minus_r2)])
-
-
-def non_dominated(n_points, scores) -> np.ndarray:
-    """Indices of the non-dominated points of (N, score), by increasing N (strictly better
-    score than every smaller N; the first of equal (N, score) pairs)."""
-    n_points = np.asarray(n_points)
-    scores = np.asarray(scores, float)
-    order = np.lexsort((scores, n_points))
-    keep, best = [], np.inf
-    for i in order:
-        if np.isfinite(scores[i]) and scores[i] < best:
-            keep.append(i)
-            best = scores[i]
-    return np.asarray(keep, int)
+# knee_index, knee_point, non_dominated: see .front (the knee's fixed normalisation)
 
 
 def hypervolume(n_points, one_minus_r2, n_total: int) -> float:
@@ -205,6 +176,12 @@ class SelectionResult:
     generations_done: int | None = None
     interrupted: bool = False
     settings: dict = field(default_factory=dict)
+    front_summary: FrontSummary | None = field(default=None, repr=False)
+
+    @property
+    def enough(self):
+        """The noise-aware "enough points" (:class:`.front.EnoughPoints`) or None."""
+        return None if self.front_summary is None else self.front_summary.enough
 
     @property
     def fits_per_second(self) -> float:
@@ -246,6 +223,16 @@ class SelectionResult:
             "seed": self.seed,
             "knee_n": self.knee_n,
             "knee_r2": float(self.front.set_index("n_points").loc[self.knee_n, "r2"]),
+            "knee_rule": ("closest to the ideal point in x = (N - k) / (n - k), "
+                          "y = (e - e_A) / (1 - e_A), e = 1 - R^2, e_A of the fit on all "
+                          "points"),
+            "reference_r2_all_points": (None if self.front_summary is None
+                                        else 1.0 - self.front_summary.reference),
+            "enough_points": None if self.enough is None else self.enough.as_dict(),
+            "front_completed_up_to": (None if self.front_summary is None
+                                      else self.front_summary.completed_up_to),
+            "completion_fits": (0 if self.front_summary is None
+                                else self.front_summary.completion_fits),
             "evaluations": self.evaluations,
             "failed_fits": self.failed_fits,
             "verify_fits": self.verify_fits,
@@ -280,10 +267,9 @@ class _Progress:
         self.t0 = time.perf_counter()
         self.bar = None
         if enabled:
-            from tqdm import tqdm
+            from .._progress import progress
 
-            self.bar = tqdm(total=1, desc=f"select {name}", unit=unit, file=sys.stderr,
-                            dynamic_ncols=True, leave=True)
+            self.bar = progress(total=1, desc=f"select {name}", unit=unit)
 
     def __call__(self, done: int, total: int) -> None:
         if self.bar is None:
@@ -306,7 +292,7 @@ def run_selection(measurements, model="two-lobe", selector: str = "nsga2", pop_s
                   candidates=None, progress: bool = False, checkpoint=None, *,
                   initial=None, checkpoint_every: int = 10,
                   search_fit: FitSettings = SEARCH_FIT, verify_fit: FitSettings = VERIFY_FIT,
-                  include_all_points: bool = True) -> SelectionResult:
+                  include_all_points: bool = True, enough: bool = True) -> SelectionResult:
     """Find the Pareto frontier of (number of points N, 1 - R^2) over subsets of a dense set.
 
     Parameters
@@ -328,6 +314,12 @@ def run_selection(measurements, model="two-lobe", selector: str = "nsga2", pop_s
     initial : optional (m, n) masks placed in the first population (NSGA-II)
     include_all_points : put the full candidate set in the first population (NSGA-II)
         when ``max_points`` allows it, so the frontier ends at Method A
+    enough : also find the noise-aware "enough points" (:func:`.front.enough_points`)
+
+    The frontier is completed for every N from the smallest to ``max(knee, 12)``
+    (:func:`.front.complete_front`) and the knee taken in a fixed normalisation
+    (:func:`.front.knee_index`), so neither depends on how far the search's frontier
+    happens to extend.
 
     Returns
     -------
@@ -393,18 +385,16 @@ def run_selection(measurements, model="two-lobe", selector: str = "nsga2", pop_s
     if not evaluator.archive:
         raise IrreflectError("the search was stopped before any subset was fitted: nothing to report")
     verified, verify_fits = _verify(evaluator, verify_fit)
-    ns = np.array(sorted(verified))
-    scores = np.array([verified[k][0] for k in ns])
-    keep = non_dominated(ns, scores)
-    front = pd.DataFrame({"n_points": ns[keep].astype(int), "one_minus_r2": scores[keep]})
-    front["r2"] = 1.0 - front["one_minus_r2"]
-    masks = {int(k): verified[int(k)][1] for k in front["n_points"]}
+    done = finish_front(meas, evaluator, verified, model=model_obj.name, n_min=n_min,
+                        n_max=n_max, candidates=cand, seed=seed, verify_fit=verify_fit,
+                        paper_n=PAPER_N, with_enough=enough)
+    front, masks, verified = done.front, done.masks, done.verified
     search_best = {k: (v[0][0], unpack(v[0][2], n)) for k, v in evaluator.archive.items()}
     seconds = time.perf_counter() - t_start + spec.info.get("seconds_before_resume", 0.0)
     return SelectionResult(
         front=front.reset_index(drop=True),
         masks=masks,
-        knee_n=knee_point(front),
+        knee_n=done.knee_n,
         evaluations=evaluator.evaluations,
         failed_fits=evaluator.failed_fits,
         seconds=seconds,
@@ -421,6 +411,7 @@ def run_selection(measurements, model="two-lobe", selector: str = "nsga2", pop_s
         cache_hits=evaluator.cache_hits,
         generations_done=spec.info.get("generations_done"),
         interrupted=interrupted,
+        front_summary=done,
         settings={"pop_size": pop_size, "generations": generations, "max_points": n_max,
                   "n_candidates": int(cand.sum()),
                   "search_fit": search_fit.as_dict(), "verify_fit": verify_fit.as_dict(),
@@ -470,6 +461,10 @@ def compare_methods(meas: Measurements, result: SelectionResult | None = None,
     each method has ``r2`` and ``n_points`` (B is None-valued without a 12-point subset).
     """
     meas = as_measurements(meas)
+    summary = None if result is None else result.front_summary
+    if (full_fit is None and summary is not None and summary.n_total == meas.n_points
+            and result.model == get_model(model).name):
+        full_fit = summary.reference_fit  # the search's own fit on all points
     if full_fit is not None:
         r2_a = float(metrics.r2(meas.power, full_fit.predict(meas.gamma_deg, meas.theta_deg)))
     else:
@@ -491,9 +486,13 @@ def compare_methods(meas: Measurements, result: SelectionResult | None = None,
     snapped = snap_points(meas, points)
     mask_12 = np.zeros(meas.n_points, bool)
     mask_12[snapped["index"].to_numpy()] = True
+    gammas = sorted({float(g) for g in snapped["gamma_requested"]}, key=abs)
+    moved = snapped["distance_deg"] > 1e-9
     out["12"] = {"r2": _r2_all(meas, mask_12, model, seed), "n_points": int(mask_12.sum()),
-                 "gammas": sorted({float(g) for g in snapped["gamma_requested"]}, key=abs),
-                 "max_snap_deg": float(snapped["distance_deg"].max())}
+                 "gammas": gammas,
+                 "max_snap_deg": float(snapped["distance_deg"].max()),
+                 "n_snapped": int(moved.sum()),
+                 "how": _method12_text(meas, gammas, snapped, protocol_points is None)}
     a, b, c = out["A"]["r2"], out["B"]["r2"], out["12"]["r2"]
     tol = 1e-9
     if b is None:
@@ -510,3 +509,21 @@ def compare_methods(meas: Measurements, result: SelectionResult | None = None,
             out["note"] = ("12 above B: the search did not find the best 12-point subset within "
                            "its budget (raise --generations or --pop-size)")
     return out
+
+
+def _method12_text(meas: Measurements, gammas, snapped: pd.DataFrame, paper_rule: bool) -> str:
+    """How Method 12's points were made, in one line (printed by ``select``)."""
+    table1 = sorted(abs(g) for g in gammas) == [20.0, 40.0, 60.0]
+    if paper_rule:
+        head = ("the paper's rule (section 4.3, Eqs. 23-34) at gamma "
+                + "/".join(f"{g:g}" for g in gammas) + " deg"
+                + (" (Table 1's angles of incidence)" if table1 else
+                   " (three of this table's angles of incidence: it lacks Table 1's -20/-40/-60)")
+                + f", receivers within {np.min(meas.theta_deg):g}..{np.max(meas.theta_deg):g} deg")
+    else:
+        head = f"the given points at gamma {'/'.join(f'{g:g}' for g in gammas)} deg"
+    moved = snapped[snapped["distance_deg"] > 1e-9]
+    if not len(moved):
+        return head + "; every point was measured exactly"
+    return (head + f"; {len(moved)} of {len(snapped)} points snapped to the nearest measured "
+            f"point, by {moved['distance_deg'].min():.2g}-{moved['distance_deg'].max():.2g} deg")
