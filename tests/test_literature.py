@@ -6,11 +6,11 @@ import numpy as np
 import pytest
 from conftest import paper_grid
 
-from irreflect.models import literature as lit
 from irreflect.data import Measurements
 from irreflect.errors import IrreflectError
 from irreflect.fitting import fit
 from irreflect.models import Geometry, get_model, model_names, phong_power
+from irreflect.models import literature as lit
 
 RNG_SEED = 20240605
 

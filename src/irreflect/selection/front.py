@@ -284,7 +284,7 @@ def enough_points(meas, front: pd.DataFrame, masks: dict, reference_fit, model, 
     its difference from the all-points fit's needs the per-point residuals, from batched
     subset fits (``chunk`` frontier points at a time, only as far as the decision needs)."""
     from ..fitting import fit_subsets
-    from ..model import get_model
+    from ..models import get_model
 
     model_obj = get_model(model)
 
