@@ -32,19 +32,12 @@ sys.path.insert(0, str(ROOT / "src"))
 from irreflect import fit  # noqa: E402
 from irreflect.data import Measurements, write_measurements  # noqa: E402
 from irreflect.models import two_lobe_power  # noqa: E402
+from irreflect.paper import TABLE1, TABLE3  # noqa: E402
 
 PAPER = ROOT.parent / "shared" / "paper" / "tables"
 SEED = 20170919  # fixed: the bundled files are reproducible bit for bit
 #: 1-sigma of the added noise (power units): about 0.8 x the paper's Table 2 RMSE
 NOISE_SIGMA = {"terrazzo": 0.006, "plasterboard": 0.002, "foam_board": 0.015}
-#: Table 3 of the paper, copied so that the script also runs without ../shared
-TABLE3 = {
-    "terrazzo": (0.01713, -2.379, 1.021, 0.4283, 34.55, -0.3772, 0.4142),
-    "plasterboard": (0.001284, -4.911, 1.083, 0.4636, 33.41, 1.382, 0.5215),
-    "foam_board": (0.01742, -3.103, 1.457, 1.005, 102.0, 0.731, 0.3879),
-}
-TABLE1 = [(-20, 20), (-20, 10), (-20, 30), (-20, -40), (-20, 70), (-40, -20), (-40, 60),
-          (-60, 60), (-60, 50), (-60, 70), (-60, 0), (-60, -70)]
 
 
 def sampling_plan(dense: bool) -> tuple[np.ndarray, np.ndarray]:

@@ -8,7 +8,7 @@ import pandas as pd
 import pytest
 
 from irreflect.cli import main
-from irreflect.report import paper_tables_dir
+from irreflect.paper import paper_tables_dir
 
 
 @pytest.fixture(scope="module")

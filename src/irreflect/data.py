@@ -528,16 +528,10 @@ def bundled_dir() -> Path:
 
 
 def real_data_dir() -> Path | None:
-    """``../shared/datasets/real`` beside the checkout (or ``$IRREFLECT_REAL_DATA``), if present."""
-    env = os.environ.get("IRREFLECT_REAL_DATA")
-    candidates = [Path(env)] if env else []
-    root = project_root()
-    candidates += [root.parent / "shared" / "datasets" / "real",
-                   root.parent.parent / "shared" / "datasets" / "real"]
-    for c in candidates:
-        if c.is_dir():
-            return c
-    return None
+    """The real measured data beside the checkout (see :func:`irreflect.paper.real_data_dir`)."""
+    from .paper import real_data_dir as _real
+
+    return _real()
 
 
 def load_bundled(name: str) -> Measurements:

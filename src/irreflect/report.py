@@ -26,6 +26,7 @@ from ._atomic import atomic_directory, atomic_path, claim_output
 from .data import BUNDLED, Measurements, bundled_dir, load_bundled, read_measurements
 from .errors import FitWarning, IrreflectError
 from .fitting import fit
+from .paper import paper_tables_dir as _paper_tables_dir
 from .reporting import Finding, ReportContext, Section
 from .validation import check_points_budget, check_seed, short_list
 
@@ -449,16 +450,6 @@ def _load_datasets(data_dir=None) -> tuple[dict[str, Measurements], frozenset]:
     return out, frozenset(recon)
 
 
-def paper_tables_dir() -> Path | None:
-    from .data import project_root
-
-    for c in (project_root().parent / "shared" / "paper" / "tables",
-              project_root().parent.parent / "shared" / "paper" / "tables"):
-        if c.is_dir():
-            return c
-    return None
-
-
 def reproduce(out_dir="out", data_dir=None, quick=False, seed=0, progress=True,
               scene=None) -> dict:
     """Run every capability and write the report; returns a summary dict. ``scene``: a room
@@ -511,7 +502,7 @@ def _run_report(out_dir, datasets, recon, quick, seed, data_dir, t_start, bar, a
             advance(f"fit {name}")
             fits[name] = fit(meas, seed=seed)
         ctx = ReportContext(datasets=datasets, fits=fits, out_dir=tmp, quick=quick, seed=seed,
-                            paper_dir=paper_tables_dir(), progress=advance,
+                            paper_dir=_paper_tables_dir(), progress=advance,
                             reconstructions=recon)
         for key, title, spec in PROVIDERS:
             advance(key)

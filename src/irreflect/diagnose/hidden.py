@@ -29,13 +29,8 @@ from ..errors import IrreflectError, unknown_name
 from ..fitting import fit
 from ..models import get_model
 from ..models.extensions import CATALOGUE, extend
+from ..paper import TABLE3
 
-#: Table 3 of the paper (u_as, v_as, u_nd, v_nd, u_ns, v_ns, K)
-TABLE3 = {
-    "terrazzo": (0.01713, -2.379, 1.021, 0.4283, 34.55, -0.3772, 0.4142),
-    "plasterboard": (0.001284, -4.911, 1.083, 0.4636, 33.41, 1.382, 0.5215),
-    "foam_board": (0.01742, -3.103, 1.457, 1.005, 102.0, 0.731, 0.3879),
-}
 #: effects outside the catalogue
 OUTSIDE = ("ripple", "bump")
 #: every kind of case the generator makes

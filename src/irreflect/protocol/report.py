@@ -7,12 +7,11 @@ import pandas as pd
 
 from ..errors import FitError, IrreflectError
 from ..fitting import fit
+from ..paper import TABLE1_GAMMAS
 from ..reporting import Finding, ReportContext, Section
 from .core import paper_protocol
 from .evaluate import evaluate_protocol, glossy_protocol_for, paper_protocol_for
 from .robustness import protocol_robustness
-
-TABLE1_GAMMAS = (-20.0, -40.0, -60.0)
 
 
 def _table1(ctx: ReportContext) -> tuple[pd.DataFrame, bool | None]:

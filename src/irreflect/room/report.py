@@ -24,11 +24,9 @@ GLOSSY_CANDIDATES = ("cornell/cornell_krylon_blue.csv", "rgl_epfl/rgl_satin_rosa
 
 
 def _shared_real() -> Path | None:
-    repo = Path(__file__).resolve().parents[3]
-    for base in (repo.parent / "shared", repo.parent.parent / "shared"):
-        if (base / "datasets" / "real").is_dir():
-            return base / "datasets" / "real"
-    return None
+    from ..paper import real_data_dir
+
+    return real_data_dir()
 
 
 def glossy_floor(rho: float):

@@ -23,7 +23,7 @@ import pandas as pd
 
 from .. import metrics
 from .._atomic import claim_output
-from ..data import Measurements, as_measurements, project_root
+from ..data import Measurements, as_measurements
 from ..errors import IrreflectError
 from ..fitting import fit
 from ..models import get_model
@@ -68,7 +68,7 @@ def paper_protocol_points(meas: Measurements | None = None) -> pd.DataFrame:
     is the one :func:`irreflect.protocol.paper_protocol_for` builds for that dataset: Table 1
     (gammas -20/-40/-60, receivers within +-70 deg) when the dataset has those angles of
     incidence, else the same rule on three of its own angles of incidence and its receiver
-    range. Otherwise Table 1 is read from ``../shared/paper/tables``.
+    range. Otherwise Table 1 itself (:data:`irreflect.paper.TABLE1`).
     """
     if meas is not None:
         from ..protocol import paper_protocol_for
@@ -77,16 +77,9 @@ def paper_protocol_points(meas: Measurements | None = None) -> pd.DataFrame:
             return paper_protocol_for(meas).to_frame()[["gamma_deg", "theta_deg"]]
         except IrreflectError:
             pass  # no triple of the dataset's gammas can carry the protocol: use Table 1
-    candidates = [project_root().parent / "shared" / "paper" / "tables",
-                  project_root().parent.parent / "shared" / "paper" / "tables"]
-    for folder in candidates:
-        path = folder / "table1_protocol_12pt.csv"
-        if path.exists():
-            return pd.read_csv(path)[["gamma_deg", "theta_deg"]]
-    raise IrreflectError(
-        "the paper's protocol points (table1_protocol_12pt.csv) were not found beside the "
-        "project in ../shared/paper/tables: pass the points explicitly"
-    )
+    from ..paper import TABLE1
+
+    return pd.DataFrame(TABLE1, columns=["gamma_deg", "theta_deg"]).astype(float)
 
 
 def snap_points(meas: Measurements, points) -> pd.DataFrame:
