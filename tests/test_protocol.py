@@ -23,8 +23,6 @@ from irreflect.models import two_lobe_power
 from irreflect.protocol import (
     Protocol,
     as_protocol,
-    choose_gamma_settings,
-    design_protocol,
     evaluate_protocol,
     measurement_permutation,
     paper_protocol,
@@ -39,6 +37,7 @@ from irreflect.protocol import (
     to_markdown,
     write_protocol,
 )
+from irreflect.selection import choose_gamma_settings, design_protocol
 from tests.conftest import TABLE3, synthetic
 
 #: The paper's Table 1 (gamma, theta), in the paper's order: the specification.

@@ -27,6 +27,7 @@ from .data import BUNDLED, Measurements, bundled_dir, load_bundled, read_measure
 from .errors import FitWarning, IrreflectError
 from .fitting import fit
 from .paper import paper_tables_dir as _paper_tables_dir
+from .protocol.points import protocol_mask
 from .reporting import Finding, ReportContext, Section
 from .validation import check_points_budget, check_seed, short_list
 
@@ -150,20 +151,6 @@ def markdown_table(df: pd.DataFrame) -> str:
     rows = ["| " + " | ".join(cell(v) for v in row) + " |"
             for row in text.itertuples(index=False, name=None)]
     return "\n".join([header, rule, *rows])
-
-
-def protocol_mask(meas: Measurements):
-    """Mask of the paper's 12 protocol points in ``meas`` (Table 1 when the dataset has its
-    angles, snapped to distinct nearest measured points) and the snaps that moved a point."""
-    from .selection.run import paper_protocol_points, snap_points
-
-    snapped = snap_points(meas, paper_protocol_points(meas))
-    mask = np.zeros(meas.n_points, bool)
-    mask[snapped["index"].to_numpy()] = True
-    moved = snapped[snapped["distance_deg"] > 0]
-    snaps = [(r.gamma_requested, r.theta_requested, r.gamma_deg, r.theta_deg)
-             for r in moved.itertuples()]
-    return mask, snaps
 
 
 # ----------------------------------------------------------------------------- fit section

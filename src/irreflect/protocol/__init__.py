@@ -1,5 +1,5 @@
-"""Measurement protocols (issue 4): the paper's 12 points for any tool, protocols designed
-from a pilot scan, their evaluation against dense data, a Monte Carlo of goniometer
+"""Measurement protocols (issue 4): the paper's 12 points for any tool (and in any dense
+dataset, :mod:`.points`), their evaluation against dense data, a Monte Carlo of goniometer
 errors, and exports a technician can follow (CSV, JSON, Markdown checklist).
 """
 
@@ -13,7 +13,6 @@ from .core import (
     paper_protocol,
     protocol_from_frame,
 )
-from .design import choose_gamma_settings, design_protocol, tool_mask
 from .evaluate import ProtocolEvaluation, evaluate_protocol, paper_protocol_for, sample_protocol
 from .export import (
     SCHEMA_VERSION,
@@ -26,15 +25,17 @@ from .export import (
     to_markdown,
     write_protocol,
 )
+from .points import paper_protocol_points, protocol_mask, protocol_points_mask, snap_points
 from .robustness import RobustnessResult, protocol_robustness
 
 __all__ = [
     "ORDER_RULE", "PAPER_RULE", "PURPOSES", "SCHEMA_VERSION", "Protocol", "ProtocolEvaluation",
-    "RobustnessResult", "as_protocol", "choose_gamma_settings", "design_protocol",
+    "RobustnessResult", "as_protocol",
     "evaluate_protocol", "measurement_permutation", "normalise_gammas", "paper_protocol",
     "paper_protocol_for", "plot_protocol", "protocol_from_frame", "protocol_robustness",
     "read_protocol", "render", "sample_protocol", "to_csv_text", "to_dict", "to_json_text",
-    "to_markdown", "tool_mask", "write_protocol", "reproduce_section", "register",
+    "to_markdown", "write_protocol", "paper_protocol_points", "protocol_mask",
+    "protocol_points_mask", "snap_points", "reproduce_section", "register",
 ]
 
 

@@ -81,7 +81,7 @@ def _protocol(args, fmt: str) -> int:
         )
     elif args.design_from:
         from ..cli import load_data
-        from .design import design_protocol
+        from ..selection.design import design_protocol
 
         dense = load_data(args, "protocol", args.design_from)
         protocol = design_protocol(

@@ -48,9 +48,7 @@ def _robust_sd(x, axis=0):
 
 def _rank_correlation(samples: np.ndarray) -> np.ndarray:
     """Spearman correlation of the columns of ``samples`` (NaN for constant columns)."""
-    from scipy.stats import rankdata
-
-    ranks = rankdata(samples, axis=0)
+    ranks = pd.DataFrame(samples).rank(axis=0).to_numpy()  # average ranks of ties
     k = samples.shape[1]
     with np.errstate(divide="ignore", invalid="ignore"):
         centred = ranks - ranks.mean(axis=0)

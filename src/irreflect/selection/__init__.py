@@ -11,6 +11,7 @@ points N and 1 - R^2 of the model fitted on those points only, evaluated on all 
 >>> res.front, res.knee_n, res.best_mask(12)                          # doctest: +SKIP
 """
 
+from .design import choose_gamma_settings, design_protocol, tool_mask
 from .front import EnoughPoints, enough_points, knee_coordinates
 from .problem import SEARCH_FIT, VERIFY_FIT, FitSettings, SubsetEvaluator, SubsetProblem
 from .run import (
@@ -29,6 +30,9 @@ from .run import (
 from .selectors import SELECTORS, get_selector
 
 __all__ = [
+    "choose_gamma_settings",
+    "design_protocol",
+    "tool_mask",
     "EnoughPoints",
     "enough_points",
     "knee_coordinates",

@@ -41,6 +41,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 import pandas as pd
+from scipy import special
 
 from ..errors import IrreflectError
 
@@ -262,15 +263,13 @@ def noise_level(meas, residuals, seed: int = 0, interval: float = ENOUGH_INTERVA
     if meas.sigma is not None:
         s = float(np.sqrt(np.mean(np.asarray(meas.sigma, float) ** 2)))
         return s, s, s, "the table's sigma column (RMS)"
-    from scipy import stats
-
     from ..diagnose.workflow import estimate_noise
 
     est = estimate_noise(meas, residuals, seed=seed)
     dof = max(float(est.dof), 1.0)
     tail = (1.0 - interval) / 2.0
-    low = est.value * np.sqrt(dof / stats.chi2.ppf(1.0 - tail, dof))
-    high = est.value * np.sqrt(dof / stats.chi2.ppf(tail, dof))
+    low = est.value * np.sqrt(dof / special.chdtri(dof, tail))
+    high = est.value * np.sqrt(dof / special.chdtri(dof, 1.0 - tail))
     return float(est.value), float(low), float(high), (
         f"estimated from the all-points fit's residuals ({dof:.0f} effective dof)")
 

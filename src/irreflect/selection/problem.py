@@ -33,6 +33,12 @@ from ..errors import IrreflectError
 from ..fitting import fit_subsets
 from ..models import get_model
 
+#: what a FitSettings may set: the keyword-only options of fit_subsets that tune a fit
+_SUBSET_FIT_OPTIONS = frozenset(
+    name for name, p in inspect.signature(fit_subsets).parameters.items()
+    if p.kind is p.KEYWORD_ONLY and name not in ("sigma", "shared_starts")
+)
+
 #: Score given to a subset whose fit failed (R^2 = 0: no better than the mean).
 FAILED_SCORE = 1.0
 
@@ -55,18 +61,27 @@ def unpack(key: bytes, n: int) -> np.ndarray:
 @dataclass(frozen=True)
 class FitSettings:
     """Keyword options of :func:`irreflect.fitting.fit_subsets` for each subset fit
-    (``max_iter``, ``n_screen``, ``n_keep``, ...). Options the installed ``fit_subsets``
-    does not take are ignored, so the same settings work as the fitter evolves."""
+    (``max_iter``, ``n_screen``, ``n_keep``, ...). An option ``fit_subsets`` does not take
+    is refused when the settings are made (a typo must not disappear)."""
 
     options: tuple[tuple[str, object], ...] = ()
+
+    def __post_init__(self):
+        accepted = _SUBSET_FIT_OPTIONS
+        unknown = sorted(k for k, _ in self.options if k not in accepted)
+        if unknown:
+            raise IrreflectError(
+                f"unknown subset-fit option(s) {', '.join(map(repr, unknown))}: "
+                f"expected some of {', '.join(sorted(accepted))} (the keyword options of "
+                "irreflect.fitting.fit_subsets)"
+            )
 
     @classmethod
     def of(cls, **options) -> FitSettings:
         return cls(tuple(sorted(options.items())))
 
     def kwargs(self) -> dict:
-        accepted = inspect.signature(fit_subsets).parameters
-        return {k: v for k, v in self.options if k in accepted}
+        return dict(self.options)
 
     def as_dict(self) -> dict:
         return dict(self.options)

@@ -27,6 +27,8 @@ from ..data import Measurements, as_measurements
 from ..errors import IrreflectError
 from ..fitting import fit
 from ..models import get_model
+from ..protocol.points import as_points as _as_points
+from ..protocol.points import paper_protocol_points, protocol_points_mask, snap_points  # noqa: F401
 from ..validation import check_int, check_masks, check_seed, check_selection_budget
 from .front import (  # noqa: F401  (knee_index, knee_point, non_dominated re-exported)
     FrontSummary,
@@ -58,81 +60,6 @@ def hypervolume(n_points, one_minus_r2, n_total: int) -> float:
     if len(f) == 0:
         return 0.0
     return float(HV(ref_point=np.asarray(HV_REFERENCE))(f))
-
-
-# ----------------------------------------------------------------------------- protocol points
-def paper_protocol_points(meas: Measurements | None = None) -> pd.DataFrame:
-    """The paper's 12 protocol points (section 4.3, Table 1) as ``gamma_deg, theta_deg``.
-
-    With a dense dataset and the protocol module (:mod:`irreflect.protocol`), the protocol
-    is the one :func:`irreflect.protocol.paper_protocol_for` builds for that dataset: Table 1
-    (gammas -20/-40/-60, receivers within +-70 deg) when the dataset has those angles of
-    incidence, else the same rule on three of its own angles of incidence and its receiver
-    range. Otherwise Table 1 itself (:data:`irreflect.paper.TABLE1`).
-    """
-    if meas is not None:
-        from ..protocol import paper_protocol_for
-
-        try:
-            return paper_protocol_for(meas).to_frame()[["gamma_deg", "theta_deg"]]
-        except IrreflectError:
-            pass  # no triple of the dataset's gammas can carry the protocol: use Table 1
-    from ..paper import TABLE1
-
-    return pd.DataFrame(TABLE1, columns=["gamma_deg", "theta_deg"]).astype(float)
-
-
-def snap_points(meas: Measurements, points) -> pd.DataFrame:
-    """Snap requested (gamma, theta) points (degrees) to the nearest measured points.
-
-    Nearest in the (gamma, theta) plane, Euclidean in degrees; a measured point is used
-    once (a second request for it goes to its next nearest free point). Returns a table
-    with the requested and the snapped angles, the distance (deg) and the row index.
-    """
-    pts = _as_points(points)
-    if len(pts) > meas.n_points:
-        raise IrreflectError(
-            f"cannot snap {len(pts)} protocol points to the {meas.n_points} measured points of "
-            f"{meas.name}: each needs its own measured point; measure at least {len(pts)} "
-            "points or pass fewer protocol points"
-        )
-    taken = np.zeros(meas.n_points, bool)
-    rows = []
-    for g, t in pts:
-        dist = np.hypot(meas.gamma_deg - g, meas.theta_deg - t)
-        dist = np.where(taken, np.inf, dist)
-        i = int(np.argmin(dist))
-        taken[i] = True
-        rows.append({"gamma_requested": g, "theta_requested": t,
-                     "gamma_deg": meas.gamma_deg[i], "theta_deg": meas.theta_deg[i],
-                     "distance_deg": float(dist[i]), "index": i})
-    return pd.DataFrame(rows)
-
-
-def protocol_points_mask(meas: Measurements, points=None) -> np.ndarray:
-    """Boolean mask (n,) of the measured points nearest to ``points`` (default: the paper's
-    protocol, see :func:`paper_protocol_points`), each snapped to a distinct measured point
-    (see :func:`snap_points`)."""
-    snapped = snap_points(meas, paper_protocol_points(meas) if points is None else points)
-    mask = np.zeros(meas.n_points, bool)
-    mask[snapped["index"].to_numpy()] = True
-    return mask
-
-
-def _as_points(points) -> np.ndarray:
-    if isinstance(points, pd.DataFrame):
-        missing = {"gamma_deg", "theta_deg"} - set(points.columns)
-        if missing:
-            raise IrreflectError(
-                f"protocol points need columns gamma_deg, theta_deg; missing {sorted(missing)}"
-            )
-        return points[["gamma_deg", "theta_deg"]].to_numpy(float)
-    arr = np.asarray(points, float)
-    if arr.ndim != 2 or arr.shape[1] != 2:
-        raise IrreflectError(
-            f"protocol points must be (gamma_deg, theta_deg) pairs; found shape {arr.shape}"
-        )
-    return arr
 
 
 # ----------------------------------------------------------------------------- result

@@ -1,4 +1,6 @@
-"""Material-specific protocols: the few points of a pilot dense scan that pin the model down.
+"""Material-specific protocols: the few points of a pilot dense scan that pin the model down
+(here, beside the optimiser it runs; the protocol itself is a :mod:`irreflect.protocol`
+object).
 
 The points are chosen by the subset optimiser of :mod:`irreflect.selection` (NSGA-II on
 number of points vs 1 - R^2 against all points, the paper's section 4.3), restricted to
@@ -25,7 +27,8 @@ from ..data import as_measurements
 from ..errors import IrreflectError
 from ..fitting import fit_subsets
 from ..models import get_model
-from .core import Protocol, measurement_permutation, normalise_gammas
+from ..protocol.core import Protocol, measurement_permutation, normalise_gammas
+from .run import run_selection
 
 #: Above this many gamma combinations, gamma settings are chosen greedily.
 MAX_COMBINATIONS = 200
@@ -136,13 +139,6 @@ def design_protocol(dense, n_points: int | None = None, model="two-lobe", *,
     Protocol
         ``kind="optimised"``, purpose ``"optimised"``, in measurement order.
     """
-    try:
-        from ..selection import run_selection
-    except ImportError as exc:  # the optimiser is a separate capability (issue 3)
-        raise IrreflectError(
-            "designing a protocol needs the subset optimiser (irreflect.selection), which is "
-            f"not available: {exc}"
-        ) from exc
     dense = as_measurements(dense)
     model_obj = get_model(model)
     mask = tool_mask(dense, theta_min, theta_max, allowed_gammas)

@@ -1,0 +1,95 @@
+"""The paper's 12 protocol points in a dense dataset: which points (Table 1, or the same
+rule on the dataset's own angles), snapped to distinct measured points, as a mask.
+
+One implementation, used by the selection (Method 12 of Table 5), the protocol evaluation
+and the report.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+
+from ..data import Measurements
+from ..errors import IrreflectError
+from ..paper import TABLE1
+from .evaluate import paper_protocol_for
+
+
+def paper_protocol_points(meas: Measurements | None = None) -> pd.DataFrame:
+    """The paper's 12 protocol points (section 4.3, Table 1) as ``gamma_deg, theta_deg``.
+
+    With a dense dataset, the protocol is the one :func:`.evaluate.paper_protocol_for`
+    builds for that dataset: Table 1 (gammas -20/-40/-60, receivers within +-70 deg) when the dataset has those angles of
+    incidence, else the same rule on three of its own angles of incidence and its receiver
+    range. Otherwise Table 1 itself (:data:`irreflect.paper.TABLE1`).
+    """
+    if meas is not None:
+        try:
+            return paper_protocol_for(meas).to_frame()[["gamma_deg", "theta_deg"]]
+        except IrreflectError:
+            pass  # no triple of the dataset's gammas can carry the protocol: use Table 1
+    return pd.DataFrame(TABLE1, columns=["gamma_deg", "theta_deg"]).astype(float)
+
+
+def snap_points(meas: Measurements, points) -> pd.DataFrame:
+    """Snap requested (gamma, theta) points (degrees) to the nearest measured points.
+
+    Nearest in the (gamma, theta) plane, Euclidean in degrees; a measured point is used
+    once (a second request for it goes to its next nearest free point). Returns a table
+    with the requested and the snapped angles, the distance (deg) and the row index.
+    """
+    pts = as_points(points)
+    if len(pts) > meas.n_points:
+        raise IrreflectError(
+            f"cannot snap {len(pts)} protocol points to the {meas.n_points} measured points of "
+            f"{meas.name}: each needs its own measured point; measure at least {len(pts)} "
+            "points or pass fewer protocol points"
+        )
+    taken = np.zeros(meas.n_points, bool)
+    rows = []
+    for g, t in pts:
+        dist = np.hypot(meas.gamma_deg - g, meas.theta_deg - t)
+        dist = np.where(taken, np.inf, dist)
+        i = int(np.argmin(dist))
+        taken[i] = True
+        rows.append({"gamma_requested": g, "theta_requested": t,
+                     "gamma_deg": meas.gamma_deg[i], "theta_deg": meas.theta_deg[i],
+                     "distance_deg": float(dist[i]), "index": i})
+    return pd.DataFrame(rows)
+
+
+def protocol_points_mask(meas: Measurements, points=None) -> np.ndarray:
+    """Boolean mask (n,) of the measured points nearest to ``points`` (default: the paper's
+    protocol, see :func:`paper_protocol_points`), each snapped to a distinct measured point
+    (see :func:`snap_points`)."""
+    return protocol_mask(meas, points)[0]
+
+
+def as_points(points) -> np.ndarray:
+    """``(m, 2)`` array of (gamma_deg, theta_deg) pairs from a frame or a sequence."""
+    if isinstance(points, pd.DataFrame):
+        missing = {"gamma_deg", "theta_deg"} - set(points.columns)
+        if missing:
+            raise IrreflectError(
+                f"protocol points need columns gamma_deg, theta_deg; missing {sorted(missing)}"
+            )
+        return points[["gamma_deg", "theta_deg"]].to_numpy(float)
+    arr = np.asarray(points, float)
+    if arr.ndim != 2 or arr.shape[1] != 2:
+        raise IrreflectError(
+            f"protocol points must be (gamma_deg, theta_deg) pairs; found shape {arr.shape}"
+        )
+    return arr
+
+
+def protocol_mask(meas: Measurements, points=None):
+    """``(mask, snaps)``: the mask of :func:`protocol_points_mask` and the snaps that moved a
+    point, as ``(gamma_requested, theta_requested, gamma_deg, theta_deg)`` tuples."""
+    snapped = snap_points(meas, paper_protocol_points(meas) if points is None else points)
+    mask = np.zeros(meas.n_points, bool)
+    mask[snapped["index"].to_numpy()] = True
+    moved = snapped[snapped["distance_deg"] > 0]
+    snaps = [(r.gamma_requested, r.theta_requested, r.gamma_deg, r.theta_deg)
+             for r in moved.itertuples()]
+    return mask, snaps
