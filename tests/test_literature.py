@@ -9,7 +9,7 @@ from conftest import paper_grid
 from irreflect.data import Measurements
 from irreflect.errors import IrreflectError
 from irreflect.fitting import fit
-from irreflect.models import Geometry, get_model, model_names, phong_power
+from irreflect.models import get_model, model_names, phong_power
 from irreflect.models import literature as lit
 
 RNG_SEED = 20240605
@@ -67,26 +67,6 @@ def test_separable_form_matches_the_closed_formula(name):
                                rtol=1e-12, atol=1e-15)
     z, alpha = model.from_natural(np.array(TRUE[name])[None])
     np.testing.assert_allclose(model.to_natural(z, alpha)[0], TRUE[name], rtol=1e-12)
-
-
-@pytest.mark.parametrize("name", sorted(TRUE))
-def test_analytic_derivatives_match_central_differences(name):
-    g, t = random_geometry(seed=7)
-    model = get_model(name)
-    rng = np.random.default_rng(3)
-    lo, hi = np.maximum(model.z_lower, -6.0), np.minimum(model.z_upper, 6.0)
-    z = lo + rng.uniform(0.2, 0.8, (3, lo.size)) * (hi - lo)
-    _, dbasis = model.basis(Geometry.of(g[None], t[None]), z, True)
-    for k in range(z.shape[1]):
-        h = 1e-6 * max(1.0, abs(z[:, k]).max())
-        zp, zm = z.copy(), z.copy()
-        zp[:, k] += h
-        zm[:, k] -= h
-        bp, _ = model.basis(Geometry.of(g[None], t[None]), zp, False)
-        bm, _ = model.basis(Geometry.of(g[None], t[None]), zm, False)
-        numeric = (bp - bm) / (2 * h)
-        scale = np.abs(numeric).max() + 1e-12
-        assert np.abs(numeric - dbasis[..., k]).max() / scale < 1e-6, (name, k)
 
 
 # ----------------------------------------------------------------------------- special cases

@@ -891,10 +891,8 @@ def _kernel_codes(model_obj, engine=None):
     if engine != "compiled" or model_obj.options.get("canonical_starts") is not \
             model_obj.starts:
         return None
-    try:
-        from . import _kernel
-    except ImportError:  # numba missing: the numpy path serves
-        return None
+    from . import _kernel  # deferred: numba costs ~1 s to import, the numpy path none
+
     return _kernel.model_code(model_obj)
 
 
