@@ -15,6 +15,7 @@ import difflib
 import os
 import warnings
 from dataclasses import dataclass, field, replace
+from importlib import resources
 from pathlib import Path
 
 import numpy as np
@@ -517,14 +518,12 @@ def check_enough_points(n_points: int, model, source: str = "table") -> None:
 BUNDLED = ("terrazzo", "plasterboard", "foam_board")
 
 
-def project_root() -> Path:
-    return Path(__file__).resolve().parents[2]
-
-
 def bundled_dir() -> Path:
-    """Folder of the bundled (reconstructed) datasets: ``$IRREFLECT_DATASETS`` or ``datasets/``."""
+    """Folder of the bundled (reconstructed) datasets: ``$IRREFLECT_DATASETS``, else the
+    package data ``irreflect/datasets`` (found through :mod:`importlib.resources`, so an
+    installed package has them too; ``datasets/`` at the top of a checkout links there)."""
     env = os.environ.get("IRREFLECT_DATASETS")
-    return Path(env) if env else project_root() / "datasets"
+    return Path(env) if env else Path(str(resources.files("irreflect") / "datasets"))
 
 
 def real_data_dir() -> Path | None:
