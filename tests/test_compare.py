@@ -205,12 +205,10 @@ def test_reproduce_section_quick(tmp_path):
     from irreflect.reporting import ReportContext
 
     datasets = {n: load_bundled(n) for n in ("terrazzo", "plasterboard")}
-    from irreflect.data import project_root
+    from irreflect.paper import paper_tables_dir
 
-    paper = project_root().parent / "shared" / "paper" / "tables"
     ctx = ReportContext(datasets=datasets, fits={n: fit(m) for n, m in datasets.items()},
-                        out_dir=tmp_path, quick=True, seed=0,
-                        paper_dir=paper if paper.is_dir() else None,
+                        out_dir=tmp_path, quick=True, seed=0, paper_dir=paper_tables_dir(),
                         reconstructions=frozenset(datasets))
     section = reproduce_section(ctx)
     for name in section.tables:
@@ -224,12 +222,13 @@ def test_reproduce_section_quick(tmp_path):
     expected = ctx.fits["terrazzo"].polar_errors()
     assert terr.loc[60.0, "two-lobe (ours)"] == pytest.approx(expected[60.0], abs=0.006)
     assert (terr["phong@10 (ours)"].iloc[-1] > 5 * terr["two-lobe (ours)"].iloc[-1])
-    if ctx.paper_dir is not None:
-        assert terr.loc[60.0, "phong@10 (paper)"] == pytest.approx(45.3)
-        # the noise floor: the generating curve is no better than our two-lobe fit, on average
-        assert terr["noise floor (ours)"].mean() > 0.8 * terr["two-lobe (ours)"].mean()
     models = section.tables["compare_models"]
     assert {"two-lobe", "phong@10", "lafortune", "torrance-sparrow"} <= set(models["model"])
+    if ctx.paper_dir is None:
+        pytest.skip("../shared/paper/tables not found: the paper's columns are not checked")
+    assert terr.loc[60.0, "phong@10 (paper)"] == pytest.approx(45.3)
+    # the noise floor: the generating curve is no better than our two-lobe fit, on average
+    assert terr["noise floor (ours)"].mean() > 0.8 * terr["two-lobe (ours)"].mean()
 
 
 def test_models_with_more_parameters_than_points_are_skipped_when_asked():

@@ -114,7 +114,10 @@ def test_table5_and_table6_paper_columns_equal_the_paper(report_dir):
 
 
 def test_ours_are_measured_not_copied(report_dir):
+    if paper_tables_dir() is None:
+        pytest.skip("../shared/paper/tables not found: no paper values to differ from")
     t2 = pd.read_csv(report_dir / "tables" / "table2_fit_quality.csv").set_index("material")
+    assert t2["R^2 paper"].notna().all() and t2["R^2 ours"].notna().all()
     # the reconstructed data give a close but different R^2 than the paper's measurements
     assert (t2["R^2 ours"] != t2["R^2 paper"]).all()
     assert t2["R^2 ours"].between(0.9, 1.0).all()

@@ -15,7 +15,6 @@ from irreflect.cli import main
 from irreflect.data import load_bundled, write_measurements
 from irreflect.errors import IrreflectError
 from irreflect.selection import (
-    SELECTORS,
     SubsetEvaluator,
     hypervolume,
     knee_point,
@@ -185,17 +184,6 @@ def test_candidates_restrict_the_chosen_points(noisy):
     res = run_selection(noisy, seed=0, candidates=allowed, **SMALL)
     for mask in res.masks.values():
         assert not (mask & ~allowed).any()
-
-
-@pytest.mark.parametrize("selector", ["random", "greedy", "d-optimal"])
-def test_other_selectors_give_valid_fronts_within_budget(noisy, selector):
-    res = run_selection(noisy, selector=selector, seed=0, pop_size=20, generations=10,
-                        max_points=16)
-    f = res.front["one_minus_r2"].to_numpy()
-    assert np.all(np.diff(f) < 0)
-    assert res.evaluations <= 200
-    assert res.front["r2"].max() > 0.95
-    assert res.selector == selector and set(SELECTORS) >= {selector}
 
 
 # ----------------------------------------------------------------------------- resume, Ctrl-C

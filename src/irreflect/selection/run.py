@@ -38,7 +38,7 @@ from .front import (  # noqa: F401  (knee_index, knee_point, non_dominated re-ex
     non_dominated,
 )
 from .problem import SEARCH_FIT, VERIFY_FIT, FitSettings, SubsetEvaluator, check_sizes, unpack
-from .selectors import SearchSpec, get_selector
+from .selectors import SELECTORS, SearchSpec, get_selector
 
 #: Reference point of every hypervolume: (N / n, 1 - R^2) = (1, 1).
 HV_REFERENCE = (1.0, 1.0)
@@ -271,13 +271,20 @@ def run_selection(measurements, model="two-lobe", selector: str = "nsga2", pop_s
     n_min, n_max = check_sizes(n, model_obj.n_params, max_points, candidates)
     if initial is not None:
         initial = check_masks(initial, n, "initial")
-    if selector == "nsga2" and include_all_points and cand.sum() <= n_max:
+    if checkpoint is not None and not run.resumable:
+        resumable = [k for k, v in SELECTORS.items() if v.resumable]
+        raise IrreflectError(f"selector '{selector}' does not save checkpoints: drop "
+                             f"--checkpoint or use {', '.join(resumable)}")
+    if initial is not None and not run.takes_initial:
+        raise IrreflectError(f"selector '{selector}' does not start from given masks "
+                             "('initial'): drop them or use nsga2")
+    if run.takes_initial and include_all_points and cand.sum() <= n_max:
         full = cand[None].copy()
         initial = full if initial is None else np.vstack([initial, full])
     evaluator = SubsetEvaluator(meas.gamma_deg, meas.theta_deg, meas.power, meas.sigma,
                                 model_obj, settings=search_fit)
     pilot = None
-    if selector == "d-optimal":
+    if run.needs_pilot:
         pilot = fit(meas, model_obj, seed=seed).values
     spec = SearchSpec(
         evaluator=evaluator, n_min=n_min, n_max=n_max, candidates=cand, pop_size=pop_size,
@@ -287,12 +294,12 @@ def run_selection(measurements, model="two-lobe", selector: str = "nsga2", pop_s
         fingerprint=_fingerprint(meas, model_obj.name, selector, pop_size, seed, n_min, n_max,
                                  cand, initial, search_fit),
     )
-    bar = _Progress(progress, evaluator, meas.name, "gen" if selector == "nsga2" else "fit")
+    bar = _Progress(progress, evaluator, meas.name, run.unit)
     spec.tick = bar
     interrupted = False
     t_search = time.perf_counter()
     # the checkpoint file is this run's until it ends: checked, locked, leftovers removed
-    claim = (contextlib.nullcontext() if checkpoint is None or selector != "nsga2"
+    claim = (contextlib.nullcontext() if checkpoint is None
              else claim_output(checkpoint, "file", "--checkpoint"))
     try:
         with claim:

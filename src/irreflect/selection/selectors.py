@@ -249,15 +249,38 @@ def d_optimal(spec: SearchSpec) -> None:
 
 
 # ----------------------------------------------------------------------------- registry
-SELECTORS: dict[str, Callable[[SearchSpec], None]] = {
-    "nsga2": nsga2,
-    "random": random_subsets,
-    "greedy": greedy,
-    "d-optimal": d_optimal,
+@dataclass(frozen=True)
+class Selector:
+    """A search strategy and what the run needs to know about it (no name checks
+    elsewhere: adding a selector is a function plus one line in :data:`SELECTORS`).
+
+    run : ``run(spec)`` spends the budget through ``spec.evaluator``
+    unit : the progress unit (``gen`` for generations, ``fit`` for subset fits)
+    needs_pilot : gets a pilot fit on all points in ``spec.pilot``
+    resumable : honours ``spec.checkpoint`` (saves its state, resumes from it)
+    takes_initial : uses ``spec.initial`` masks (then the full candidate set is offered too,
+        so the frontier ends at Method A)
+    """
+
+    run: Callable[[SearchSpec], None]
+    unit: str = "fit"
+    needs_pilot: bool = False
+    resumable: bool = False
+    takes_initial: bool = False
+
+    def __call__(self, spec: SearchSpec) -> None:
+        self.run(spec)
+
+
+SELECTORS: dict[str, Selector] = {
+    "nsga2": Selector(nsga2, unit="gen", resumable=True, takes_initial=True),
+    "random": Selector(random_subsets),
+    "greedy": Selector(greedy),
+    "d-optimal": Selector(d_optimal, needs_pilot=True),
 }
 
 
-def get_selector(name: str) -> Callable[[SearchSpec], None]:
+def get_selector(name: str) -> Selector:
     """The selector called ``name`` (see :data:`SELECTORS`)."""
     if name not in SELECTORS:
         raise unknown_name("selector", name, SELECTORS)
