@@ -26,11 +26,13 @@ import json
 import os
 import re
 import shutil
+import tempfile
 import threading
 import time
 from pathlib import Path
 
 from .errors import IrreflectError
+from .validation import check_output_path, short_list
 
 try:  # POSIX; elsewhere runs are not locked against each other
     import fcntl
@@ -155,7 +157,6 @@ def claim_output(path, kind: str = "dir", option: str = "--out", suffixes=None):
     Re-entrant within a process: :func:`atomic_path` and :func:`atomic_directory` reuse a
     claim the caller holds. Yields the path.
     """
-    from .validation import check_output_path
 
     path = Path(path)
     key = _key(path)
@@ -195,7 +196,6 @@ def _check_owned(path: Path, option: str) -> None:
                if not (e.is_dir() and (e / MANIFEST).exists())
                and not re.fullmatch(rf"\..+\.({_TMP}|{_OLD}|{_LOCK}).*", e.name)]
     if entries:
-        from .validation import short_list
 
         raise IrreflectError(
             f"{option} {path}: the folder exists and holds files irreflect did not write "
@@ -216,7 +216,6 @@ def _permissions(path: Path) -> None:
 def atomic_path(path, option: str = "output"):
     """Yield a temporary path beside ``path``; move it into place only if the block
     succeeds. The path is claimed (locked) for the duration unless the caller holds it."""
-    import tempfile
 
     path = Path(path)
     with claim_output(path, "file", option):
@@ -238,7 +237,6 @@ def atomic_directory(path, option: str = "--out", command: str = "irreflect"):
     """Yield a fresh temporary folder beside ``path``; on success it replaces ``path``
     whole (with a manifest of what was written), keeping only entries of the old folder
     that no irreflect run wrote. On failure nothing at ``path`` changes."""
-    import tempfile
 
     path = Path(path)
     with claim_output(path, "dir", option):

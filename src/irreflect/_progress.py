@@ -10,6 +10,8 @@ from __future__ import annotations
 import sys
 import time
 
+from tqdm import tqdm
+
 
 def on_terminal(stream=None) -> bool:
     """True when ``stream`` (default stderr) is an interactive terminal."""
@@ -109,7 +111,6 @@ def progress(total=None, desc: str = "", unit: str = "it", *, enabled: bool = Tr
         return _Silent()
     stream = sys.stderr if stream is None else stream
     if on_terminal(stream):
-        from tqdm import tqdm
 
         return tqdm(total=total, desc=desc, unit=unit, file=stream, dynamic_ncols=True,
                     leave=leave)

@@ -22,7 +22,8 @@ import numpy as np
 import pandas as pd
 
 from ._atomic import atomic_path
-from .errors import DataError
+from .errors import DataError, unknown_name
+from .paper import real_data_dir as _real
 from .validation import MAX_FILE_BYTES, MAX_TABLE_ROWS, check_real_array, short_list
 
 REQUIRED = ("gamma_deg", "theta_deg", "power")
@@ -528,14 +529,12 @@ def bundled_dir() -> Path:
 
 def real_data_dir() -> Path | None:
     """The real measured data beside the checkout (see :func:`irreflect.paper.real_data_dir`)."""
-    from .paper import real_data_dir as _real
 
     return _real()
 
 
 def load_bundled(name: str) -> Measurements:
     """One of the bundled reconstructed datasets by name (``terrazzo``, ``plasterboard``, ``foam_board``)."""
-    from .errors import unknown_name
 
     if name not in BUNDLED:
         raise unknown_name("bundled dataset", name, BUNDLED)

@@ -7,6 +7,8 @@ traceback. A fit that cannot be completed raises :class:`FitError`.
 
 from __future__ import annotations
 
+import difflib
+
 
 class IrreflectError(ValueError):
     """A user error: the message says what was expected, what was found and how to fix it."""
@@ -32,7 +34,6 @@ class FitWarning(UserWarning):
 
 def unknown_name(kind: str, name: str, valid) -> UnknownNameError:
     """Build the one-line error for a registry look-up that failed."""
-    import difflib
 
     valid = sorted(valid)
     close = difflib.get_close_matches(name, valid, n=1)

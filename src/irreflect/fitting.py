@@ -22,7 +22,8 @@ from warnings import warn
 import numpy as np
 
 from . import metrics
-from .errors import FitError, FitWarning, IrreflectError
+from .data import as_measurements, check_enough_points
+from .errors import DataError, FitError, FitWarning, IrreflectError, unknown_name
 from .models import (
     PROFILE_DIFFUSE_INDICES,
     PROFILE_SPECULAR_INDICES,
@@ -30,6 +31,7 @@ from .models import (
     ReflectionModel,
     get_model,
 )
+from .models.extensions import Extension, _start_rows
 from .validation import check_angles_deg, check_seed, check_subset_inputs
 
 # ----------------------------------------------------------------------------- core solver
@@ -635,8 +637,6 @@ def _candidates(model, gamma_rad, theta_rad, power, seed, n_random, extra=None):
 def check_fit_data(power, model, source: str = "table") -> None:
     """Refuse tables no fit can be honest about: no degree of freedom left
     (``n_points <= n_params``), non-finite or constant power."""
-    from .data import check_enough_points
-    from .errors import DataError
 
     power = np.asarray(power)
     n = power.size
@@ -858,7 +858,6 @@ def _extension_start_rows(model) -> np.ndarray:
     """The starting values of the extensions' coordinates, as the extended models' own
     ``starts`` combine them (the first row with every extension's first value, then, one
     extension at a time, its other values): ``(rows, P - 5)``."""
-    from .models.extensions import Extension, _start_rows
 
     chain = []
     m = model
@@ -885,7 +884,6 @@ def _kernel_codes(model_obj, engine=None):
     (models the kernel does not cover, or a model whose starts a caller replaced)."""
     engine = engine or ENGINE
     if engine not in ENGINES:
-        from .errors import unknown_name
 
         raise unknown_name("fitting engine", str(engine), ENGINES)
     if engine != "compiled" or model_obj.options.get("canonical_starts") is not \
@@ -992,7 +990,6 @@ def fit(measurements, model="two-lobe", *, seed: int = 0, n_random_starts: int =
         No start reaches a finite optimum, non-finite coefficients, or a fit that cannot
         beat a constant (R^2 <= 0).
     """
-    from .data import as_measurements
 
     t0 = time.perf_counter()
     seed = check_seed(seed)

@@ -12,6 +12,7 @@ from __future__ import annotations
 import math
 import numbers
 import os
+import tempfile
 from pathlib import Path
 
 import numpy as np
@@ -264,7 +265,6 @@ def check_output_path(path, kind: str = "file", option: str = "--out",
 def _writable(folder: Path) -> bool:
     """Try to create a file in ``folder`` (``os.access`` is wrong for root and some
     network file systems)."""
-    import tempfile
 
     try:
         fd, probe = tempfile.mkstemp(prefix=".irreflect-probe-", dir=folder)

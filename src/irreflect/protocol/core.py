@@ -14,7 +14,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 import pandas as pd
 
-from ..errors import IrreflectError
+from ..errors import IrreflectError, unknown_name
 from ..validation import short_list
 
 #: What each point of a protocol is for.
@@ -533,7 +533,6 @@ def glossy_protocol(gammas_deg, theta_min: float = -70.0, theta_max: float = 70.
             )
         offsets[g] = float(np.clip(lobe_half_width_deg(n), min_lobe_offset, max_lobe_offset))
     if layout not in GLOSSY_LAYOUTS:
-        from ..errors import unknown_name
 
         raise unknown_name("glossy protocol layout", str(layout), GLOSSY_LAYOUTS)
     plan = []

@@ -14,18 +14,19 @@ interpolating across a wide gap (for instance across a specular peak) would inve
 
 from __future__ import annotations
 
+import itertools
 import warnings
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 import pandas as pd
 
 from .. import metrics
 from ..data import Measurements, as_measurements
-from ..errors import FitError, FitWarning, IrreflectError
+from ..errors import FitError, FitWarning, IrreflectError, unknown_name
 from ..fitting import FitResult, fit
-from ..models import get_model
-from .core import Protocol
+from ..models import get_model, lobe_profile
+from .core import Protocol, glossy_protocol, lobe_half_width_deg, paper_protocol
 from .export import as_protocol
 
 METHODS = ("interpolate", "snap")
@@ -173,7 +174,6 @@ def sample_protocol(protocol, dense, *, tolerance_deg: float = 5.0,
     protocol = as_protocol(protocol)
     dense = as_measurements(dense)
     if method not in METHODS:
-        from ..errors import unknown_name
 
         raise unknown_name("protocol sampling method", method, METHODS)
     if not tolerance_deg >= 0:
@@ -307,8 +307,6 @@ def specular_half_widths(dense, reference: FitResult | None = None) -> dict[floa
     dense scan: from the reference's ``n_s(gamma) = u_ns cos^v_ns(gamma)`` when it is a
     two-lobe fit, else from the per-angle decomposition of the data
     (`irreflect.models.lobe_profile`). Keys: gamma in degrees."""
-    from ..models import lobe_profile
-    from .core import lobe_half_width_deg
 
     gammas = np.asarray(dense.gammas, float)
     if reference is not None and {"u_ns", "v_ns"} <= set(reference.param_names):
@@ -391,9 +389,7 @@ def glossy_protocol_for(dense, reference: FitResult | None = None, *,
     all its points) is returned, its score in ``settings["pilot_r2"]``. ``kwargs`` go to
     :func:`~.core.glossy_protocol`.
     """
-    import itertools
 
-    from .core import glossy_protocol
 
     dense = as_measurements(dense)
     if reference is None or not {"u_ns", "v_ns"} <= set(reference.param_names):
@@ -445,7 +441,6 @@ def glossy_protocol_for(dense, reference: FitResult | None = None, *,
     score, proto, factor = best
     settings = dict(proto.settings, pilot=dense.name, pilot_r2=round(score, 6),
                     lobe_factor=factor)
-    from dataclasses import replace
 
     return replace(proto, settings=settings)
 def evaluation_table(evaluations: dict[str, ProtocolEvaluation], digits: int = 4) -> pd.DataFrame:
@@ -474,9 +469,7 @@ def paper_protocol_for(dense, *, preferred=(-20.0, -40.0, -60.0), theta_min=None
     and then the most central middle gamma (ties: smaller gammas). ``kwargs`` go to
     :func:`~.core.paper_protocol`.
     """
-    import itertools
 
-    from .core import paper_protocol
 
     dense = as_measurements(dense)
     lo = float(np.min(dense.theta_deg)) if theta_min is None else float(theta_min)

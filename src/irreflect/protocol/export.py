@@ -10,12 +10,13 @@ from __future__ import annotations
 
 import json
 import math
+from dataclasses import replace
 from pathlib import Path
 
 import pandas as pd
 
 from .._atomic import atomic_path
-from ..errors import IrreflectError
+from ..errors import IrreflectError, unknown_name
 from .core import ORDER_RULE, Protocol, protocol_from_frame
 
 SCHEMA_VERSION = 1
@@ -116,7 +117,6 @@ def to_markdown(protocol: Protocol) -> str:
 
 def render(protocol: Protocol, fmt: str = "csv") -> str:
     """The protocol as text in ``fmt`` (``csv``, ``json`` or ``md``)."""
-    from ..errors import unknown_name
 
     renderers = {"csv": to_csv_text, "json": to_json_text, "md": to_markdown}
     if fmt not in renderers:
@@ -159,7 +159,6 @@ def read_protocol(path) -> Protocol:
         df = pd.DataFrame(doc.get("points") or [])
         proto = protocol_from_frame(df, str(path), name=doc.get("name") or path.stem)
         limits = doc.get("tool_limits") or {}
-        from dataclasses import replace
 
         return replace(
             proto, kind=doc.get("protocol_kind", "file"), rule=doc.get("rule", ""),

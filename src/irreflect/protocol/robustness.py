@@ -20,14 +20,17 @@ by ``angle_error``, so runs that differ only in the error size are directly comp
 
 from __future__ import annotations
 
+import warnings
 from dataclasses import dataclass, field
 
 import numpy as np
 import pandas as pd
+from tqdm import tqdm
 
 from .. import metrics
+from .._progress import on_terminal
 from ..data import Measurements, as_measurements
-from ..errors import IrreflectError
+from ..errors import FitError, FitWarning, IrreflectError
 from ..fitting import FitResult, fit, fit_subsets
 from ..models import get_model
 from .evaluate import (
@@ -165,9 +168,7 @@ def _structural_reasons(model_obj, g0, t0, power, seed, reasons) -> list[str]:
     a near-singular direction of the information matrix of the error-free fit (e.g. every
     ``v`` of Eqs. 15-18 when all points share one angle of incidence). A Monte Carlo
     alone can miss them: a degenerate coefficient may simply stay at its start."""
-    import warnings
 
-    from ..errors import FitError, FitWarning
 
     try:
         with warnings.catch_warnings():  # an internal check, not a fit the user asked for
@@ -255,10 +256,8 @@ def protocol_robustness(protocol, reference, *, model=None, dense=None, n_trials
     params = np.empty((rows.shape[0], model_obj.n_params))
     failed = np.empty(rows.shape[0], bool)
     chunks = range(0, rows.shape[0], _CHUNK)
-    from .._progress import on_terminal
 
     if progress and on_terminal():  # a transient bar; nothing through a pipe
-        from tqdm import tqdm
 
         chunks = tqdm(chunks, desc="Monte Carlo", unit="batch", leave=False)
     for start in chunks:

@@ -24,14 +24,17 @@ give identical results.
 
 from __future__ import annotations
 
+import concurrent.futures as cf
 import math
+import multiprocessing as mp
 import os
 import time
 from concurrent.futures import ThreadPoolExecutor
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
+from .._progress import progress as progress_display
 from ..errors import IrreflectError
 from . import kernels as K
 from .geometry import (
@@ -43,6 +46,7 @@ from .geometry import (
     face_material_indices,
     line_of_sight,
 )
+from .results import summary_table, write_results
 from .scene import METHODS, Scene
 
 DEFAULTS = {"method": "montecarlo", "bounces": 3, "cell_m": 0.25, "rays": 20000, "seed": 0,
@@ -115,12 +119,10 @@ class RoomResult:
         return np.arange(any_link.hist.shape[1]) * self.dt_s * 1e9
 
     def summary(self):
-        from .results import summary_table
 
         return summary_table(self)
 
     def write(self, out_dir, figures: bool = True) -> list[str]:
-        from .results import write_results
 
         return write_results(self, out_dir, figures=figures)
 
@@ -210,7 +212,6 @@ def simulate(scene: Scene, *, method=None, bounces=None, cell_m=None, rays=None,
     pairs = [(e, r) for e in range(len(scene.emitters)) for r in range(len(scene.receivers))]
     bar = None
     if progress:
-        from .._progress import progress as progress_display
 
         bar = progress_display(total=len(pairs), desc=f"room ({s['method']})", unit="link")
     try:
@@ -256,8 +257,6 @@ def _run(ctx, pairs, scheduler, workers, bar):
             out.extend(_run_task(ctx, task))
             tick(len(task))
         return out
-    import concurrent.futures as cf
-    import multiprocessing as mp
 
     results = {}
     wctx = _worker_copy(ctx)
@@ -273,7 +272,6 @@ def _run(ctx, pairs, scheduler, workers, bar):
 
 
 def _worker_copy(ctx: _Context) -> _Context:
-    from dataclasses import replace
 
     return replace(ctx, threads=1)
 
@@ -572,12 +570,11 @@ def _rho_at(ctx, cells, din):
     cos_g = np.clip(-np.einsum("ij,ij->i", din, cells.normal), 0.0, 1.0)
     g = np.arccos(cos_g)
     rhotab = ctx.mats[7]
-    from .materials import GAMMA_NODES
 
     out = np.empty(cells.n)
     for m in np.unique(cells.material):
         sel = cells.material == m
-        out[sel] = np.interp(g[sel], GAMMA_NODES, rhotab[m])
+        out[sel] = np.interp(g[sel], K.GAMMA_NODES, rhotab[m])
     return out
 
 

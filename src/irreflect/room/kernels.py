@@ -18,7 +18,14 @@ import math
 import numpy as np
 from numba import njit
 
-from .materials import GAMMA_NODES, LOBE_MAX, N_GAMMA, TABLE_GAMMA, TABLE_THETA
+#: nodes of the per-gamma normalisation tables over [0, 90] deg
+N_GAMMA = 257
+GAMMA_NODES = np.linspace(0.0, np.pi / 2, N_GAMMA)
+#: lobes per material at most
+LOBE_MAX = 8
+#: tabulation of plane-of-incidence-equivalent models (0.25 deg)
+TABLE_GAMMA = np.radians(np.linspace(0.0, 90.0, 361))
+TABLE_THETA = np.radians(np.linspace(-90.0, 90.0, 721))
 
 C_LIGHT = 299_792_458.0
 PI = math.pi

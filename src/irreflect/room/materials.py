@@ -56,19 +56,23 @@ from pathlib import Path
 
 import numpy as np
 
+from .._atomic import atomic_path
 from ..errors import IrreflectError
+from ..models import get_model
+from .kernels import (  # noqa: F401  (the table constants are re-exported)
+    GAMMA_NODES,
+    LOBE_MAX,
+    N_GAMMA,
+    TABLE_GAMMA,
+    TABLE_THETA,
+    eval_material_directions,
+    hemisphere_integral,
+    pack_materials,
+)
 
 #: format of a material file written by ``irreflect fit --save``
 MATERIAL_FORMAT = "irreflect-material"
 MATERIAL_FORMAT_VERSION = 1
-#: nodes of the per-gamma normalisation tables over [0, 90] deg
-N_GAMMA = 257
-GAMMA_NODES = np.linspace(0.0, np.pi / 2, N_GAMMA)
-#: lobes per material at most
-LOBE_MAX = 8
-#: tabulation of plane-of-incidence-equivalent models (0.25 deg)
-TABLE_GAMMA = np.radians(np.linspace(0.0, 90.0, 361))
-TABLE_THETA = np.radians(np.linspace(-90.0, 90.0, 721))
 #: largest angle of incidence at which the share/index laws are evaluated
 GAMMA_LAW_MAX = np.radians(89.5)
 
@@ -152,7 +156,6 @@ class Material:
         ``azimuth_deg`` about the normal out of the plane of incidence (0 = in the plane).
         Evaluated by the same compiled code as the simulation.
         """
-        from .kernels import eval_material_directions, pack_materials
 
         g = np.radians(np.abs(np.asarray(gamma_deg, float)))
         t = np.radians(np.asarray(theta_deg, float))
@@ -214,7 +217,6 @@ def from_model(model, params: dict, reflectance, *, name: str = "material",
         Largest measured angle of incidence: the share and index laws are held constant
         beyond it (default: used up to 89.5 deg).
     """
-    from ..models import get_model
 
     model_obj = get_model(model)
     spec = model if isinstance(model, str) else model_obj.name
@@ -365,7 +367,6 @@ def _plane_table(model_obj, values, gamma_max) -> np.ndarray:
 
 def table_hemisphere_integral(mat: Material, n_mu: int = 96, n_az: int = 192) -> np.ndarray:
     """``S(gamma)`` of a tabulated material, by a product quadrature over the hemisphere."""
-    from .kernels import hemisphere_integral, pack_materials
 
     probe = replace(mat, norm_table=np.ones(N_GAMMA), rho_table=np.ones(N_GAMMA))
     return hemisphere_integral(pack_materials([probe]), 0, GAMMA_NODES, n_mu, n_az)
@@ -380,7 +381,6 @@ def save_material(result, path, *, data_file=None, wavelength_nm=None, notes=Non
     reflectance if known (a number in [0, 1]), ``"K"`` if the fitted power was
     BRDF x cos(theta) in 1/sr, or None (then a scene must give it).
     """
-    from .._atomic import atomic_path
 
     reflectance = parse_reflectance(reflectance, Path(path).stem)
     gamma = np.abs(np.asarray(result.gamma_deg, float))

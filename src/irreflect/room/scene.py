@@ -13,6 +13,7 @@ Room faces are named ``floor``, ``ceiling``, ``wall_x0`` (x = 0), ``wall_x1`` (x
 
 from __future__ import annotations
 
+import difflib
 import math
 import tomllib
 from dataclasses import dataclass, field, replace
@@ -184,7 +185,6 @@ def _check_keys(ctx, where, table, allowed, required=()):
             ctx.fail(where, f"missing key '{key}' (expected {', '.join(required)})")
     unknown = [k for k in table if k not in allowed]
     if unknown:
-        import difflib
 
         close = difflib.get_close_matches(unknown[0], allowed, n=1)
         hint = f"; did you mean '{close[0]}'?" if close else f"; allowed: {', '.join(allowed)}"
@@ -259,7 +259,6 @@ def scene_from_dict(doc: dict, path: str | None = None) -> Scene:
                 except IrreflectError as exc:
                     ctx.fail(where, str(exc))
             return value
-        import difflib
 
         close = difflib.get_close_matches(value, list(materials), n=1)
         hint = f"did you mean '{close[0]}'?" if close else (

@@ -24,6 +24,7 @@ import zipfile
 from pathlib import Path
 
 import numpy as np
+from pymoo.core.population import Population
 
 from .._atomic import atomic_path
 from ..errors import IrreflectError
@@ -158,7 +159,6 @@ def _check_arrays(path, data, meta, n_points) -> None:
 def restore(state: dict, algorithm, evaluator) -> int:
     """Put a loaded checkpoint into a set-up (not yet run) NSGA-II ``algorithm`` and its
     ``evaluator``; returns the generation reached."""
-    from pymoo.core.population import Population
 
     meta = state["meta"]
     evaluator.cache = {row.tobytes(): float(s)

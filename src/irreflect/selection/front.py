@@ -43,7 +43,11 @@ import numpy as np
 import pandas as pd
 from scipy import special
 
+from .. import metrics
+from ..diagnose.workflow import estimate_noise
 from ..errors import IrreflectError
+from ..fitting import fit, fit_subsets
+from ..models import get_model
 
 #: Candidates screened per added point by :func:`complete_front` (a seeded sample of the
 #: allowed points when there are more): keeps the completion cheap on 1000-point scans.
@@ -263,7 +267,6 @@ def noise_level(meas, residuals, seed: int = 0, interval: float = ENOUGH_INTERVA
     if meas.sigma is not None:
         s = float(np.sqrt(np.mean(np.asarray(meas.sigma, float) ** 2)))
         return s, s, s, "the table's sigma column (RMS)"
-    from ..diagnose.workflow import estimate_noise
 
     est = estimate_noise(meas, residuals, seed=seed)
     dof = max(float(est.dof), 1.0)
@@ -282,8 +285,6 @@ def enough_points(meas, front: pd.DataFrame, masks: dict, reference_fit, model, 
     The RMSE of each frontier point comes from its (checked) 1 - R^2; the standard error of
     its difference from the all-points fit's needs the per-point residuals, from batched
     subset fits (``chunk`` frontier points at a time, only as far as the decision needs)."""
-    from ..fitting import fit_subsets
-    from ..models import get_model
 
     model_obj = get_model(model)
 
@@ -368,8 +369,6 @@ def finish_front(meas, evaluator, verified: dict, *, model: str, n_min: int, n_m
     knee's normalisation; the frontier is completed for every N up to ``max(knee,
     paper_n)`` (at most ``n_max``), and the knee taken again on the completed frontier.
     """
-    from .. import metrics
-    from ..fitting import fit
 
     cand = np.asarray(candidates, bool)
     n_total = int(cand.sum())

@@ -28,6 +28,10 @@ from pymoo.core.problem import Problem
 from pymoo.core.repair import Repair
 from pymoo.core.sampling import Sampling
 from pymoo.core.survival import Survival
+from pymoo.operators.survival.rank_and_crowding.classes import RankAndCrowding
+from pymoo.operators.survival.rank_and_crowding.metrics import get_crowding_function
+from pymoo.util.nds.non_dominated_sorting import NonDominatedSorting
+from pymoo.util.randomized_argsort import randomized_argsort
 
 from ..errors import IrreflectError
 from ..fitting import fit_subsets
@@ -474,11 +478,8 @@ class FeasibleRankAndCrowding(Survival):
 
     def __init__(self):
         super().__init__(filter_infeasible=False)
-        from pymoo.operators.survival.rank_and_crowding.classes import RankAndCrowding
 
         self._general = RankAndCrowding()
-        from pymoo.operators.survival.rank_and_crowding.metrics import get_crowding_function
-        from pymoo.util.nds.non_dominated_sorting import NonDominatedSorting
 
         self._nds = NonDominatedSorting()
         self._crowding = get_crowding_function("cd")
@@ -496,7 +497,6 @@ class FeasibleRankAndCrowding(Survival):
         return self._do(problem, pop, n_survive=n_survive, random_state=random_state)
 
     def _do(self, problem, pop, *args, random_state=None, n_survive=None, **kwargs):
-        from pymoo.util.randomized_argsort import randomized_argsort
 
         F = pop.get("F").astype(float, copy=False)
         fronts = self._nds.do(F, n_stop_if_ranked=n_survive)

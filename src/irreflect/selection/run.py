@@ -20,9 +20,11 @@ from pathlib import Path
 
 import numpy as np
 import pandas as pd
+from pymoo.indicators.hv import HV
 
 from .. import metrics
 from .._atomic import claim_output
+from .._progress import progress
 from ..data import Measurements, as_measurements
 from ..errors import IrreflectError
 from ..fitting import fit
@@ -53,7 +55,6 @@ PAPER_N = 12
 def hypervolume(n_points, one_minus_r2, n_total: int) -> float:
     """Hypervolume (pymoo's indicator) of a front in (N / n_total, 1 - R^2) with the fixed
     reference point :data:`HV_REFERENCE`; larger is better, at most 1."""
-    from pymoo.indicators.hv import HV
 
     f = np.column_stack([np.asarray(n_points, float) / n_total, np.asarray(one_minus_r2, float)])
     f = f[np.all(f < np.asarray(HV_REFERENCE), axis=1)]
@@ -187,7 +188,6 @@ class _Progress:
         self.t0 = time.perf_counter()
         self.bar = None
         if enabled:
-            from .._progress import progress
 
             self.bar = progress(total=1, desc=f"select {name}", unit=unit)
 

@@ -18,13 +18,18 @@ d-optimal   sequential D-optimal design: add the point that most increases
 
 from __future__ import annotations
 
+import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
+from pymoo.algorithms.moo.nsga2 import NSGA2
+from pymoo.termination.max_gen import MaximumGenerationTermination
 
 from ..errors import IrreflectError, unknown_name
+from ..models import Geometry
+from .checkpoint import load_checkpoint, restore, save_checkpoint
 from .problem import (
     FeasibleRankAndCrowding,
     MaskDuplicateElimination,
@@ -84,10 +89,7 @@ def nsga2(spec: SearchSpec) -> None:
 
     Checkpoints are data-only ``.npz`` files (:mod:`.checkpoint`): the population, the
     random generator's state and the evaluator's cache and archive."""
-    from pymoo.algorithms.moo.nsga2 import NSGA2
-    from pymoo.termination.max_gen import MaximumGenerationTermination
 
-    from .checkpoint import load_checkpoint, restore, save_checkpoint
 
     generation, previous_seconds = 0, 0.0
     problem = SubsetProblem(spec.evaluator, spec.n_min, spec.n_max, spec.candidates)
@@ -109,7 +111,6 @@ def nsga2(spec: SearchSpec) -> None:
         spec.info["resumed_from_generation"] = generation
     algorithm.termination = MaximumGenerationTermination(max(spec.generations, 1))
     spec.info["seconds_before_resume"] = previous_seconds
-    import time
 
     t0 = time.perf_counter()
     spec.tick(generation, spec.generations)
@@ -178,7 +179,6 @@ def _jacobian(model, params, gamma_rad, theta_rad, sigma):
     """Jacobian (n, P+L) of the model power in its internal coordinates (z, alpha) at the
     pilot parameters, weighted by 1/sigma; D-optimality does not depend on the
     parametrisation (a reparametrisation multiplies every det by the same factor)."""
-    from ..models import Geometry
 
     z, alpha = model.from_natural(np.atleast_2d(params))
     with np.errstate(all="ignore"):
