@@ -1,0 +1,105 @@
+"""Layers import downward only.
+
+    cli  ->  report  ->  plots  ->  capabilities  ->  fitting  ->  data and models
+
+Every import in the package (at module level and inside functions) is read from the
+source; a module may import its own layer's modules or lower layers, never a higher one.
+Among the capabilities the order is explicit (the protocol's points are used by the
+selection, the noise estimate of the diagnosis by the selection's "enough points").
+"""
+
+from __future__ import annotations
+
+import ast
+from pathlib import Path
+
+import pytest
+
+import irreflect
+
+PACKAGE = Path(irreflect.__file__).parent
+
+#: layer -> module prefixes, lowest first
+LAYERS = [
+    ("data and models", ["errors", "validation", "_atomic", "_progress", "_jsonio", "paper",
+                         "data", "metrics", "models"]),
+    ("fitting", ["fitting", "_kernel", "synthetic"]),
+    ("capabilities", ["diagnose", "protocol", "compare", "selection", "room"]),
+    ("plots", ["plots"]),
+    ("report", ["report"]),
+    ("cli", ["cli", "__main__"]),
+]
+#: the order among the capabilities (a capability imports only those before it)
+CAPABILITIES = ["diagnose", "protocol", "compare", "selection", "room"]
+
+
+def _module_name(path: Path) -> str:
+    rel = path.relative_to(PACKAGE).with_suffix("")
+    parts = list(rel.parts)
+    if parts[-1] == "__init__":
+        parts = parts[:-1]
+    return ".".join(["irreflect", *parts])
+
+
+def _top(module: str) -> str | None:
+    """The first component below ``irreflect`` (``irreflect.selection.run`` -> selection)."""
+    parts = module.split(".")
+    return parts[1] if len(parts) > 1 and parts[0] == "irreflect" else None
+
+
+def _layer(top: str) -> int:
+    for i, (_, members) in enumerate(LAYERS):
+        if top in members:
+            return i
+    raise AssertionError(f"irreflect.{top} is in no layer: add it to LAYERS in {__file__}")
+
+
+def _imports(path: Path):
+    module = _module_name(path)
+    package = module if path.name == "__init__.py" else module.rsplit(".", 1)[0]
+    tree = ast.parse(path.read_text(), str(path))
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Import):
+            for alias in node.names:
+                yield node.lineno, alias.name
+        elif isinstance(node, ast.ImportFrom):
+            if node.level:
+                base = package.split(".")
+                base = base[: len(base) - node.level + 1]
+                target = ".".join(base + ([node.module] if node.module else []))
+            else:
+                target = node.module or ""
+            if node.module is None:  # from . import x: x may be a module
+                for alias in node.names:
+                    yield node.lineno, f"{target}.{alias.name}"
+            else:
+                yield node.lineno, target
+
+
+MODULES = sorted(p for p in PACKAGE.rglob("*.py"))
+
+
+def test_every_module_is_in_a_layer():
+    tops = {_top(_module_name(p)) for p in MODULES} - {None}
+    for top in tops:
+        _layer(top)
+
+
+@pytest.mark.parametrize("path", MODULES, ids=lambda p: str(p.relative_to(PACKAGE)))
+def test_imports_go_downward(path):
+    importer = _top(_module_name(path))
+    if importer is None:  # irreflect/__init__.py: the public API may gather any layer
+        return
+    wrong = []
+    for line, target in _imports(path):
+        top = _top(target)
+        if top is None or top == importer or target == "irreflect":
+            continue
+        if top not in {m for _, ms in LAYERS for m in ms}:
+            continue  # an attribute imported from the package (from . import __version__)
+        mine, theirs = _layer(importer), _layer(top)
+        if theirs > mine or (theirs == mine and mine == 2 and
+                             CAPABILITIES.index(top) > CAPABILITIES.index(importer)):
+            wrong.append(f"line {line}: {target} ({LAYERS[theirs][0]})")
+    assert not wrong, (f"{path.relative_to(PACKAGE)} ({LAYERS[_layer(importer)][0]}) imports "
+                       f"upward: {wrong}")
