@@ -119,6 +119,19 @@ def protocol_points_mask(meas: Measurements, points=None) -> np.ndarray:
     return mask
 
 
+def protocol_mask(meas: Measurements) -> tuple[np.ndarray, list[tuple]]:
+    """Mask of the paper's 12 protocol points in ``meas`` (:func:`paper_protocol_points`,
+    snapped to distinct nearest measured points) and the snaps that moved a point, as
+    ``(gamma requested, theta requested, gamma measured, theta measured)`` in degrees."""
+    snapped = snap_points(meas, paper_protocol_points(meas))
+    mask = np.zeros(meas.n_points, bool)
+    mask[snapped["index"].to_numpy()] = True
+    moved = snapped[snapped["distance_deg"] > 0]
+    snaps = [(r.gamma_requested, r.theta_requested, r.gamma_deg, r.theta_deg)
+             for r in moved.itertuples()]
+    return mask, snaps
+
+
 def _as_points(points) -> np.ndarray:
     if isinstance(points, pd.DataFrame):
         missing = {"gamma_deg", "theta_deg"} - set(points.columns)
