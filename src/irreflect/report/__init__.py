@@ -17,18 +17,30 @@ Adding a section is one module with a ``section(ctx: ReportContext) -> Section``
 plus one line in :data:`SECTIONS`; ``tests/test_contracts_report.py`` then checks it.
 """
 
-from .base import Finding, ReportContext, Section, fmt, format_table, markdown_table
-from .runner import PAGE_WIDTH_PX, findings_section, load_datasets, reproduce
-from .sections import SCENE_SECTIONS, SECTIONS
+import importlib
 
-__all__ = ["PAGE_WIDTH_PX", "SCENE_SECTIONS", "SECTIONS", "Finding", "ReportContext", "Section",
-           "findings_section", "fmt", "format_table", "load_datasets", "markdown_table",
-           "reproduce"]
+from .base import Finding, ReportContext, Section, fmt, format_table, markdown_table
+
+#: Loaded on first use: the sections import every capability and the plotting stack, which
+#: ``irreflect --help`` (it imports this package for its ``register``) must not pay for.
+_LAZY = {"reproduce": "runner", "findings_section": "runner", "load_datasets": "runner",
+         "PAGE_WIDTH_PX": "runner", "SECTIONS": "sections", "SCENE_SECTIONS": "sections"}
+
+__all__ = ["Finding", "ReportContext", "Section", "fmt", "format_table", "markdown_table",
+           *_LAZY]
+
+
+def __getattr__(name):
+    if name in _LAZY:
+        return getattr(importlib.import_module(f"{__name__}.{_LAZY[name]}"), name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
 # moved to cli/ on the cli branch; kept here (verbatim) until the merge
 # ----------------------------------------------------------------------------- CLI
 def _cmd_reproduce(args) -> int:
+    from .runner import reproduce
+
     reproduce(out_dir=args.out, data_dir=args.data_dir, quick=args.quick, seed=args.seed,
               progress=not args.no_progress, scene=args.scene)
     return 0
