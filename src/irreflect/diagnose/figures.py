@@ -1,5 +1,5 @@
-"""Moved to :mod:`irreflect.plots.diagnose`."""
-# shim until cli/ merge: diagnose/command.py imports these names from here
+"""Moved to :mod:`irreflect.plots.diagnose` (shim until the cli/ merge: diagnose/command.py
+imports these names from here, with the old residual-map defaults)."""
 from functools import partial
 
 from ..plots import NORMALIZED

@@ -15,6 +15,7 @@ import json
 import numpy as np
 import pandas as pd
 
+from .._atomic import atomic_directory
 from .kernels import C_LIGHT
 
 
@@ -134,8 +135,6 @@ def run_info(result) -> dict:
 
 def write_results(result, out_dir, figures: bool = True) -> list[str]:
     """Write every number (CSV and Parquet) and the figures into ``out_dir``, atomically."""
-    from .._atomic import atomic_directory
-
     written = []
     summary = summary_table(result)
     bounces = bounces_table(result)
