@@ -15,10 +15,14 @@ protocol that fails a material, a fit that cannot be trusted) goes into its
 ``findings``; the report lists them all at the top, failures first.
 
 What a section promises (``tests/test_contracts_report.py`` checks it for every section):
-a title; every ``{table:x}`` / ``{figure:x}`` placeholder of its markdown names a table or
-figure it returns (a section replaces the placeholders of what it could not make by a
-sentence saying why); every table a DataFrame and every figure an existing file; every
-finding's severity one of :data:`SEVERITIES`. A section that cannot run raises: the runner
+its registry name as ``key`` and a title; every ``{table:x}`` / ``{figure:x}`` placeholder
+of its markdown names a table or figure it returns, and everything it returns has its
+placeholder (a section replaces the placeholders of what it could not make by a sentence
+saying why); table and figure names are lower_snake_case and not used by another section
+(they are file names); every table a DataFrame with distinct text column names that
+:func:`format_table` shows without a "nan" (a missing value reads "n/a"); every figure a
+PNG file under ``ctx.out_dir``; every finding's severity one of :data:`SEVERITIES` and its
+dataset "" or one of the run's. A section that cannot run raises: the runner
 never turns an error into a missing section. This module also holds the one formatter of
 numbers in tables (:func:`fmt`, :func:`format_table`, :func:`markdown_table`).
 """
