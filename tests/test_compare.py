@@ -10,11 +10,7 @@ from conftest import paper_grid
 
 from irreflect import metrics
 from irreflect.cli import main
-from irreflect.compare import (
-    compare_models,
-    parse_model_list,
-    reproduce_section,
-)
+from irreflect.compare import compare_models, parse_model_list
 from irreflect.data import Measurements, bundled_dir, load_bundled, read_measurements
 from irreflect.errors import IrreflectError, UnknownNameError
 from irreflect.models import get_model, phong_power
@@ -202,7 +198,8 @@ def test_real_ptfe_comparison(real_dir):
 # ----------------------------------------------------------------------------- report
 def test_reproduce_section_quick(tmp_path):
     from irreflect.fitting import fit
-    from irreflect.reporting import ReportContext
+    from irreflect.report import ReportContext
+    from irreflect.report.compare import section as reproduce_section
 
     datasets = {n: load_bundled(n) for n in ("terrazzo", "plasterboard")}
     from irreflect.paper import paper_tables_dir

@@ -285,8 +285,8 @@ def test_cli_readable_report_and_errors(tmp_path, capsys):
 
 # ----------------------------------------------------------------------------- report
 def test_reproduce_section_quick(tmp_path):
-    from irreflect.diagnose import reproduce_section
-    from irreflect.reporting import ReportContext
+    from irreflect.report import ReportContext
+    from irreflect.report.diagnose import section as reproduce_section
 
     data = {n: load_bundled(n) for n in ("terrazzo", "foam_board")}
     ctx = ReportContext(datasets=data, fits={n: fit(m) for n, m in data.items()},

@@ -20,6 +20,7 @@ from irreflect.data import bundled_dir, load_bundled, read_measurements
 from irreflect.errors import IrreflectError
 from irreflect.fitting import fit
 from irreflect.models import two_lobe_power
+from irreflect.plots.protocol import plot_protocol
 from irreflect.protocol import (
     Protocol,
     as_protocol,
@@ -27,16 +28,16 @@ from irreflect.protocol import (
     measurement_permutation,
     paper_protocol,
     paper_protocol_for,
-    plot_protocol,
     protocol_robustness,
     read_protocol,
-    reproduce_section,
     sample_protocol,
     to_csv_text,
     to_dict,
     to_markdown,
     write_protocol,
 )
+from irreflect.report import ReportContext
+from irreflect.report.protocol import section as protocol_section
 from irreflect.selection import choose_gamma_settings, design_protocol
 from tests.conftest import TABLE3, synthetic
 
@@ -458,15 +459,13 @@ def test_cli_design_from(tmp_path, capsys):
 
 # ----------------------------------------------------------------------------- report, plot
 def test_reproduce_section_quick(tmp_path):
-    from irreflect.reporting import ReportContext
-
     datasets = {"terrazzo": load_bundled("terrazzo"),
                 "plaster-like": synthetic(TABLE3["plasterboard"], 0.002, name="plaster-like")}
     ctx = ReportContext(datasets=datasets, fits={"terrazzo": fit(datasets["terrazzo"])},
                         out_dir=tmp_path, quick=True,
                         paper_dir=PAPER_TABLES if PAPER_TABLES.exists() else None,
                         reconstructions=frozenset({"terrazzo"}))
-    section = reproduce_section(ctx)
+    section = protocol_section(ctx)
     assert section.key == "protocol"
     assert "The reconstructions (terrazzo)" in section.markdown
     assert "On the measured tables the protocol fails 0 of 1" in section.markdown

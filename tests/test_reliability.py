@@ -252,7 +252,7 @@ def test_output_paths_are_checked_before_reading_or_computing(tmp_path, monkeypa
     (tmp_path / "folder").mkdir()
     (tmp_path / "file.txt").write_text("x")
     monkeypatch.setattr("irreflect.data.read_measurements", _must_not_run)
-    monkeypatch.setattr("irreflect.report.read_measurements", _must_not_run)
+    monkeypatch.setattr("irreflect.report.runner.read_measurements", _must_not_run)
     line = _one_error([a.format(tmp=tmp_path) for a in argv])
     assert "--out" in line or "--checkpoint" in line
     assert sorted(p.name for p in tmp_path.iterdir()) == ["file.txt", "folder"]

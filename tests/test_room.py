@@ -345,11 +345,12 @@ def test_room_cli_writes_results_and_refuses_bad_input(tmp_path, capsys):
 
 
 def test_report_room_section(tmp_path):
-    from irreflect.reporting import ReportContext
-    from irreflect.room.report import room_section
+    from irreflect.report import ReportContext
+    from irreflect.report.room import section as room_section
 
-    ctx = ReportContext(datasets={}, fits={}, out_dir=tmp_path, quick=True)
-    section = room_section(ctx, ROOMS / "office.toml")
+    ctx = ReportContext(datasets={}, fits={}, out_dir=tmp_path, quick=True,
+                        scene=ROOMS / "office.toml")
+    section = room_section(ctx)
     comp = section.tables["room_comparison"]
     lam = comp[comp.surfaces.str.startswith("Lambertian")]
     assert (lam["d DC gain vs Lambertian %"] == 0).all()

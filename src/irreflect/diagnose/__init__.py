@@ -16,12 +16,10 @@ workflow
     (:func:`diagnose`).
 hidden
     Synthetic tables with a hidden effect, to test the workflow blind.
-figures
-    Residual maps and polar diagrams of a diagnosis.
 command
     ``irreflect diagnose DATA [--model NAME] [--json] [--out DIR]``.
-section
-    The report section (:func:`reproduce_section`).
+
+Figures: :mod:`irreflect.plots.diagnose`; the report section: :mod:`irreflect.report.diagnose`.
 """
 
 from ..models.extensions import (
@@ -44,16 +42,8 @@ from .workflow import (
     structure_tests,
 )
 
-
-def reproduce_section(ctx):
-    """The report section of the discrepancy workflow (see :mod:`.section`)."""
-    from .section import reproduce_section as _section
-
-    return _section(ctx)
-
-
 __all__ = [
     "CATALOGUE", "EFFECTS_FOUND", "EXTENSIONS", "NO_MISSING_EFFECT", "UNEXPLAINED", "Diagnosis",
     "Extension", "diagnose", "estimate_noise", "extend", "extension_names", "get_extension",
-    "register", "register_extension", "reproduce_section", "structure_tests",
+    "register", "register_extension", "structure_tests",
 ]

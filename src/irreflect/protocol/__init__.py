@@ -1,6 +1,8 @@
 """Measurement protocols (issue 4): the paper's 12 points for any tool (and in any dense
 dataset, :mod:`.points`), their evaluation against dense data, a Monte Carlo of goniometer
-errors, and exports a technician can follow (CSV, JSON, Markdown checklist).
+errors, and exports a technician can follow (CSV, JSON, Markdown checklist). The figure of
+a protocol is :func:`irreflect.plots.protocol.plot_protocol`; the report section
+:mod:`irreflect.report.protocol`.
 """
 
 from .core import (
@@ -32,10 +34,10 @@ __all__ = [
     "ORDER_RULE", "PAPER_RULE", "PURPOSES", "SCHEMA_VERSION", "Protocol", "ProtocolEvaluation",
     "RobustnessResult", "as_protocol",
     "evaluate_protocol", "measurement_permutation", "normalise_gammas", "paper_protocol",
-    "paper_protocol_for", "plot_protocol", "protocol_from_frame", "protocol_robustness",
+    "paper_protocol_for", "protocol_from_frame", "protocol_robustness",
     "read_protocol", "render", "sample_protocol", "to_csv_text", "to_dict", "to_json_text",
     "to_markdown", "write_protocol", "paper_protocol_points", "protocol_mask",
-    "protocol_points_mask", "snap_points", "reproduce_section", "register",
+    "protocol_points_mask", "snap_points", "register",
 ]
 
 
@@ -44,17 +46,3 @@ def register(sub) -> None:
     from .cli import register as _register
 
     _register(sub)
-
-
-def reproduce_section(ctx):
-    """The protocol section of the reproduction report (see :mod:`irreflect.reporting`)."""
-    from .report import reproduce_section as _section
-
-    return _section(ctx)
-
-
-def plot_protocol(protocol, dense=None, ax=None, **kwargs):
-    """Protocol points in the (gamma, theta) plane (see :func:`.plot.plot_protocol`)."""
-    from .plot import plot_protocol as _plot
-
-    return _plot(protocol, dense, ax, **kwargs)

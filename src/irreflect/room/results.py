@@ -135,7 +135,6 @@ def run_info(result) -> dict:
 
 def write_results(result, out_dir, figures: bool = True) -> list[str]:
     """Write every number (CSV and Parquet) and the figures into ``out_dir``, atomically."""
-
     written = []
     summary = summary_table(result)
     bounces = bounces_table(result)
@@ -149,39 +148,15 @@ def write_results(result, out_dir, figures: bool = True) -> list[str]:
         (tmp / "run.json").write_text(json.dumps(run_info(result), indent=2, default=str) + "\n")
         written.append("run.json")
         if figures:
-            written += _figures(result, summary, singles, tmp)
+            # the one drawing call of a capability: RoomResult.write (public API) writes the
+            # figures too; the lead decides at the cli/ merge whether it moves up a layer
+            from ..plots.room import write_figures
+
+            written += write_figures(result, summary, singles, tmp)
     return written
 
 
-def _figures(result, summary, singles, folder) -> list[str]:
-    from .plots import plot_bounce_gains, plot_impulse_response, plot_map, save
-
-    out = []
-    scene = result.scene
-    shown = singles[:6]
-    for e, em in enumerate(scene.emitters):
-        for r in shown:
-            name = f"impulse_{_safe(em.name)}_{_safe(scene.receivers[r].name)}.png"
-            ax = plot_impulse_response(result, e, r)
-            save(ax, folder / name)
-            out.append(name)
-        if shown:
-            name = f"bounce_gains_{_safe(em.name)}.png"
-            ax = plot_bounce_gains(result, e, shown)
-            save(ax, folder / name)
-            out.append(name)
-        for grid in scene.grids:
-            for column, label in (("dc_gain_total", "DC gain (total)"),
-                                  ("range_error_m", "range error (m)"),
-                                  ("rms_delay_spread_ns", "RMS delay spread (ns)")):
-                if summary[column].isna().all():
-                    continue
-                name = f"map_{column}_{_safe(grid.name)}_{_safe(em.name)}.png"
-                ax = plot_map(result, summary, grid, column, em.name, label=label)
-                save(ax, folder / name)
-                out.append(name)
-    return out
-
-
-def _safe(text: str) -> str:
+def safe_name(text: str) -> str:
+    """``text`` with every character but letters, digits, '-' and '_' replaced by '_'
+    (for file names)."""
     return "".join(c if c.isalnum() or c in "-_" else "_" for c in text)

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .. import plots as _plots  # noqa: F401  (selects the Agg backend)
+from .common import plt
 
 _STYLE = {
     "mirror": ("*", "tab:red"),
@@ -31,8 +31,6 @@ def plot_protocol(protocol, dense=None, ax=None, *, title=None):
     -------
     Axes
     """
-    import matplotlib.pyplot as plt
-
     if ax is None:
         _, ax = plt.subplots(figsize=(6.0, 4.2))
     if dense is not None:

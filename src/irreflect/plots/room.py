@@ -1,14 +1,15 @@
 """Figures of room simulations: h(t), per-order DC gains, maps over receiver grids, and the
 3D extension of a material. ``plot_*(..., ax=None) -> Axes``; nothing is shown or saved
-behind the caller's back (use :func:`save`)."""
+behind the caller's back (use :func:`save`); :func:`write_figures` writes a
+room run's set."""
 
 from __future__ import annotations
 
-import matplotlib
+import matplotlib.patches
+import numpy as np
 
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
+from ..room.results import grid_values, safe_name
+from .common import plt
 
 _ORDER_LABEL = {0: "line of sight", 1: "1 reflection"}
 
@@ -82,8 +83,6 @@ def plot_bounce_gains(result, emitter=0, receivers=None, ax=None):
 def plot_map(result, summary, grid, column, emitter, ax=None, *, label=None, cmap="viridis",
              center=None):
     """A summary column over a receiver grid (``pcolormesh``), with emitters and boxes drawn."""
-    from .results import grid_values
-
     ax = _ax(ax, figsize=(5.6, 4.6))
     x, y, values = grid_values(result, summary, grid, column, emitter)
     kw = {}
@@ -126,3 +125,34 @@ def plot_material_3d(material, gamma_deg: float, ax=None, azimuths=(0, 30, 60, 9
     ax.set_title(f"{material.name}: 3D intensity (1/sr per W), gamma = {gamma_deg:g} deg", fontsize=9)
     ax.legend(fontsize=7, loc="lower left")
     return ax
+
+
+def write_figures(result, summary, singles, folder) -> list[str]:
+    """A room run's figures into ``folder``: h(t) and the DC gain per order for up to six
+    single receivers, and a map of the DC gain, range error and delay spread over every
+    receiver grid, per emitter. Returns the file names."""
+    out = []
+    scene = result.scene
+    shown = singles[:6]
+    for e, em in enumerate(scene.emitters):
+        for r in shown:
+            name = f"impulse_{safe_name(em.name)}_{safe_name(scene.receivers[r].name)}.png"
+            ax = plot_impulse_response(result, e, r)
+            save(ax, folder / name)
+            out.append(name)
+        if shown:
+            name = f"bounce_gains_{safe_name(em.name)}.png"
+            ax = plot_bounce_gains(result, e, shown)
+            save(ax, folder / name)
+            out.append(name)
+        for grid in scene.grids:
+            for column, label in (("dc_gain_total", "DC gain (total)"),
+                                  ("range_error_m", "range error (m)"),
+                                  ("rms_delay_spread_ns", "RMS delay spread (ns)")):
+                if summary[column].isna().all():
+                    continue
+                name = f"map_{column}_{safe_name(grid.name)}_{safe_name(em.name)}.png"
+                ax = plot_map(result, summary, grid, column, em.name, label=label)
+                save(ax, folder / name)
+                out.append(name)
+    return out

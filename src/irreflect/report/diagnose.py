@@ -5,8 +5,12 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 
+from ..diagnose.hidden import KINDS, OUTSIDE, hidden_case
+from ..diagnose.workflow import EFFECTS_FOUND, NO_MISSING_EFFECT, UNEXPLAINED, diagnose
 from ..errors import IrreflectError
-from ..reporting import Finding, ReportContext, Section
+from ..plots import save_figure
+from ..plots.diagnose import plot_diagnosis_residuals
+from .base import Finding, ReportContext, Section
 
 
 def _effects_text(d) -> str:
@@ -17,13 +21,9 @@ def _effects_text(d) -> str:
         + f", dBIC {e.delta_bic:.0f})" for e in d.effects)
 
 
-def reproduce_section(ctx: ReportContext) -> Section:
+def section(ctx: ReportContext) -> Section:
     """Diagnose every dataset of the report (and, in a full run, a blind test on tables with
     hidden effects): verdict, effects added, the gap before and after, residual maps."""
-    from ..plots import plt, save_figure
-    from .figures import plot_residual_map
-    from .workflow import diagnose
-
     max_effects = 1 if ctx.quick else 3
     results, rows, cand_rows = {}, [], []
     for name, meas in ctx.datasets.items():
@@ -74,18 +74,10 @@ def reproduce_section(ctx: ReportContext) -> Section:
         elif d.effects:
             findings.append(Finding(2, name, "missing effect found: " + _effects_text(d)))
 
-    n = len(results)
     figures = {}
-    if n:
-        fig = plt.figure(figsize=(12.0, 3.4 * n))
-        for i, (name, d) in enumerate(results.items()):
-            for j, (label, a) in enumerate((("before", d.before), ("after", d.after))):
-                ax = fig.add_subplot(n, 2, 2 * i + j + 1)
-                plot_residual_map(a.fit.gamma_deg, a.fit.theta_deg, a.residuals_z, ax=ax,
-                                  title=f"{name} {label}: {a.model_name}, chi2/dof "
-                                        f"{a.lack_of_fit.ratio:.3g}")
-        fig.tight_layout()
-        figures["diagnose_residuals"] = save_figure(fig, ctx.figure_path("diagnose_residuals"))
+    if results:
+        figures["diagnose_residuals"] = save_figure(plot_diagnosis_residuals(results),
+                                                    ctx.figure_path("diagnose_residuals"))
 
     blind = ""
     if not ctx.quick:
@@ -127,9 +119,6 @@ def reproduce_section(ctx: ReportContext) -> Section:
 
 
 def _blind_table(seeds: int, first_seed: int) -> pd.DataFrame:
-    from .hidden import KINDS, OUTSIDE, hidden_case
-    from .workflow import EFFECTS_FOUND, NO_MISSING_EFFECT, UNEXPLAINED, diagnose
-
     rows = []
     for kind in KINDS:
         named = right = verdicts = 0

@@ -2,17 +2,16 @@
 
 from __future__ import annotations
 
-import matplotlib
+import pandas as pd
 
-matplotlib.use("Agg")
+from ..errors import FitError, IrreflectError
+from ..plots import save_figure
+from ..plots.selection import plot_points, plot_selection
+from ..protocol.points import protocol_points_mask
+from ..selection.run import PAPER_N, compare_methods, run_selection
+from .base import Finding, ReportContext, Section
 
-import pandas as pd  # noqa: E402
-
-from ..errors import FitError, IrreflectError  # noqa: E402
-from ..plots import save_figure  # noqa: E402
-from ..reporting import Finding, ReportContext, Section  # noqa: E402
-from .plots import plot_points, plot_selection  # noqa: E402
-from .run import PAPER_N, compare_methods, protocol_points_mask, run_selection  # noqa: E402
+TITLE = "Which points matter: Pareto frontier, knee, Method A / B / 12 (Table 5, Figs. 18-19)"
 
 #: The knees the paper reports in its text (section 4.3): 12 for terrazzo, 11 for the others.
 PAPER_KNEE = {"terrazzo": 12, "plasterboard": 11, "foam_board": 11}
@@ -26,7 +25,7 @@ def _budget(ctx: ReportContext) -> dict:
     return dict(QUICK if ctx.quick else FULL)
 
 
-def reproduce_section(ctx: ReportContext) -> Section:
+def section(ctx: ReportContext) -> Section:
     """Frontier, knee, enough points and best 12 per dataset (Figs. 18-19), Table 5."""
     budget = _budget(ctx)
     paper5 = ctx.paper_table("table5_methods_r2.csv")
@@ -43,7 +42,7 @@ def reproduce_section(ctx: ReportContext) -> Section:
             continue
         results[name] = res
     if not results:
-        return Section("selection", "", "No dataset could be searched: " + "; ".join(skipped))
+        return Section("selection", TITLE, "No dataset could be searched: " + "; ".join(skipped))
 
     front_rows, table5_rows, findings = [], [], []
     for name, res in results.items():
@@ -151,7 +150,7 @@ def reproduce_section(ctx: ReportContext) -> Section:
         md += ["", "Not searched: " + "; ".join(skipped)]
     return Section(
         key="selection",
-        title="",
+        title=TITLE,
         markdown="\n".join(md),
         tables={"selection_fronts": fronts, "selection_table5": table5,
                 "selection_best12": best},

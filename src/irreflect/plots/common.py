@@ -1,5 +1,7 @@
-"""Figures. Every ``plot_*`` draws on the axes or figure it is given (or makes one) and
-returns it: no ``plt.show()``, no hidden file writes. Angles in degrees on every axis.
+"""What every figure shares: the backend, :func:`save_figure`, polar diagrams, the 3D
+surface, the residual map and histogram and their robust limits. Every ``plot_*`` draws on
+the axes or figure it is given (or makes one) and returns it: no ``plt.show()``, no hidden
+file writes. Angles in degrees on every axis.
 
 Polar diagrams follow the paper's Figs. 15-17: the surface normal points up, positive
 receiver angles (the mirror side) to the right.
@@ -15,7 +17,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 import matplotlib.ticker  # noqa: E402
 import numpy as np  # noqa: E402
 
-from ._atomic import atomic_path  # noqa: E402
+from .._atomic import atomic_path  # noqa: E402
 
 
 def _polar_axes(ax=None, fig=None):
@@ -148,39 +150,96 @@ def robust_limit(values, coverage: float = 0.98):
     return limit
 
 
-def plot_residual_map(measurements, values, ax=None, *, title=None,
-                      label="measured - model", symmetric=True, robust: bool = False):
-    """Residuals (or normalised residuals) over the (gamma, theta) plane (Figs. 21-22).
+def robust_limits(values, coverage: float = 0.98) -> tuple[float, list[int], int]:
+    """The symmetric colour / bin limit of the residual figures (:func:`robust_limit`: the
+    central ``coverage`` of ``|values|``), the indices of the outliers (beyond 1.5 times
+    it, at most 5, largest first) and how many values lie beyond it in all. A single
+    outlier (a near-zero measured power making a relative residual of -870 %) then no
+    longer flattens the scale, and is named."""
+    v = np.asarray(values, float)
+    limit = robust_limit(v, coverage)
+    finite = np.isfinite(v)
+    n_beyond = int(np.sum(finite & (np.abs(v) > limit)))
+    far = np.flatnonzero(finite & (np.abs(v) > 1.5 * limit))
+    far = far[np.argsort(-np.abs(v[far]))][:5]
+    return limit, [int(i) for i in far], n_beyond
 
-    ``values`` should be *measured - model* (the sign used everywhere in irreflect; say
-    so in ``label``, the colour bar's label). With ``robust``, the colour scale covers the
-    central 98 % of |values| and the rest is drawn at the limit (a single point with a
-    near-zero measured power no longer flattens the map); the colour bar then has arrows.
-    The legend sits above the axes, clear of every row of points.
+
+def plot_residual_map(gamma_deg, theta_deg, values, ax=None, *, title=None,
+                      label="measured - model", symmetric=True, robust: bool = False,
+                      limit: float | None = None, source_line: bool = False,
+                      colorbar: bool = True):
+    """Residuals over the (theta, gamma) plane (the paper's Figs. 21-22; the diagnosis's
+    normalised residual maps).
+
+    Parameters
+    ----------
+    gamma_deg, theta_deg : array-like, degrees
+        Angle of incidence and receiver angle of every point.
+    values : array-like
+        *measured - model* (the sign used everywhere in irreflect; say so in ``label``,
+        the colour bar's label), in power units, percent or noise sigmas.
+    robust : the colour scale covers the central 98 % of |values| and the rest is drawn at
+        the limit (a single point with a near-zero measured power no longer flattens the
+        map); the colour bar then has arrows.
+    limit : a fixed symmetric colour limit (e.g. 4 for residuals in noise sigmas); values
+        beyond are drawn at it.
+    source_line : also mark the source direction (``theta = gamma``) beside the mirror
+        direction, and frame the plot around both (the diagnosis's maps).
+
+    Red = measured above the model. The legend sits above the axes, clear of every row of
+    points. Returns the Axes.
     """
-    if ax is None:
-        ax = plt.figure(figsize=(6.4, 4.0)).add_subplot()
+    g = np.asarray(gamma_deg, float)
+    t = np.asarray(theta_deg, float)
     values = np.asarray(values, float)
-    if symmetric:
+    if ax is None:
+        ax = plt.figure(figsize=(6.4, 3.6 if source_line else 4.0)).add_subplot()
+    if limit is not None:
+        vmin, vmax = -limit, limit
+    elif symmetric:
         vmax = robust_limit(values) if robust else float(np.nanmax(np.abs(values)))
         vmin = -vmax
     else:
         vmin = vmax = None
-    shown = np.clip(values, vmin, vmax) if symmetric else values
-    sc = ax.scatter(measurements.theta_deg, measurements.gamma_deg, c=shown, cmap="coolwarm",
-                    vmin=vmin, vmax=vmax, s=28 if measurements.n_points <= 400 else 6,
-                    edgecolor="k" if measurements.n_points <= 400 else "none", linewidth=0.3)
-    mirror = np.unique(measurements.gamma_deg)
-    ax.plot(-mirror, mirror, ":", color="0.4", lw=1, label="mirror direction theta = -gamma")
-    clipped = symmetric and robust and np.nanmax(np.abs(values)) > vmax
-    ax.figure.colorbar(sc, ax=ax, label=label, extend="both" if clipped else "neither")
+    shown = np.clip(values, vmin, vmax) if vmax is not None else values
+    if limit is not None:  # residuals in noise sigmas: a diverging map without edges
+        size = 28 if g.size <= 300 else 6
+        sc = ax.scatter(t, g, c=shown, cmap="RdBu_r", vmin=vmin, vmax=vmax, s=size,
+                        edgecolors="none")
+    else:
+        few = g.size <= 400
+        sc = ax.scatter(t, g, c=shown, cmap="coolwarm", vmin=vmin, vmax=vmax,
+                        s=28 if few else 6, edgecolor="k" if few else "none", linewidth=0.3)
+    if source_line:
+        span = np.array([g.min() - 3, g.max() + 3])
+        ax.plot(-span, span, "k--", lw=0.8, label="mirror direction")
+        ax.plot(span, span, ":", color="0.4", lw=0.9, label="source direction")
+        ax.set_ylim(span[0], span[1])
+        ax.set_xlim(min(t.min(), -span.max()) - 3, max(t.max(), -span.min()) + 3)
+    else:
+        mirror = np.unique(g)
+        ax.plot(-mirror, mirror, ":", color="0.4", lw=1, label="mirror direction theta = -gamma")
+    clipped = vmax is not None and (limit is not None or robust) and \
+        np.nanmax(np.abs(values)) > vmax
+    if colorbar:
+        ax.figure.colorbar(sc, ax=ax, label=label, extend="both" if clipped else "neither",
+                           **({"shrink": 0.9} if source_line else {}))
     ax.set_xlabel("receiver angle theta (deg)")
     ax.set_ylabel("angle of incidence gamma (deg)")
-    ax.legend(fontsize=7, loc="lower left", bbox_to_anchor=(0.0, 1.0), frameon=False,
-              borderaxespad=0.2)
+    if source_line:
+        ax.legend(loc="lower center", bbox_to_anchor=(0.5, 1.0), ncol=2, fontsize=7,
+                  frameon=False, borderaxespad=0.2)
+    else:
+        ax.legend(fontsize=7, loc="lower left", bbox_to_anchor=(0.0, 1.0), frameon=False,
+                  borderaxespad=0.2)
     if title:
-        ax.set_title(title, fontsize=10, pad=16)
+        ax.set_title(title, fontsize=10, pad=18 if source_line else 16)
     return ax
+
+
+#: The diagnosis's maps: residuals in noise sigmas, clipped at 4, source direction marked.
+NORMALIZED = {"limit": 4.0, "label": "(measured - model) / sigma", "source_line": True}
 
 
 def plot_residual_histogram(values, ax=None, *, title=None,

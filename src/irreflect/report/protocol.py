@@ -5,13 +5,17 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 
+from .. import metrics
 from ..errors import FitError, IrreflectError
 from ..fitting import fit
 from ..paper import TABLE1_GAMMAS
-from ..reporting import Finding, ReportContext, Section
-from .core import paper_protocol
-from .evaluate import evaluate_protocol, glossy_protocol_for, paper_protocol_for
-from .robustness import protocol_robustness
+from ..plots import plot_polar_per_gamma, save_figure
+from ..plots.protocol import plot_protocol
+from ..protocol.core import lobe_half_width_deg, paper_protocol
+from ..protocol.evaluate import evaluate_protocol, glossy_protocol_for, paper_protocol_for
+from ..protocol.points import protocol_mask
+from ..protocol.robustness import protocol_robustness
+from .base import Finding, ReportContext, Section
 
 
 def _table1(ctx: ReportContext) -> tuple[pd.DataFrame, bool | None]:
@@ -31,8 +35,6 @@ def _table1(ctx: ReportContext) -> tuple[pd.DataFrame, bool | None]:
 
 
 def _half_widths(reference, gammas_deg):
-    from .core import lobe_half_width_deg
-
     p = reference.params
     n = p["u_ns"] * np.cos(np.radians(np.asarray(gammas_deg, float))) ** p["v_ns"]
     return lobe_half_width_deg(n)
@@ -41,9 +43,6 @@ def _half_widths(reference, gammas_deg):
 def _snapped_r2(meas, seed: int) -> float | None:
     """R^2 on all points of the fit on the protocol's points snapped to the nearest
     measured points (as Table 2 and Table 5 do), to set beside the interpolated one."""
-    from .. import metrics
-    from ..report import protocol_mask
-
     try:
         mask, _ = protocol_mask(meas)
     except IrreflectError:
@@ -54,7 +53,7 @@ def _snapped_r2(meas, seed: int) -> float | None:
     return float(metrics.r2(meas.power, res.predict(meas.gamma_deg, meas.theta_deg)))
 
 
-def reproduce_section(ctx: ReportContext) -> Section:
+def section(ctx: ReportContext) -> Section:
     """The paper's protocol (Table 1), its evaluation on every dataset and its robustness."""
     n_trials = 40 if ctx.quick else 400
     table1, same = _table1(ctx)
@@ -168,9 +167,6 @@ def reproduce_section(ctx: ReportContext) -> Section:
         tables["protocol_robustness"] = pd.DataFrame(rob_rows)
         tables["protocol_coefficient_spread_pct"] = pd.DataFrame(spread_rows)
     if first is not None:
-        from ..plots import plot_polar_per_gamma, save_figure
-        from .plot import plot_protocol
-
         _, name, meas, proto, ev, reference = first  # the dataset the protocol suits least
         ax = plot_protocol(proto, meas, title=f"paper protocol on the {name} grid")
         figures["protocol_points"] = save_figure(ax.figure, ctx.figure_path("protocol_points"))

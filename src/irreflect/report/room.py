@@ -14,7 +14,20 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from ..reporting import ReportContext, Section
+from ..fitting import fit
+from ..paper import real_data_dir
+from ..plots.room import plot_bounce_gains, plot_impulse_response, plot_map, plot_material_3d, save
+from ..room.engine import simulate
+from ..room.materials import from_model
+from ..room.results import safe_name, summary_table
+from ..room.scene import load_scene
+from ..room.validation import (
+    barry_configuration_a,
+    line_of_sight_closed_form,
+    one_bounce_reference,
+    single_floor_scene,
+)
+from .base import ReportContext, Section
 
 TITLE = "Room multipath from the fitted materials: DC gain, delay spread and range error"
 #: Barry's configuration A, 3 bounces, 0.125 m cells, from vlc-rm (PyPI) run by
@@ -24,8 +37,6 @@ GLOSSY_CANDIDATES = ("cornell/cornell_krylon_blue.csv", "rgl_epfl/rgl_satin_rosa
 
 
 def _shared_real() -> Path | None:
-    from ..paper import real_data_dir
-
     return real_data_dir()
 
 
@@ -35,9 +46,6 @@ def glossy_floor(rho: float):
     real = _shared_real()
     if real is None:
         return None, "the real data (../shared/datasets/real) are not beside this checkout"
-    from ..fitting import fit
-    from .materials import from_model
-
     for rel in GLOSSY_CANDIDATES:
         path = real / rel
         if path.exists():
@@ -65,13 +73,12 @@ def _variants(scene, quick):
     return out, note
 
 
-def room_section(ctx: ReportContext, scene_path) -> Section:
-    from .engine import simulate
-    from .plots import plot_bounce_gains, plot_impulse_response, plot_map, plot_material_3d, save
-    from .results import summary_table
-    from .scene import load_scene
-
-    scene = load_scene(scene_path)
+def section(ctx: ReportContext) -> Section:
+    """The scene's room with Lambertian, fitted and glossy-floor surfaces, and the
+    validation page (``ctx.scene``: the scene's TOML file)."""
+    if ctx.scene is None:
+        raise ValueError("the room section needs a scene: ReportContext(scene=SCENE.toml)")
+    scene = load_scene(ctx.scene)
     rays = 1500 if ctx.quick else int(scene.settings.get("rays", 20000))
     bounces = int(scene.settings.get("bounces", 3))
     tables, figures, md = {}, {}, []
@@ -100,7 +107,7 @@ def room_section(ctx: ReportContext, scene_path) -> Section:
     for name, mat in scene.materials.items():
         if mat.model == "two-lobe":
             ax = plot_material_3d(mat, 50.0)
-            key = f"room_material_{_safe(name)}"
+            key = f"room_material_{safe_name(name)}"
             save(ax, ctx.figure_path(key))
             figures[key] = ctx.figure_path(key)
             md.append(f"{{figure:{key}}} ")
@@ -190,14 +197,6 @@ def room_section(ctx: ReportContext, scene_path) -> Section:
 
 def validation_page(quick: bool):
     """Checks against what exists, as report tables (numbers measured in this run)."""
-    from .engine import simulate
-    from .validation import (
-        barry_configuration_a,
-        line_of_sight_closed_form,
-        one_bounce_reference,
-        single_floor_scene,
-    )
-
     tables = {}
     scene = barry_configuration_a()
     los, tau = line_of_sight_closed_form(scene.emitters[0], scene.receivers[0])
@@ -247,7 +246,3 @@ def validation_page(quick: bool):
           "recursive method converges to the numerical integral as the cells shrink.\n\n"
           "{table:room_one_bounce}\n\n{table:room_checks}\n")
     return md, tables
-
-
-def _safe(text: str) -> str:
-    return "".join(c if c.isalnum() or c in "-_" else "_" for c in text)

@@ -1,0 +1,154 @@
+"""The report's contract (:mod:`irreflect.report.base`), checked for every registered section.
+
+Every section of :data:`irreflect.report.sections.SECTIONS` (and of ``SCENE_SECTIONS``) is
+called once on one small context (two bundled datasets, quick budgets, the office scene)
+and must return a Section with a title whose placeholders all resolve to what it made,
+tables that format, figures that exist, and findings with a valid severity. A section
+added to the registry is covered without editing this file. A section that raises stops
+the report: nothing is turned into a silent "not available".
+"""
+
+from __future__ import annotations
+
+import re
+from pathlib import Path
+
+import pandas as pd
+import pytest
+
+from irreflect.data import bundled_dir, load_bundled
+from irreflect.fitting import fit
+from irreflect.paper import paper_tables_dir
+from irreflect.report import SCENE_SECTIONS, SECTIONS, ReportContext, Section, reproduce
+from irreflect.report.base import SEVERITIES, Finding, format_table
+
+DATASETS = ("terrazzo", "plasterboard")
+SCENE = bundled_dir() / "rooms" / "office.toml"
+ALL = {**SECTIONS, **SCENE_SECTIONS}
+PLACEHOLDER = re.compile(r"\{(table|figure):([^}]+)\}")
+
+
+@pytest.fixture(scope="module")
+def context(tmp_path_factory) -> ReportContext:
+    datasets = {name: load_bundled(name) for name in DATASETS}
+    return ReportContext(datasets=datasets, fits={n: fit(m) for n, m in datasets.items()},
+                         out_dir=tmp_path_factory.mktemp("sections"), quick=True, seed=0,
+                         paper_dir=paper_tables_dir(), reconstructions=frozenset(datasets),
+                         scene=SCENE)
+
+
+@pytest.fixture(scope="module")
+def made(context):
+    """Each section's output, computed once for every test of this module."""
+    cache: dict[str, Section] = {}
+
+    def get(name: str) -> Section:
+        if name not in cache:
+            cache[name] = ALL[name](context)
+        return cache[name]
+
+    return get
+
+
+def _params():
+    return [pytest.param(name, marks=pytest.mark.slow) if name in SCENE_SECTIONS else name
+            for name in ALL]
+
+
+def test_the_registry_holds_functions_in_report_order():
+    assert list(SECTIONS) == ["fits", "selection", "protocol", "compare", "diagnose"]
+    assert list(SCENE_SECTIONS) == ["room"]
+    assert not set(SECTIONS) & set(SCENE_SECTIONS)
+    for name, function in ALL.items():
+        assert callable(function), name
+        assert function.__module__ == f"irreflect.report.{name}", (name, function.__module__)
+
+
+@pytest.mark.parametrize("name", _params())
+def test_section_keeps_the_contract(made, context, name):
+    section = made(name)
+    assert isinstance(section, Section)
+    assert section.key == name
+    assert isinstance(section.title, str) and section.title.strip()
+    assert isinstance(section.markdown, str) and section.markdown.strip()
+    # every placeholder names something the section made, and everything it made is shown
+    wanted = {(kind, key) for kind, key in PLACEHOLDER.findall(section.markdown)}
+    made_ = {("table", k) for k in section.tables} | {("figure", k) for k in section.figures}
+    assert wanted <= made_, sorted(wanted - made_)
+    assert made_ <= wanted, sorted(made_ - wanted)
+
+
+@pytest.mark.parametrize("name", _params())
+def test_section_tables_format_and_figures_exist(made, context, name):
+    section = made(name)
+    for key, table in section.tables.items():
+        assert re.fullmatch(r"[a-z0-9_]+", key), key  # the CSV file name
+        assert isinstance(table, pd.DataFrame) and len(table.columns), key
+        assert all(isinstance(c, str) for c in table.columns), (key, list(table.columns))
+        assert len(set(table.columns)) == len(table.columns), (key, list(table.columns))
+        shown = format_table(table)
+        cells = [c for row in shown.itertuples(index=False) for c in row]
+        assert all(isinstance(c, str) for c in cells), key
+        assert not any(c.lower() in ("nan", "<na>", "nat") for c in cells), key  # n/a or empty
+    for key, path in section.figures.items():
+        assert re.fullmatch(r"[a-z0-9_]+", key), key
+        path = Path(path)
+        assert path.resolve().is_relative_to(context.out_dir.resolve()), (key, path)
+        assert path.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n", key
+
+
+@pytest.mark.parametrize("name", _params())
+def test_section_findings_are_valid(made, context, name):
+    for finding in made(name).findings:
+        assert isinstance(finding, Finding)
+        assert finding.severity in SEVERITIES, finding
+        assert finding.dataset == "" or finding.dataset in context.datasets, finding
+        assert finding.text.strip(), finding
+
+
+@pytest.mark.slow
+def test_sections_name_their_tables_and_figures_apart(made):
+    """Tables and figures share one folder each: no two sections may use one name."""
+    tables, figures = {}, {}
+    for name in ALL:
+        section = made(name)
+        for key in section.tables:
+            assert key not in tables, (key, tables.get(key), name)
+            tables[key] = name
+        for key in section.figures:
+            assert key not in figures, (key, figures.get(key), name)
+            figures[key] = name
+
+
+def test_a_failing_section_stops_the_report(tmp_path, monkeypatch):
+    def broken(ctx):
+        raise RuntimeError("section broke")
+
+    data = tmp_path / "data"
+    data.mkdir()
+    (data / "terrazzo.csv").write_bytes((bundled_dir() / "terrazzo.csv").read_bytes())
+    monkeypatch.setattr("irreflect.report.runner.SECTIONS", {"broken": broken})
+    out = tmp_path / "out"
+    with pytest.raises(RuntimeError, match="section broke"):
+        reproduce(out_dir=out, data_dir=data, quick=True, progress=False)
+    assert not out.exists()  # nothing half-written, and no "not available" page
+
+
+def test_the_registry_is_what_reproduce_runs(tmp_path, monkeypatch):
+    calls = []
+
+    def tiny(ctx):
+        calls.append(sorted(ctx.datasets))
+        return Section("tiny", "A tiny section", "One table:\n\n{table:tiny_table}\n",
+                       tables={"tiny_table": pd.DataFrame({"value": [1.5]})})
+
+    data = tmp_path / "data"
+    data.mkdir()
+    (data / "terrazzo.csv").write_bytes((bundled_dir() / "terrazzo.csv").read_bytes())
+    monkeypatch.setattr("irreflect.report.runner.SECTIONS", {"tiny": tiny})
+    summary = reproduce(out_dir=tmp_path / "out", data_dir=data, quick=True, progress=False)
+    assert calls == [["terrazzo"]]
+    assert summary["sections"] == ["findings", "tiny", "warnings"]
+    md = (tmp_path / "out" / "report.md").read_text()
+    assert "A tiny section" in md and "| 1.5 |" in md
+    assert (tmp_path / "out" / "tables" / "tiny_table.csv").read_text() == "value\n1.5\n"
