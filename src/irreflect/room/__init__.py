@@ -5,7 +5,8 @@ range error of phase-based ranging, in a room of known geometry.
     scene = load_scene("datasets/rooms/office.toml")
     result = simulate(scene, method="montecarlo", bounces=3, rays=20000, seed=0)
     result.summary()            # one row per emitter-receiver pair
-    result.write("out/room")    # CSV / Parquet of every number, figures
+    result.write("out/room")    # CSV / Parquet of every number
+    result.write("out/room", figures=irreflect.plots.room.write_figures)  # and the figures
 
 Modules: :mod:`.materials` (the 3D extension of the plane-of-incidence models and material
 files), :mod:`.scene` (TOML scenes), :mod:`.geometry` (cells, line of sight),

@@ -119,11 +119,11 @@ class RoomResult:
         return np.arange(any_link.hist.shape[1]) * self.dt_s * 1e9
 
     def summary(self):
-
         return summary_table(self)
 
-    def write(self, out_dir, figures: bool = True) -> list[str]:
-
+    def write(self, out_dir, figures=None) -> list[str]:
+        """Every number as CSV and Parquet into ``out_dir``; the figures too with
+        ``figures=irreflect.plots.room.write_figures`` (see :func:`.results.write_results`)."""
         return write_results(self, out_dir, figures=figures)
 
 

@@ -133,8 +133,11 @@ def run_info(result) -> dict:
     }
 
 
-def write_results(result, out_dir, figures: bool = True) -> list[str]:
-    """Write every number (CSV and Parquet) and the figures into ``out_dir``, atomically."""
+def write_results(result, out_dir, figures=None) -> list[str]:
+    """Write every number (CSV and Parquet) into ``out_dir``, atomically; with ``figures``
+    (a figure writer such as :func:`irreflect.plots.room.write_figures`, called as
+    ``figures(result, summary, singles, folder) -> file names``) the figures too, in the
+    same atomic step. The writer is passed in because drawing is a higher layer."""
     written = []
     summary = summary_table(result)
     bounces = bounces_table(result)
@@ -147,12 +150,8 @@ def write_results(result, out_dir, figures: bool = True) -> list[str]:
             written += [f"{name}.csv", f"{name}.parquet"]
         (tmp / "run.json").write_text(json.dumps(run_info(result), indent=2, default=str) + "\n")
         written.append("run.json")
-        if figures:
-            # the one drawing call of a capability: RoomResult.write (public API) writes the
-            # figures too; the lead decides at the cli/ merge whether it moves up a layer
-            from ..plots.room import write_figures
-
-            written += write_figures(result, summary, singles, tmp)
+        if figures is not None:
+            written += figures(result, summary, singles, tmp)
     return written
 
 
