@@ -21,7 +21,8 @@ _PUBLIC = {
     "DataError": "errors", "FitError": "errors", "FitWarning": "errors",
     "IrreflectError": "errors", "UnknownNameError": "errors",
     "FitResult": "fitting", "fit": "fitting", "fit_subsets": "fitting",
-    "ReflectionModel": "model", "get_model": "model", "model_names": "model",
+    "ReflectionModel": "models", "get_model": "models", "model_names": "models",
+    "parse_spec": "models", "register_model": "models",
 }
 __all__ = sorted(_PUBLIC)
 

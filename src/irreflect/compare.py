@@ -30,18 +30,17 @@ from tqdm.auto import tqdm
 
 from . import metrics
 from .data import as_measurements
-from .errors import FitError, IrreflectError, unknown_name
+from .errors import FitError, IrreflectError
+from .fitting import GAMMA_TOL_DEG as _GAMMA_TOL_DEG
 from .fitting import fit
-from .models import MODELS, get_model, model_names
-from .validation import check_seed, short_list
+from .models import get_model, parse_spec
+from .validation import check_seed
 
 #: Models compared by default; ``phong@{G}`` takes the ``phong_at_deg`` of the call.
 DEFAULT_MODELS = ("two-lobe", "phong@{G}", "phong", "blinn-phong", "lafortune", "ward",
                   "torrance-sparrow", "oren-nayar")
 #: The paper's Table 6 columns (bundled dataset names).
 TABLE6_MATERIALS = ("terrazzo", "plasterboard", "foam_board")
-#: Tolerance (deg) when matching ``G`` of ``MODEL@G`` to a measured angle of incidence.
-_GAMMA_TOL_DEG = 1e-6
 
 
 # ----------------------------------------------------------------------------- results
@@ -176,12 +175,12 @@ def _fmt_pct(value) -> str:
 
 # ----------------------------------------------------------------------------- logic
 def parse_model_list(text=None, phong_at_deg: float = 10.0) -> list[str]:
-    """Comma-separated model labels -> list, validated.
+    """Comma-separated model specifications -> list, validated.
 
-    ``None`` or ``""`` gives :data:`DEFAULT_MODELS`. A label is a registry model name
-    (``irreflect models``) or ``MODEL@G`` (fitted at ``|gamma| = G`` deg only);
-    ``MODEL@`` without a number takes ``phong_at_deg`` (which
-    :func:`compare_models` moves to the nearest measured incidence when not given).
+    ``None`` or ``""`` gives :data:`DEFAULT_MODELS`. Each label is a model specification
+    ``name[:N][+extension...][@G]`` (the one grammar, :func:`irreflect.models.parse_spec`);
+    ``MODEL@`` without a number takes ``phong_at_deg`` (which :func:`compare_models` moves
+    to the nearest measured incidence when not given).
     """
     g_text = f"{float(phong_at_deg):g}"
     if text is None or not str(text).strip():
@@ -190,24 +189,11 @@ def parse_model_list(text=None, phong_at_deg: float = 10.0) -> list[str]:
         labels = [t.strip() for t in str(text).split(",") if t.strip()]
     out = []
     for label in labels:
-        base, at, g = label.partition("@")
-        if at:
-            g = g or g_text
-            try:
-                value = float(g)
-            except ValueError as exc:
-                raise IrreflectError(
-                    f"model '{label}': expected MODEL@G with G an angle of incidence in degrees "
-                    f"(e.g. phong@10), found '{g}'"
-                ) from exc
-            if not np.isfinite(value) or not 0 <= abs(value) < 90:
-                raise IrreflectError(f"model '{label}': G must lie between 0 and 90 deg, found {g}")
-            label = f"{base}@{abs(value):g}"
-        if base.partition(":")[0] not in MODELS:
-            model_names()  # loads the literature models before judging
-        if base.partition(":")[0] not in MODELS:
-            raise unknown_name("model", base, list(MODELS) + ["<model>@<deg>"])
-        get_model(base)  # validates 'n-lobe:4'-style options
+        if label.endswith("@"):
+            label += g_text
+        spec = parse_spec(label)
+        get_model(spec.model_text)  # validates 'n-lobe:4'-style sizes
+        label = str(spec)
         if label in out:
             raise IrreflectError(f"model '{label}' is listed twice in --models: list it once")
         out.append(label)
@@ -217,7 +203,8 @@ def parse_model_list(text=None, phong_at_deg: float = 10.0) -> list[str]:
 
 
 def fit_at_incidence(meas, model, gamma_abs_deg: float, *, seed: int = 0):
-    """Fit ``model`` to the points of one angle of incidence ``|gamma| = gamma_abs_deg``.
+    """Fit ``model`` to the points of one angle of incidence ``|gamma| = gamma_abs_deg``
+    (``fit(meas, "MODEL@G")``).
 
     This is how the paper fitted Phong (at 10 deg, section 5.3): a model whose parameters do
     not depend on gamma is identified from one incidence and then applied to all. (A model
@@ -227,16 +214,8 @@ def fit_at_incidence(meas, model, gamma_abs_deg: float, *, seed: int = 0):
     Returns ``(FitResult, number of points fitted)``. Raises IrreflectError if the table
     has no such angle of incidence.
     """
-    available = np.unique(np.abs(meas.gamma_deg))
-    sel = np.abs(np.abs(meas.gamma_deg) - abs(gamma_abs_deg)) <= _GAMMA_TOL_DEG
-    if not sel.any():
-        raise IrreflectError(
-            f"{meas.name}: no measurements at |gamma| = {gamma_abs_deg:g} deg to fit "
-            f"'{model}@{gamma_abs_deg:g}'; found |gamma| = "
-            f"{short_list(available, fmt=lambda g: f'{g:g}')}: pass --phong-at-deg with one of "
-            "them"
-        )
-    return fit(meas.subset(sel), model, seed=seed), int(sel.sum())
+    result = fit(meas, f"{parse_spec(model).model_text}@{abs(gamma_abs_deg):g}", seed=seed)
+    return result, int(result.n_points)
 
 
 def score(meas, fit_result, name: str, fitted_on: str = "all points") -> ModelScore:
@@ -356,61 +335,3 @@ def _nearest_gamma(meas, target: float) -> float:
     gammas = np.unique(np.abs(meas.gamma_deg))
     nonzero = gammas[gammas > 0] if np.any(gammas > 0) else gammas
     return float(nonzero[np.argmin(np.abs(nonzero - target))])
-
-
-# ----------------------------------------------------------------------------- CLI
-def _cmd_compare(args) -> int:
-    from .cli import load_data, print_json
-    from .plots.compare import write_outputs
-
-    at = args.phong_at_deg
-    if at is not None and (not np.isfinite(at) or not 0 <= abs(at) < 90):
-        raise IrreflectError(
-            f"--phong-at-deg must lie between 0 and 90 degrees, found {at:g}"
-        )
-    import contextlib
-
-    from ._atomic import claim_output
-
-    parse_model_list(args.models, PAPER_PHONG_DEG if at is None else abs(at))  # names first
-    claim = claim_output(args.out, "dir", "--out") if args.out else contextlib.nullcontext()
-    with claim:
-        meas = load_data(args)
-        comparison = compare_models(meas, args.models,
-                                    phong_at_deg=None if at is None else abs(at),
-                                    seed=args.seed, progress=None)
-        written = write_outputs(comparison, args.out) if args.out else []
-    if args.json:
-        print_json(comparison.to_dict() | {"written": [str(p) for p in written]})
-    else:
-        print(comparison.format())
-        for p in written:
-            print(f"wrote {p}")
-    return 0
-
-
-def register(sub) -> None:
-    from .cli import FINITE, SEED, add_data_argument
-
-    p = sub.add_parser(
-        "compare", help="compare reflection models on the same data (section 5.3, Table 6)",
-        description="Fit several reflection models to the same table and compare the relative "
-                    "polar-area error per angle of incidence (section 5.3), R^2, RMSE, the "
-                    "number of parameters and BIC. 'MODEL@G' fits a model at |gamma| = G deg "
-                    "only and applies it to all angles, as the paper did with Phong.")
-    add_data_argument(p)
-    p.add_argument("--models", default=None, metavar="A,B,C",
-                   help="comma-separated models (default: "
-                        + ",".join(DEFAULT_MODELS).replace("{G}", "<G>")
-                        + "); see 'irreflect models'")
-    p.add_argument("--phong-at-deg", type=FINITE, default=None, metavar="G",
-                   help="angle of incidence (deg) at which phong@ is fitted (default 10 as in "
-                        "the paper, or the nearest measured one when the table has no 10 deg; "
-                        "an explicit G must be measured)")
-    p.add_argument("--seed", type=SEED, default=0, help="seed of every fit (default 0)")
-    p.add_argument("--json", action="store_true", help="one JSON object on stdout")
-    p.add_argument("--out", default=None, metavar="DIR",
-                   help="write polar plots per angle of incidence (Fig. 25), a line chart of "
-                        "the error per angle of incidence, comparison.csv and comparison.json "
-                        "into DIR (default: none)")
-    p.set_defaults(handler=_cmd_compare)

@@ -14,6 +14,7 @@ fit_subsets(gamma, theta, power, masks, model, ...)    -> SubsetFits (one fit pe
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 import time
 from dataclasses import dataclass, field
@@ -30,9 +31,10 @@ from .models import (
     Geometry,
     ReflectionModel,
     get_model,
+    parse_spec,
 )
 from .models.extensions import Extension, _start_rows
-from .validation import check_angles_deg, check_seed, check_subset_inputs
+from .validation import check_angles_deg, check_seed, check_subset_inputs, short_list
 
 # ----------------------------------------------------------------------------- core solver
 _RIDGE = 1e-12
@@ -932,6 +934,25 @@ def _global_search_unit(model_obj, gamma, theta, power, weights, *, seed, n_rand
     return zb, ab, cb, converged, message, n_starts, n_evals
 
 
+#: Tolerance (deg) when matching ``G`` of ``MODEL@G`` to a measured angle of incidence.
+GAMMA_TOL_DEG = 1e-6
+
+
+def points_at_incidence(measurements, gamma_abs_deg: float, label: str = "the fit"):
+    """The points of one angle of incidence ``|gamma| = gamma_abs_deg`` (degrees), for a
+    ``MODEL@G`` fit; a one-line error listing the measured ones when there are none."""
+    meas = as_measurements(measurements)
+    sel = np.abs(np.abs(meas.gamma_deg) - abs(gamma_abs_deg)) <= GAMMA_TOL_DEG
+    if not sel.any():
+        available = np.unique(np.abs(meas.gamma_deg))
+        raise IrreflectError(
+            f"{meas.name}: no measurements at |gamma| = {abs(gamma_abs_deg):g} deg to fit "
+            f"'{label}'; found |gamma| = {short_list(available, fmt=lambda g: f'{g:g}')}: "
+            "choose one of them after '@'"
+        )
+    return meas.subset(sel)
+
+
 def fit(measurements, model="two-lobe", *, seed: int = 0, n_random_starts: int = 2,
         n_screen: int | None = None, n_keep: int | None = None,
         n_data_starts: int | None = None, use_sigma: bool = True, max_iter: int = 200,
@@ -956,7 +977,11 @@ def fit(measurements, model="two-lobe", *, seed: int = 0, n_random_starts: int =
     measurements : Measurements, pandas.DataFrame or path
         Table with ``gamma_deg, theta_deg, power`` (degrees) and optional ``sigma``.
     model : str or ReflectionModel
-        Registry name (see `irreflect.models.model_names`).
+        A specification ``name[:N][+extension...][@G]`` (see
+        :mod:`irreflect.models.registry`; names from `irreflect.models.model_names`).
+        With ``@G`` the model is fitted to the points of ``|gamma| = G`` degrees only (the
+        paper's Phong at 10 deg, ``phong@10``) and the result describes those points
+        (score it on all points with its ``predict``).
     seed : int
         Seeds the random extra starts and the screening; the same seed gives the same result.
     n_random_starts : int
@@ -991,6 +1016,14 @@ def fit(measurements, model="two-lobe", *, seed: int = 0, n_random_starts: int =
         beat a constant (R^2 <= 0).
     """
 
+    spec = parse_spec(model) if isinstance(model, str) else None
+    if spec is not None and spec.at_gamma_deg is not None:  # 'phong@10': one incidence
+        sub = points_at_incidence(as_measurements(measurements), spec.at_gamma_deg, str(spec))
+        result = fit(sub, spec.model_text, seed=seed, n_random_starts=n_random_starts,
+                     n_screen=n_screen, n_keep=n_keep, n_data_starts=n_data_starts,
+                     use_sigma=use_sigma, max_iter=max_iter, max_rounds=max_rounds,
+                     polish=polish, engine=engine, extra_starts=extra_starts)
+        return dataclasses.replace(result, model=str(spec))
     t0 = time.perf_counter()
     seed = check_seed(seed)
     meas = as_measurements(measurements)

@@ -16,10 +16,8 @@ workflow
     (:func:`diagnose`).
 hidden
     Synthetic tables with a hidden effect, to test the workflow blind.
-command
-    ``irreflect diagnose DATA [--model NAME] [--json] [--out DIR]``.
-
-Figures: :mod:`irreflect.plots.diagnose`; the report section: :mod:`irreflect.report.diagnose`.
+The command ``irreflect diagnose``: :mod:`irreflect.cli.diagnose`; figures and ``--out``
+files: :mod:`irreflect.plots.diagnose`; the report section: :mod:`irreflect.report.diagnose`.
 """
 
 from ..models.extensions import (
@@ -31,7 +29,6 @@ from ..models.extensions import (
     get_extension,
     register_extension,
 )
-from .command import register
 from .workflow import (
     EFFECTS_FOUND,
     NO_MISSING_EFFECT,
@@ -45,5 +42,5 @@ from .workflow import (
 __all__ = [
     "CATALOGUE", "EFFECTS_FOUND", "EXTENSIONS", "NO_MISSING_EFFECT", "UNEXPLAINED", "Diagnosis",
     "Extension", "diagnose", "estimate_noise", "extend", "extension_names", "get_extension",
-    "register", "register_extension", "structure_tests",
+    "register_extension", "structure_tests",
 ]

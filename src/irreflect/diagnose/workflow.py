@@ -35,6 +35,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy import special
 
+from .._jsonio import finite
 from ..data import Measurements, as_measurements
 from ..errors import FitError, FitWarning, IrreflectError
 from ..fitting import FitResult, fit
@@ -399,7 +400,7 @@ class Diagnosis:
                     "bic": a.bic,
                     "polar_error_pct": {f"{k:g}": v for k, v in a.polar_errors.items()}}
 
-        return _finite({
+        return finite({
             "dataset": self.name,
             "n_points": self.n_points,
             "model": self.base_model,
@@ -471,19 +472,6 @@ class Diagnosis:
                      f"{a.fit.r2:.5f}, chi2/dof {b.lack_of_fit.ratio:.3g} -> "
                      f"{a.lack_of_fit.ratio:.3g} ({self.elapsed_s:.1f} s)")
         return "\n".join(lines)
-
-
-def _finite(obj):
-    """JSON-safe copy: numpy scalars to Python, NaN and infinities to None."""
-    if isinstance(obj, dict):
-        return {str(k): _finite(v) for k, v in obj.items()}
-    if isinstance(obj, list | tuple):
-        return [_finite(v) for v in obj]
-    if isinstance(obj, np.generic):
-        obj = obj.item()
-    if isinstance(obj, float) and not np.isfinite(obj):
-        return None
-    return obj
 
 
 def _p_text(p: float) -> str:

@@ -3,13 +3,13 @@ of ``irreflect compare --out``."""
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
 import numpy as np
 from matplotlib.ticker import FuncFormatter, LogLocator
 
 from .._atomic import atomic_directory
+from .._jsonio import dumps
 from ..compare import Comparison, at_label
 from .common import plot_polar_per_gamma, plt, save_figure
 
@@ -102,8 +102,7 @@ def write_outputs(comparison: Comparison, out_dir) -> list[Path]:
         save_figure(plot_comparison_polar(comparison), tmp / names[0])
         save_figure(plot_errors_per_gamma(comparison), tmp / names[1])
         comparison.table().to_csv(tmp / names[2], float_format="%.6g")
-        (tmp / names[3]).write_text(json.dumps(comparison.to_dict(), indent=2,
-                                               default=_json_default) + "\n")
+        (tmp / names[3]).write_text(dumps(comparison.to_dict()))
     return [out_dir / n for n in names]
 
 
@@ -132,12 +131,3 @@ def plot_error_lines(comparisons: dict):
     fig.legend([handles[lb] for lb in labels], labels, loc="lower center",
                ncol=min(len(labels), 5), fontsize=8, frameon=False)
     return fig
-
-
-def _json_default(o):
-    """numpy scalars and arrays in ``json.dumps`` (the CLI's sanitiser, until there is one)."""
-    if isinstance(o, np.generic):
-        return o.item()
-    if isinstance(o, np.ndarray):
-        return o.tolist()
-    raise TypeError(f"not JSON serialisable: {type(o).__name__}")

@@ -1,16 +1,20 @@
 """Figures of the discrepancy workflow: residual maps over (gamma, theta) and polar fits.
 
-Every function draws on the axes / figure it is given (or makes one) and returns it; none
-calls ``plt.show()`` or writes files (save with :func:`irreflect.plots.save_figure`). One
+Every ``plot_*`` draws on the axes / figure it is given (or makes one) and returns it; none
+calls ``plt.show()``. :func:`write_outputs` writes the files of ``irreflect diagnose --out``. One
 residual map is :func:`irreflect.plots.plot_residual_map` with :data:`~irreflect.plots.NORMALIZED`.
 Angles in degrees on every axis.
 """
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 
-from .common import NORMALIZED, plot_polar_per_gamma, plot_residual_map, plt
+from .._atomic import atomic_directory
+from .._jsonio import dumps
+from .common import NORMALIZED, plot_polar_per_gamma, plot_residual_map, plt, save_figure
 
 
 def plot_diagnosis_residuals(diagnoses: dict, fig=None):
@@ -57,3 +61,24 @@ def plot_diagnosis_polar(diagnosis, measurements, fig=None):
         if top > 0:
             ax.set_rmax(1.25 * top)
     return fig
+
+
+def write_outputs(diagnosis, measurements, out_dir) -> list[Path]:
+    """Residual maps before/after (``residuals_before.png``, ``residuals_after.png``), the
+    polar fits (``polar_fits.png``) and ``diagnosis.json``, written into ``out_dir`` all
+    together or not at all. Returns the final paths."""
+    out = Path(out_dir)
+    names = []
+    with atomic_directory(out, command="diagnose") as tmp:
+        for label, a in (("before", diagnosis.before), ("after", diagnosis.after)):
+            fig, ax = plt.subplots(figsize=(6.4, 3.8))
+            plot_residual_map(a.fit.gamma_deg, a.fit.theta_deg, a.residuals_z, ax=ax,
+                              title=f"{diagnosis.name} {label}: {a.model_name}, chi2/dof "
+                                    f"{a.lack_of_fit.ratio:.3g}", **NORMALIZED)
+            save_figure(fig, tmp / f"residuals_{label}.png")
+            names.append(f"residuals_{label}.png")
+        save_figure(plot_diagnosis_polar(diagnosis, measurements), tmp / "polar_fits.png")
+        names.append("polar_fits.png")
+        (tmp / "diagnosis.json").write_text(dumps(diagnosis.to_dict()))
+        names.append("diagnosis.json")
+    return [out / n for n in names]

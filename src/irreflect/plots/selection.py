@@ -1,16 +1,20 @@
 """Figures of a point selection: the Pareto frontier (Fig. 18) and the chosen points (Fig. 19).
 
-Every function draws on the axes (or figure) it is given, or makes them, and returns
-them; nothing is shown or written here (save with :func:`irreflect.plots.save_figure`).
+Every ``plot_*`` draws on the axes (or figure) it is given, or makes them, and returns
+them; nothing is shown. :func:`write_outputs` writes the files of one ``irreflect select``
+run (tables, summary and figures) into a folder it is given.
 """
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 from matplotlib.ticker import FuncFormatter
 
+from .._jsonio import dumps
 from ..selection.run import PAPER_N
-from .common import plt
+from .common import plt, save_figure
 
 
 def _log_n_axis(ax, lo: float, hi: float) -> None:
@@ -172,3 +176,39 @@ def plot_selection(result, fig=None, *, methods: dict | None = None, protocol_ma
     plot_points(meas, masks, ax=right, title=f"{meas.name}: where those points lie")
     fig.tight_layout()
     return fig
+
+
+# ----------------------------------------------------------------------------- output files
+#: The files :func:`write_outputs` writes for one run.
+OUTPUT_FILES = ("pareto.csv", "optimal_points.csv", "summary.json", "pareto.png",
+                "optimal_points.png")
+
+
+def _points_text(meas, mask) -> str:
+    return ";".join(f"({g:g},{t:g})" for g, t in zip(meas.gamma_deg[mask], meas.theta_deg[mask],
+                                                        strict=True))
+
+
+def write_outputs(result, methods: dict | None, directory) -> list[Path]:
+    """Write one run's files (:data:`OUTPUT_FILES`) into ``directory``: the frontier with
+    its points (``pareto.csv``), the optimal points, ``summary.json`` and the frontier and
+    points figures (Figs. 18-19). Not atomic by itself: the caller writes into
+    :func:`irreflect._atomic.atomic_directory`. Returns the paths."""
+    directory = Path(directory)
+    directory.mkdir(parents=True, exist_ok=True)
+    meas = result.measurements
+    front = result.front.copy()
+    front["points"] = [_points_text(meas, result.masks[int(k)]) for k in front["n_points"]]
+    front.to_csv(directory / "pareto.csv", index=False)
+    n_opt = result.optimal_n
+    result.points(n_opt).to_csv(directory / "optimal_points.csv", index=False)
+    (directory / "summary.json").write_text(dumps(result.summary(methods)))
+    ax = plot_pareto(result, methods=methods, legend_below=True,
+                     title=f"{meas.name}: Pareto frontier ({result.selector}, seed {result.seed})")
+    save_figure(ax.figure, directory / "pareto.png")
+    masks = {f"best {n_opt}": result.best_mask(n_opt)}
+    if result.knee_n != n_opt:
+        masks[f"knee ({result.knee_n})"] = result.best_mask(result.knee_n)
+    ax = plot_points(meas, masks, title=f"{meas.name}: chosen points")
+    save_figure(ax.figure, directory / "optimal_points.png")
+    return [directory / name for name in OUTPUT_FILES]

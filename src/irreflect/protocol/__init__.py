@@ -37,12 +37,5 @@ __all__ = [
     "paper_protocol_for", "protocol_from_frame", "protocol_robustness",
     "read_protocol", "render", "sample_protocol", "to_csv_text", "to_dict", "to_json_text",
     "to_markdown", "write_protocol", "paper_protocol_points", "protocol_mask",
-    "protocol_points_mask", "snap_points", "register",
+    "protocol_points_mask", "snap_points",
 ]
-
-
-def register(sub) -> None:
-    """Add ``irreflect protocol`` and ``irreflect evaluate-protocol``."""
-    from .cli import register as _register
-
-    _register(sub)

@@ -11,8 +11,8 @@ range error of phase-based ranging, in a room of known geometry.
 Modules: :mod:`.materials` (the 3D extension of the plane-of-incidence models and material
 files), :mod:`.scene` (TOML scenes), :mod:`.geometry` (cells, line of sight),
 :mod:`.engine` (recursive method and Monte Carlo), :mod:`.results` (metrics, files),
-:mod:`.validation` (checks against closed forms and Barry's configuration A),
-:mod:`.command` (``irreflect room``). Figures: :mod:`irreflect.plots.room`; the
+:mod:`.validation` (checks against closed forms and Barry's configuration A). The command
+``irreflect room``: :mod:`irreflect.cli.room`; figures: :mod:`irreflect.plots.room`; the
 ``reproduce --scene`` section: :mod:`irreflect.report.room`.
 """
 

@@ -135,8 +135,11 @@ class SelectionResult:
         m = self.measurements
         return pd.DataFrame({"gamma_deg": m.gamma_deg[mask], "theta_deg": m.theta_deg[mask]})
 
-    def summary(self) -> dict:
-        return {
+    def summary(self, methods: dict | None = None) -> dict:
+        """What ``summary.json`` of ``irreflect select`` holds (JSON-ready with
+        :func:`irreflect._jsonio.dumps`); ``methods`` from :func:`compare_methods` adds
+        Methods A/B/12."""
+        out = {
             "dataset": self.measurements.name,
             "n_measured": self.measurements.n_points,
             "selector": self.selector,
@@ -166,6 +169,20 @@ class SelectionResult:
             "interrupted": self.interrupted,
             "settings": self.settings,
         }
+        if methods is not None:
+            out["methods"] = {k: dict(methods[k]) for k in ("A", "B", "12")}
+            out["methods_order_holds"] = methods["order_holds"]
+            out["methods_note"] = methods["note"]
+        else:
+            out["methods"] = None
+        out["optimal_points_n"] = self.optimal_n
+        return out
+
+    @property
+    def optimal_n(self) -> int:
+        """N of "the optimal points" a run reports: the paper's 12 when that subset was
+        evaluated (the frontier is completed up to 12), else the knee."""
+        return PAPER_N if self.best_mask(PAPER_N) is not None else self.knee_n
 
 
 # ----------------------------------------------------------------------------- run

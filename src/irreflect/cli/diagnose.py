@@ -3,18 +3,21 @@
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 
-from ..cli import json_default
-from ..errors import IrreflectError
-from ..models import get_model
-from ..models.extensions import get_extension
+from .options import (
+    FINITE,
+    NON_NEGATIVE_INT,
+    SEED,
+    add_data_argument,
+    add_model_argument,
+    load_data,
+    print_json,
+)
 
 
 def register(sub) -> None:
     """Add the ``diagnose`` subcommand to the CLI's subparsers."""
-    from ..cli import FINITE, NON_NEGATIVE_INT, SEED, add_data_argument
     from ..models.extensions import EXTENSIONS
 
     p = sub.add_parser(
@@ -27,9 +30,7 @@ def register(sub) -> None:
                     "remains'. Extensions: " + ", ".join(EXTENSIONS) + ".",
     )
     add_data_argument(p)
-    p.add_argument("--model", default="two-lobe",
-                   help="base model (default two-lobe; extensions may be appended with '+', "
-                        "e.g. two-lobe+background)")
+    add_model_argument(p, what="base model")
     p.add_argument("--json", action="store_true", help="one JSON object on stdout")
     p.add_argument("--out", metavar="DIR",
                    help="write residual maps before/after, polar fits and diagnosis.json here "
@@ -49,6 +50,9 @@ def _cmd_diagnose(args: argparse.Namespace) -> int:
     import contextlib
 
     from .._atomic import claim_output
+    from ..errors import IrreflectError
+    from ..models import get_model
+    from ..models.extensions import get_extension
 
     if not 0.0 < args.alpha < 1.0:
         raise IrreflectError(f"--alpha must lie strictly between 0 and 1 (e.g. 0.01), found "
@@ -65,8 +69,8 @@ def _cmd_diagnose(args: argparse.Namespace) -> int:
 
 
 def _diagnose(args, extensions) -> int:
-    from ..cli import load_data, print_json
-    from .workflow import diagnose
+    from ..diagnose.workflow import diagnose
+    from ..plots.diagnose import write_outputs
 
     meas = load_data(args)
     bar = _progress()
@@ -99,32 +103,3 @@ class _progress:
 
     def close(self) -> None:
         self.bar.close()
-
-
-def write_outputs(result, measurements, out_dir) -> list:
-    """Residual maps before/after, polar fits and the JSON of a diagnosis, written into
-    ``out_dir`` all together or not at all. Returns the final paths."""
-    from pathlib import Path
-
-    from .._atomic import atomic_directory
-    from ..plots import plt, save_figure
-    from .figures import plot_diagnosis_polar, plot_residual_map
-
-    out = Path(out_dir)
-    names = []
-    with atomic_directory(out, command="diagnose") as tmp:
-        for label, a in (("before", result.before), ("after", result.after)):
-            fig, ax = plt.subplots(figsize=(6.4, 3.8))
-            plot_residual_map(a.fit.gamma_deg, a.fit.theta_deg, a.residuals_z, ax=ax,
-                              title=f"{result.name} {label}: {a.model_name}, chi2/dof "
-                                    f"{a.lack_of_fit.ratio:.3g}")
-            save_figure(fig, tmp / f"residuals_{label}.png")
-            names.append(f"residuals_{label}.png")
-        save_figure(plot_diagnosis_polar(result, measurements), tmp / "polar_fits.png")
-        names.append("polar_fits.png")
-        (tmp / "diagnosis.json").write_text(json.dumps(result.to_dict(), indent=2,
-                                                       default=json_default) + "\n")
-        names.append("diagnosis.json")
-    return [out / n for n in names]
-
-

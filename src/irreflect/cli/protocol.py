@@ -5,7 +5,8 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
-from ..cli import (
+from ..errors import IrreflectError
+from .options import (
     ANGLE,
     FINITE,
     NON_NEGATIVE,
@@ -14,8 +15,9 @@ from ..cli import (
     POSITIVE_INT,
     SEED,
     int_at_least,
+    load_data,
+    print_json,
 )
-from ..errors import IrreflectError
 
 #: ``--out`` extensions and the format each one means
 SUFFIXES = {".csv": "csv", ".json": "json", ".md": "md", ".markdown": "md"}
@@ -45,12 +47,11 @@ def _cmd_protocol(args) -> int:
 
 
 def _protocol(args, fmt: str) -> int:
-    from .core import paper_protocol
-    from .export import render, write_protocol
+    from ..protocol.core import paper_protocol
+    from ..protocol.export import render, write_protocol
 
     if args.lobe_from:
-        from ..cli import load_data
-        from .evaluate import glossy_protocol_for
+        from ..protocol.evaluate import glossy_protocol_for
 
         if args.n is not None or args.gamma_settings is not None:
             raise IrreflectError("--n and --gamma-settings apply to --design-from, not to "
@@ -67,7 +68,7 @@ def _protocol(args, fmt: str) -> int:
               f"deg, R^2 {protocol.settings['pilot_r2']:.4f} on the pilot's points",
               file=sys.stderr)
     elif args.specular_index is not None:
-        from .core import glossy_protocol
+        from ..protocol.core import glossy_protocol
 
         if args.n is not None or args.gamma_settings is not None:
             raise IrreflectError("--n and --gamma-settings apply to --design-from, not to "
@@ -80,7 +81,6 @@ def _protocol(args, fmt: str) -> int:
             central_offset=args.central_offset, layout=args.layout,
         )
     elif args.design_from:
-        from ..cli import load_data
         from ..selection.design import design_protocol
 
         dense = load_data(args, "protocol", args.design_from)
@@ -111,10 +111,9 @@ def _protocol(args, fmt: str) -> int:
 
 
 def _cmd_evaluate(args) -> int:
-    from ..cli import load_data, print_json
     from ..models import get_model
-    from .evaluate import evaluate_protocol
-    from .export import read_protocol
+    from ..protocol.evaluate import evaluate_protocol
+    from ..protocol.export import read_protocol
 
     get_model(args.model)
     protocol = read_protocol(args.protocol)
@@ -123,7 +122,7 @@ def _cmd_evaluate(args) -> int:
                            method="snap" if args.snap else "interpolate", seed=args.seed)
     rob = None
     if args.monte_carlo:
-        from .robustness import protocol_robustness
+        from ..protocol.robustness import protocol_robustness
 
         rob = protocol_robustness(protocol, dense, model=args.model,
                                   n_trials=args.monte_carlo, angle_error_deg=args.angle_error,

@@ -3,9 +3,7 @@ error for every emitter-receiver pair of a scene (see :mod:`irreflect.room`)."""
 
 from __future__ import annotations
 
-import sys
-
-from ..cli import NON_NEGATIVE_INT, POSITIVE, POSITIVE_INT, SEED
+from .options import NON_NEGATIVE_INT, POSITIVE, POSITIVE_INT, SEED
 
 
 def _cmd_room(args) -> int:
@@ -18,8 +16,8 @@ def _cmd_room(args) -> int:
 def _room(args) -> int:
     from pathlib import Path
 
-    from .engine import simulate
-    from .scene import load_scene
+    from ..room.engine import simulate
+    from ..room.scene import load_scene
 
     if args.scheduler is not None:
         from ..selection.parallel import check_scheduler_address
@@ -30,7 +28,10 @@ def _room(args) -> int:
     result = simulate(scene, method=args.method, bounces=args.bounces, cell_m=args.cell,
                       rays=args.rays, seed=args.seed, time_resolution_ns=args.dt,
                       scheduler=args.scheduler, workers=args.workers, progress=not args.quiet)
-    written = result.write(out, figures=not args.no_figures)
+    figures = None
+    if not args.no_figures:  # matplotlib only when figures are drawn
+        from ..plots.room import write_figures as figures
+    written = result.write(out, figures=figures)
     summary = result.summary()
     print(_report(result, summary))
     print(f"wrote {out}/: {', '.join(written[:6])}{' ...' if len(written) > 6 else ''} "
@@ -105,6 +106,3 @@ def register(sub) -> None:
                    help="no progress display (a bar on a terminal, lines through a pipe)")
     p.set_defaults(handler=_cmd_room)
 
-
-if __name__ == "__main__":  # pragma: no cover
-    sys.exit(1)

@@ -1,6 +1,7 @@
 """``irreflect select``: which measurements to take (Pareto frontier, knee, best 12 points).
 
-One DATA file and one seed write straight into ``--out DIR``::
+One DATA file and one seed write straight into ``--out DIR``
+(:data:`irreflect.plots.selection.OUTPUT_FILES`)::
 
     DIR/pareto.csv           n_points, one_minus_r2, r2, points ("(gamma,theta);...", degrees)
     DIR/optimal_points.csv   gamma_deg, theta_deg of the best 12-point subset
@@ -17,66 +18,21 @@ with ``--scheduler``) and write one such folder per run, ``DIR/<name>/seed<S>/``
 from __future__ import annotations
 
 import contextlib
-import json
 from pathlib import Path
 
-import pandas as pd
+from .options import (
+    POSITIVE_INT,
+    SEED,
+    add_data_argument,
+    add_model_argument,
+    int_at_least,
+    load_data,
+)
 
-from .._atomic import atomic_directory
-from ..cli import POSITIVE_INT, SEED, int_at_least, json_default
-from ..errors import IrreflectError
-from .run import PAPER_N, SelectionResult
-from .selectors import SELECTORS, get_selector
-
-
-def _points_text(meas, mask) -> str:
-    return ";".join(f"({g:g},{t:g})" for g, t in zip(meas.gamma_deg[mask], meas.theta_deg[mask],
-                                                        strict=True))
+PAPER_N = 12  # the paper's protocol size (irreflect.selection.run.PAPER_N)
 
 
-def summary_dict(result: SelectionResult, methods: dict | None) -> dict:
-    """The content of ``summary.json`` (JSON-ready)."""
-    out = result.summary()
-    if methods is not None:
-        out["methods"] = {k: {kk: vv for kk, vv in methods[k].items()} for k in ("A", "B", "12")}
-        out["methods_order_holds"] = methods["order_holds"]
-        out["methods_note"] = methods["note"]
-    else:
-        out["methods"] = None
-    best12 = result.best_mask(PAPER_N)
-    out["optimal_points_n"] = PAPER_N if best12 is not None else result.knee_n
-    return out
-
-
-def write_selection(result: SelectionResult, methods: dict | None, directory) -> Path:
-    """Write the five output files of one run into ``directory`` (not atomic by itself:
-    call it inside :func:`irreflect._atomic.atomic_directory`)."""
-    from ..plots import save_figure
-    from .plots import plot_pareto, plot_points
-
-    directory = Path(directory)
-    directory.mkdir(parents=True, exist_ok=True)
-    meas = result.measurements
-    front = result.front.copy()
-    front["points"] = [_points_text(meas, result.masks[int(k)]) for k in front["n_points"]]
-    front.to_csv(directory / "pareto.csv", index=False)
-    n_opt = PAPER_N if result.best_mask(PAPER_N) is not None else result.knee_n
-    result.points(n_opt).to_csv(directory / "optimal_points.csv", index=False)
-    with open(directory / "summary.json", "w") as fh:
-        json.dump(summary_dict(result, methods), fh, indent=2, default=json_default)
-        fh.write("\n")
-    ax = plot_pareto(result, methods=methods, legend_below=True,
-                     title=f"{meas.name}: Pareto frontier ({result.selector}, seed {result.seed})")
-    save_figure(ax.figure, directory / "pareto.png")
-    masks = {f"best {n_opt}": result.best_mask(n_opt)}
-    if result.knee_n != n_opt:
-        masks[f"knee ({result.knee_n})"] = result.best_mask(result.knee_n)
-    ax = plot_points(meas, masks, title=f"{meas.name}: chosen points")
-    save_figure(ax.figure, directory / "optimal_points.png")
-    return directory
-
-
-def _print_run(result: SelectionResult, methods: dict | None) -> None:
+def _print_run(result, methods: dict | None) -> None:
     m = result.measurements
     state = " (interrupted: results so far)" if result.interrupted else ""
     print(f"{m.name}: {m.n_points} points, selector {result.selector}, seed {result.seed}{state}")
@@ -122,10 +78,11 @@ def _print_run(result: SelectionResult, methods: dict | None) -> None:
 
 def _cmd_select(args) -> int:
     from .._atomic import claim_output
-    from ..cli import load_data
+    from ..errors import IrreflectError
     from ..models import get_model
+    from ..selection.parallel import check_scheduler_address
+    from ..selection.selectors import get_selector
     from ..validation import check_selection_budget, short_list
-    from .parallel import check_scheduler_address
 
     # everything that can be checked before any work: names, seeds, the scheduler's
     # address, output and checkpoint paths (claimed: checked and locked), table sizes
@@ -137,9 +94,6 @@ def _cmd_select(args) -> int:
     if args.scheduler is not None:
         check_scheduler_address(args.scheduler)
     flat = len(args.data) == 1 and len(seeds) == 1
-    kwargs = dict(model=args.model, selector=args.selector, pop_size=args.pop_size,
-                  generations=args.generations, max_points=args.max_points,
-                  checkpoint_every=args.checkpoint_every)
     out = Path(args.out)
     with contextlib.ExitStack() as stack:
         stack.enter_context(claim_output(out, "dir", "--out"))
@@ -151,67 +105,70 @@ def _cmd_select(args) -> int:
             meas = load_data(args, "select", path)
             check_selection_budget(meas.n_points, args.max_points, str(path))
             tables.append(meas)
-        return _run_and_write(args, tables, seeds, kwargs, out, flat)
+        return _run_and_write(args, tables, seeds, out, flat)
 
 
-def _run_and_write(args, tables, seeds, kwargs, out: Path, flat: bool) -> int:
-    from .parallel import run_many
-    from .run import compare_methods, run_selection
+def _run_and_write(args, tables, seeds, out: Path, flat: bool) -> int:
+    import pandas as pd
 
+    from .._atomic import atomic_directory
+    from .._jsonio import dumps
+    from ..errors import IrreflectError
+    from ..plots.selection import OUTPUT_FILES, write_outputs
+    from ..selection.parallel import run_many
+    from ..selection.run import compare_methods, run_selection
+
+    kwargs = dict(model=args.model, selector=args.selector, pop_size=args.pop_size,
+                  generations=args.generations, max_points=args.max_points,
+                  checkpoint_every=args.checkpoint_every)
     if flat and args.scheduler is None:
         res = run_selection(tables[0], seed=seeds[0], progress=not args.quiet,
                             checkpoint=args.checkpoint, **kwargs)
         methods = compare_methods(tables[0], res, model=args.model, seed=seeds[0])
-        with atomic_directory(out, command="select") as tmp:
-            write_selection(res, methods, tmp)
-        _print_run(res, methods)
-        print(f"wrote {out}/pareto.csv, optimal_points.csv, summary.json, pareto.png, "
-              "optimal_points.png")
-        return 130 if res.interrupted else 0
-    outcomes, interrupted = run_many(tables, seeds, scheduler=args.scheduler,
+        outcomes, interrupted = [(tables[0].name, res, methods)], res.interrupted
+    else:
+        runs, interrupted = run_many(tables, seeds, scheduler=args.scheduler,
                                      workers=args.workers, progress=not args.quiet,
                                      checkpoint_dir=args.checkpoint, **kwargs)
-    if flat and outcomes:
-        o = outcomes[0]
+        if not runs:
+            raise IrreflectError("interrupted before any run finished: nothing written")
+        outcomes = [(o.dataset, o.result, o.methods) for o in runs]
+    if flat:
+        _, res, methods = outcomes[0]
         with atomic_directory(out, command="select") as tmp:
-            write_selection(o.result, o.methods, tmp)
-        _print_run(o.result, o.methods)
-        print(f"wrote {out}/pareto.csv, optimal_points.csv, summary.json, pareto.png, "
-              "optimal_points.png")
+            write_outputs(res, methods, tmp)
+        _print_run(res, methods)
+        print(f"wrote {out}/{', '.join(OUTPUT_FILES)}")
         return 130 if interrupted else 0
-    if not outcomes:
-        raise IrreflectError("interrupted before any run finished: nothing written")
     rows, summaries = [], []
     with atomic_directory(out, command="select") as tmp:
-        for o in outcomes:
-            write_selection(o.result, o.methods, tmp / o.dataset / f"seed{o.seed}")
-            s = summary_dict(o.result, o.methods)
-            summaries.append(s)
-            e = o.result.enough
-            row = {"dataset": o.dataset, "seed": o.seed, "knee_n": o.result.knee_n,
+        for dataset, res, methods in outcomes:
+            write_outputs(res, methods, tmp / dataset / f"seed{res.seed}")
+            summaries.append(res.summary(methods))
+            e = res.enough
+            row = {"dataset": dataset, "seed": res.seed, "knee_n": res.knee_n,
                    "enough_n": None if e is None else e.n,
                    "enough_n_low": None if e is None else e.n_low,
                    "enough_n_high": None if e is None else e.n_high,
-                   f"r2_at_{PAPER_N}": 1 - o.result.best_score(PAPER_N),
-                   "hypervolume": o.result.hypervolume, "evaluations": o.result.evaluations,
-                   "failed_fits": o.result.failed_fits, "seconds": round(o.result.seconds, 2),
-                   "interrupted": o.result.interrupted}
-            if o.methods is not None:
+                   f"r2_at_{PAPER_N}": 1 - res.best_score(PAPER_N),
+                   "hypervolume": res.hypervolume, "evaluations": res.evaluations,
+                   "failed_fits": res.failed_fits, "seconds": round(res.seconds, 2),
+                   "interrupted": res.interrupted}
+            if methods is not None:
                 for k in ("A", "B", "12"):
-                    row[f"r2_{k}"] = o.methods[k]["r2"]
+                    row[f"r2_{k}"] = methods[k]["r2"]
             rows.append(row)
         pd.DataFrame(rows).to_csv(tmp / "runs.csv", index=False)
-        with open(tmp / "summary.json", "w") as fh:
-            json.dump({"runs": summaries, "interrupted": interrupted}, fh, indent=2,
-                      default=json_default)
-            fh.write("\n")
-    for o in outcomes:
-        _print_run(o.result, o.methods)
+        (tmp / "summary.json").write_text(dumps({"runs": summaries, "interrupted": interrupted}))
+    for _, res, methods in outcomes:
+        _print_run(res, methods)
     print(f"wrote {len(outcomes)} run folder(s), {out}/runs.csv and {out}/summary.json")
     return 130 if interrupted else 0
 
 
 def register(sub) -> None:
+    from ..selection.selectors import SELECTORS
+
     p = sub.add_parser(
         "select",
         help="choose which few measurements to take (Pareto frontier, knee, best 12 points)",
@@ -220,12 +177,8 @@ def register(sub) -> None:
                     "and compare Method A (all points), B (best 12) and 12 (the paper's "
                     "protocol, Table 1).",
     )
-    p.add_argument("data", metavar="DATA", nargs="+",
-                   help="dense measurement table(s) (CSV or Parquet: gamma_deg, theta_deg, "
-                        "power[, sigma]); several run in parallel")
-    p.add_argument("--average-duplicates", action="store_true",
-                   help="average the power of duplicated (gamma, theta) rows")
-    p.add_argument("--model", default="two-lobe", help="reflection model (default two-lobe)")
+    add_data_argument(p, nargs="+")
+    add_model_argument(p)
     p.add_argument("--selector", default="nsga2",
                    help=f"search strategy: {', '.join(SELECTORS)} (default nsga2)")
     p.add_argument("--pop-size", type=int_at_least(2), default=100,

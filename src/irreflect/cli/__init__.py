@@ -1,0 +1,115 @@
+"""Command-line interface: ``irreflect <command> ...``.
+
+:data:`COMMANDS` is the one command table: command name -> the module of this package that
+defines it. Each module has ``register(subparsers)``, which adds its parser(s) with
+``set_defaults(handler=...)``; a handler takes the parsed arguments and returns the exit
+code. Running one command imports only its module (the optimiser, statistics and plotting
+stacks cost seconds to import); shared options and types live in :mod:`.options`.
+
+User errors (:class:`~irreflect.errors.IrreflectError`) are printed as one line on stderr
+with exit code 2, failed fits with exit code 1; nothing is written half-way.
+
+Adding a command is one module here plus its line(s) in :data:`COMMANDS`; the CLI contract
+tests (``tests/test_contracts_cli.py``) then check its ``--help``, ``--json`` and bad input.
+"""
+
+from __future__ import annotations
+
+import importlib
+import sys
+import warnings
+
+from .. import __version__
+from ..errors import FitError, IrreflectError
+from .options import OneLineParser
+
+#: command -> module of this package that registers it (in the order of ``--help``)
+COMMANDS = {
+    "fit": "fit",
+    "plot": "fit",
+    "models": "fit",
+    "select": "select",
+    "protocol": "protocol",
+    "evaluate-protocol": "protocol",
+    "compare": "compare",
+    "diagnose": "diagnose",
+    "reproduce": "reproduce",
+    "room": "room",
+}
+
+__all__ = ["COMMANDS", "build_parser", "main"]
+
+
+def build_parser(command: str | None = None) -> OneLineParser:
+    """The parser with every command, or only ``command``'s module when it is known."""
+    parser = OneLineParser(
+        prog="irreflect",
+        description="Reflection models for infrared / visible-light indoor multipath.",
+    )
+    parser.add_argument("--version", action="version", version=f"irreflect {__version__}")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=OneLineParser)
+    modules = [COMMANDS[command]] if command in COMMANDS else list(dict.fromkeys(COMMANDS.values()))
+    for name in modules:
+        importlib.import_module(f"{__name__}.{name}").register(sub)
+    return parser
+
+
+def main(argv=None) -> int:
+    argv = sys.argv[1:] if argv is None else list(argv)
+    if argv in (["--version"], ["-V"]):  # without importing every command's module
+        print(f"irreflect {__version__}")
+        return 0
+    command = next((a for a in argv if not a.startswith("-")), None)
+    parser = build_parser(command)
+    try:
+        args = parser.parse_args(argv)
+    except SystemExit as exc:  # --help, --version, or a one-line usage error
+        return exc.code if isinstance(exc.code, int) else 2
+    if not getattr(args, "handler", None):
+        parser.print_help(sys.stderr)
+        return 2
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        try:
+            code = args.handler(args)
+        except IrreflectError as exc:
+            _print_notes(caught)
+            print(f"irreflect: error: {_one_line(exc)}", file=sys.stderr)
+            return 2
+        except FitError as exc:
+            _print_notes(caught)
+            print(f"irreflect: fit failed: {_one_line(exc)}", file=sys.stderr)
+            return 1
+        except MemoryError:
+            print("irreflect: error: out of memory: subsample the table or lower the budget "
+                  "options (see 'Bad input' in the README for each command's limit)",
+                  file=sys.stderr)
+            return 1
+        except OSError as exc:  # a full disk, a file removed under us: the system's reason
+            where = f" {exc.filename}" if exc.filename else ""
+            print(f"irreflect: error: cannot read or write{where}: "
+                  f"{exc.strerror or _one_line(exc)}", file=sys.stderr)
+            return 1
+        except KeyboardInterrupt:
+            print("irreflect: interrupted", file=sys.stderr)
+            return 130
+    _print_notes(caught)
+    return int(code or 0)
+
+
+def _one_line(exc: BaseException) -> str:
+    return " ".join(str(exc).split("\n")).strip() or type(exc).__name__
+
+
+def _print_notes(caught) -> None:
+    """Reader notes and fit warnings, each once, one line each, on stderr."""
+    from ..data import DataNotice
+    from ..errors import FitWarning
+
+    seen = set()
+    for w in caught:
+        kind = ("note" if issubclass(w.category, DataNotice) else
+                "warning" if issubclass(w.category, FitWarning) else None)
+        if kind and str(w.message) not in seen:
+            seen.add(str(w.message))
+            print(f"irreflect: {kind}: {w.message}", file=sys.stderr)

@@ -1,0 +1,109 @@
+"""``irreflect fit``, ``irreflect plot`` and ``irreflect models``."""
+
+from __future__ import annotations
+
+import contextlib
+
+from .options import POSITIVE, SEED, add_data_argument, add_model_argument, load_data, print_json
+from .options import single_fit_engine as _engine
+
+
+def _cmd_fit(args) -> int:
+    from .._atomic import claim_output
+    from ..fitting import fit
+    from ..models import get_model
+
+    model = get_model(args.model)
+    if args.save and args.reflectance is not None:
+        from ..room.materials import parse_reflectance
+
+        parse_reflectance(args.reflectance, "--reflectance")  # before the fit, not after
+    claim = (claim_output(args.save, "file", "--save", suffixes=(".json",)) if args.save
+             else contextlib.nullcontext())
+    with claim:  # the material file's path is checked and locked before any work
+        meas = load_data(args)
+        result = fit(meas, model, seed=args.seed, engine=_engine(meas.n_points))
+        if args.save:
+            from ..room.materials import save_material
+
+            save_material(result, args.save, data_file=args.data, wavelength_nm=args.wavelength,
+                          notes=args.notes, reflectance=args.reflectance)
+    if args.json:
+        d = result.to_dict()
+        print_json({k: d[k] for k in ("model", "params", "stderr", "r2", "rmse", "mse",
+                                      "n_points", "fit_ms", "converged", "message",
+                                      "at_bound", "ill_determined", "warnings")}
+                   | {"polar_error_pct": result.polar_errors()})
+    else:
+        print(f"{meas.name}: {meas.n_points} points, angles of incidence "
+              f"{', '.join(f'{g:g}' for g in meas.gammas)} deg")
+        print(result.report(warnings=False))  # the warnings go to stderr
+        if args.save:
+            print(f"wrote {args.save} (material file for 'irreflect room' scenes)")
+    return 0
+
+
+def _cmd_plot(args) -> int:
+    from .._atomic import claim_output
+    from ..fitting import fit
+    from ..models import get_model
+    from ..plots import plot_polar, save_figure
+
+    model = get_model(args.model)
+    with claim_output(args.out, "file", "--out", suffixes=(".png", ".svg", ".pdf")):
+        meas = load_data(args)
+        predict, title = None, meas.name
+        if args.fit:
+            result = fit(meas, model, seed=args.seed, engine=_engine(meas.n_points))
+            predict = result.predict
+            title = f"{meas.name}: {result.model} fit, R^2 = {result.r2:.4f}"
+        ax = plot_polar(meas, predict, title=title)
+        save_figure(ax.figure, args.out)
+    print(f"wrote {args.out}")
+    return 0
+
+
+def _cmd_models(args) -> int:
+    from ..models import get_model, model_names
+    from ..models.extensions import EXTENSIONS
+
+    for name in model_names():
+        m = get_model(name)
+        print(f"{name:<18} {m.n_params:>2} parameters  {m.formula}")
+    print("extensions (append with '+', e.g. two-lobe+background): " + ", ".join(EXTENSIONS))
+    return 0
+
+
+def register(sub) -> None:
+    p = sub.add_parser("fit", help="fit a reflection model to a measurement table",
+                       description="Fit a reflection model and print coefficients with standard "
+                                   "errors, R^2, RMSE, MSE and the per-gamma polar-area error.")
+    add_data_argument(p)
+    add_model_argument(p)
+    p.add_argument("--seed", type=SEED, default=0,
+                   help="seed of the random extra starts (default 0)")
+    p.add_argument("--json", action="store_true", help="one JSON object on stdout")
+    p.add_argument("--save", metavar="MATERIAL.json",
+                   help="also write the fit as a material file for room scenes (default: no)")
+    p.add_argument("--reflectance", default=None, metavar="RHO|K",
+                   help="with --save: total reflectance of the material (0..1), or K when the "
+                        "power column is BRDF x cos(theta) in 1/sr (default: none, the scene "
+                        "gives it)")
+    p.add_argument("--wavelength", type=POSITIVE, default=None, metavar="NM",
+                   help="with --save: wavelength of the measurement (nm; default: none)")
+    p.add_argument("--notes", default=None,
+                   help="with --save: free text kept in the file (default: none)")
+    p.set_defaults(handler=_cmd_fit)
+
+    p = sub.add_parser("plot", help="polar diagram per angle of incidence (Figs. 15-17)")
+    add_data_argument(p)
+    add_model_argument(p)
+    p.add_argument("--fit", action="store_true", help="draw the fitted model over the markers")
+    p.add_argument("--seed", type=SEED, default=0,
+                   help="seed of the fit's random extra starts, with --fit (default 0)")
+    p.add_argument("--out", required=True, metavar="FILE.png",
+                   help="figure file (.png, .svg or .pdf)")
+    p.set_defaults(handler=_cmd_plot)
+
+    p = sub.add_parser("models", help="list the reflection models and the extensions")
+    p.set_defaults(handler=_cmd_models)

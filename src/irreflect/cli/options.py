@@ -1,0 +1,100 @@
+"""What every command shares: the one-line parser, option types, the DATA and --model
+arguments, reading a table within the command's budget, JSON on stdout."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+
+from .._jsonio import dumps
+from ..errors import IrreflectError
+from ..validation import check_int, check_number
+
+
+class OneLineParser(argparse.ArgumentParser):
+    """An argument parser whose errors are one line (no usage block), exit code 2."""
+
+    def error(self, message):
+        self.exit(2, f"irreflect: error: {self.prog}: {message} (see '{self.prog} --help')\n")
+
+
+def _argument_type(check, label: str):
+    """An argparse ``type`` from a ``validation.check_*`` helper; its name shows in errors."""
+
+    def convert(text: str):
+        try:
+            return check(text)
+        except (IrreflectError, ValueError) as exc:
+            raise argparse.ArgumentTypeError(f"expected {label}, found '{text}'") from exc
+
+    convert.__name__ = label
+    return convert
+
+
+def _int(text, minimum):
+    return check_int(int(text), "value", minimum)
+
+
+def int_at_least(minimum: int):
+    """argparse type: an integer >= ``minimum``."""
+    return _argument_type(lambda t: _int(t, minimum), f"an integer >= {minimum}")
+
+
+#: argparse types: a seed (integer >= 0), integers >= 1 / >= 0, finite numbers, angles
+SEED = _argument_type(lambda t: _int(t, 0), "a seed (an integer >= 0)")
+POSITIVE_INT = _argument_type(lambda t: _int(t, 1), "an integer >= 1")
+NON_NEGATIVE_INT = _argument_type(lambda t: _int(t, 0), "an integer >= 0")
+FINITE = _argument_type(lambda t: check_number(t, "value"), "a finite number")
+NON_NEGATIVE = _argument_type(lambda t: check_number(t, "value", low=0.0), "a finite number >= 0")
+POSITIVE = _argument_type(lambda t: check_number(t, "value", low=0.0, low_open=True),
+                          "a number > 0")
+ANGLE = _argument_type(lambda t: check_number(t, "value", low=-90.0, high=90.0, low_open=True,
+                                              high_open=True),
+                       "an angle in degrees strictly between -90 and 90")
+
+
+def add_data_argument(parser: argparse.ArgumentParser, *, nargs=None) -> None:
+    """The DATA positional and the options every command that reads a table shares."""
+    parser.add_argument("data", metavar="DATA", nargs=nargs,
+                        help="measurement table (CSV or Parquet: gamma_deg, theta_deg, power"
+                             "[, sigma, material])" + ("; several run in parallel" if nargs
+                                                       else ""))
+    parser.add_argument("--average-duplicates", action="store_true",
+                        help="average the power of duplicated (gamma, theta) rows instead of "
+                             "refusing them")
+
+
+def add_model_argument(parser: argparse.ArgumentParser, default: str = "two-lobe",
+                       what: str = "reflection model") -> None:
+    """``--model``: one grammar everywhere, ``name[:N][+extension...][@G]``."""
+    parser.add_argument("--model", default=default,
+                        help=f"{what} (default {default}): a name from 'irreflect models', "
+                             "with ':N' lobes, '+extension' effects (e.g. "
+                             "two-lobe+background)")
+
+
+def load_data(args, command: str | None = None, path=None):
+    """Read the DATA table of a command and refuse it up front when it is larger than the
+    command's memory budget (:data:`irreflect.validation.POINT_BUDGET`)."""
+    from ..data import read_measurements
+    from ..validation import check_points_budget
+
+    path = args.data if path is None else path
+    meas = read_measurements(path, average_duplicates=args.average_duplicates)
+    check_points_budget(meas.n_points, command or args.command, str(path))
+    return meas
+
+
+#: Up to this many points, a command that fits once uses the numpy fitter: loading the
+#: compiled kernel (about a second) costs more than it saves on one fit.
+SINGLE_FIT_NUMPY_POINTS = 5000
+
+
+def single_fit_engine(n_points: int) -> str | None:
+    """The fitting engine of a command that fits one table once."""
+    return "numpy" if n_points <= SINGLE_FIT_NUMPY_POINTS else None
+
+
+def print_json(obj) -> None:
+    """One strict JSON object on stdout (NaN as null)."""
+    sys.stdout.write(dumps(obj))
