@@ -11,6 +11,8 @@ import pytest
 from irreflect.cli import main
 from irreflect.data import bundled_dir
 
+TERRAZZO = bundled_dir() / "terrazzo.csv"
+
 
 def test_fit_json_has_the_documented_keys(capsys):
     assert main(["fit", str(bundled_dir() / "terrazzo.csv"), "--json"]) == 0
@@ -125,3 +127,34 @@ def test_progress_is_lines_through_a_pipe_and_a_bar_on_a_terminal(capsys):
     bar.update(2)
     bar.close()
     assert "\r" in tty.getvalue() and "100%" in tty.getvalue()
+
+
+def test_fit_takes_the_one_grammar_with_at_gamma(capsys):
+    """``fit --model phong@10`` fits the |gamma| = 10 deg points only (the paper's Phong)."""
+    import json
+
+    from irreflect import fit, read_measurements
+
+    assert main(["fit", str(TERRAZZO), "--model", "phong@10", "--json"]) == 0
+    doc = json.loads(capsys.readouterr().out)
+    meas = read_measurements(TERRAZZO)
+    n10 = int((abs(meas.gamma_deg) == 10).sum())
+    assert doc["model"] == "phong@10" and doc["n_points"] == n10 < meas.n_points
+    # the same as fitting the subset by hand
+    alone = fit(meas.subset(abs(meas.gamma_deg) == 10), "phong")
+    assert doc["r2"] == pytest.approx(alone.r2, abs=1e-9)
+    assert doc["on_all_points"]["n_points"] == meas.n_points
+    assert doc["on_all_points"]["r2"] < alone.r2  # one incidence does not describe all
+    assert main(["fit", str(TERRAZZO), "--model", "phong@15"]) == 2
+    err = capsys.readouterr().err
+    assert "no measurements at |gamma| = 15 deg" in err and "10, 20, 30" in err
+    assert main(["select", str(TERRAZZO), "--model", "phong@10", "--out", "never"]) == 2
+    assert "'@10' chooses the points" in capsys.readouterr().err
+
+
+def test_the_public_api_resolves_every_name():
+    import irreflect
+
+    for name in irreflect.__all__:
+        assert getattr(irreflect, name) is not None, name
+    assert irreflect.get_model("two-lobe+background").n_params == 8

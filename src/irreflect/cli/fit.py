@@ -11,9 +11,10 @@ from .options import single_fit_engine as _engine
 def _cmd_fit(args) -> int:
     from .._atomic import claim_output
     from ..fitting import fit
-    from ..models import get_model
+    from ..models import parse_spec
 
-    model = get_model(args.model)
+    model = args.model
+    parse_spec(model).model()  # the name checked before any work ('phong@10' included)
     if args.save and args.reflectance is not None:
         from ..room.materials import parse_reflectance
 
@@ -28,16 +29,28 @@ def _cmd_fit(args) -> int:
 
             save_material(result, args.save, data_file=args.data, wavelength_nm=args.wavelength,
                           notes=args.notes, reflectance=args.reflectance)
+    on_all = None
+    if result.n_points < meas.n_points:  # 'MODEL@G': fitted on one incidence, judged on all
+        from .. import metrics
+
+        pred = result.predict(meas.gamma_deg, meas.theta_deg)
+        on_all = {"n_points": meas.n_points, "r2": metrics.r2(meas.power, pred),
+                  "rmse": metrics.rmse(meas.power, pred)}
     if args.json:
         d = result.to_dict()
         print_json({k: d[k] for k in ("model", "params", "stderr", "r2", "rmse", "mse",
                                       "n_points", "fit_ms", "converged", "message",
                                       "at_bound", "ill_determined", "warnings")}
-                   | {"polar_error_pct": result.polar_errors()})
+                   | {"polar_error_pct": result.polar_errors()}
+                   | ({"on_all_points": on_all} if on_all else {}))
     else:
         print(f"{meas.name}: {meas.n_points} points, angles of incidence "
               f"{', '.join(f'{g:g}' for g in meas.gammas)} deg")
         print(result.report(warnings=False))  # the warnings go to stderr
+        if on_all:
+            print(f"fitted on the {result.n_points} points of one angle of incidence; on all "
+                  f"{on_all['n_points']} points: R^2 = {on_all['r2']:.6f}   RMSE = "
+                  f"{on_all['rmse']:.6g}")
         if args.save:
             print(f"wrote {args.save} (material file for 'irreflect room' scenes)")
     return 0
@@ -46,10 +59,11 @@ def _cmd_fit(args) -> int:
 def _cmd_plot(args) -> int:
     from .._atomic import claim_output
     from ..fitting import fit
-    from ..models import get_model
+    from ..models import parse_spec
     from ..plots import plot_polar, save_figure
 
-    model = get_model(args.model)
+    model = args.model
+    parse_spec(model).model()
     with claim_output(args.out, "file", "--out", suffixes=(".png", ".svg", ".pdf")):
         meas = load_data(args)
         predict, title = None, meas.name
