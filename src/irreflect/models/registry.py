@@ -16,7 +16,7 @@ A model specification is ``name[:N][+extension...][@G]``:
     fit (``fit``, ``compare``) read it (:func:`parse_spec`).
 
 Adding a model is one module with a ``make_<name>()`` factory plus one line in
-:data:`MODELS`; the contract tests (``tests/test_contracts.py``) then cover it.
+:data:`MODELS`; the contract tests (``tests/test_contracts_models.py``) then cover it.
 Models pickle as their specification (:meth:`ReflectionModel.__reduce__`).
 """
 
