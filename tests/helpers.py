@@ -50,8 +50,10 @@ def least_squares_reference(model, meas, n_starts: int = 50, seed: int = 0,
         with np.errstate(all="ignore"):
             b, _ = model.basis(geom, z0[None], False)
         shares = rng.dirichlet(np.ones(n_lin))
-        total = np.nan_to_num(b[0] @ shares)
-        level = max(float(total @ y) / max(float(total @ total), 1e-300), 1e-12)
+        with np.errstate(all="ignore"):
+            total = np.nan_to_num(b[0] @ shares)
+        with np.errstate(all="ignore"):
+            level = max(float(total @ y) / max(float(total @ total), 1e-300), 1e-12)
         x0 = np.clip(np.concatenate([z0, shares * level]), lo, hi)
         try:
             with warnings.catch_warnings():  # scipy's overflow notes on wild starts
