@@ -13,7 +13,6 @@ from __future__ import annotations
 import json
 
 import numpy as np
-import pandas as pd
 
 from .._atomic import atomic_directory
 from .kernels import C_LIGHT
@@ -72,11 +71,15 @@ def ranging_error(phasor_total: complex, los_delay_s: float, modulation_hz: floa
 
 
 def summary_table(result) -> pd.DataFrame:
+    import pandas as pd  # deferred: a room run without tables need not load it
+
     rows = [link_metrics(result, result.links[key]) for key in sorted(result.links)]
     return pd.DataFrame(rows)
 
 
 def bounces_table(result) -> pd.DataFrame:
+    import pandas as pd  # deferred: a room run without tables need not load it
+
     rows = []
     for (e, r), link in sorted(result.links.items()):
         P = result.scene.emitters[e].power_w
@@ -96,6 +99,8 @@ def bounces_table(result) -> pd.DataFrame:
 def impulse_table(result, receivers=None) -> pd.DataFrame:
     """h(t) in long form, non-zero bins only: emitter, receiver, order, t_ns (bin start),
     power_w (power in the bin)."""
+    import pandas as pd  # deferred: a room run without tables need not load it
+
     parts = []
     for (e, r), link in sorted(result.links.items()):
         if receivers is not None and r not in receivers:

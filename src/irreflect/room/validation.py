@@ -12,7 +12,6 @@
 from __future__ import annotations
 
 import numpy as np
-from scipy.integrate import dblquad
 
 from .materials import lambertian
 from .scene import Emitter, Receiver, Scene
@@ -65,6 +64,7 @@ def single_floor_scene(rho=0.5, size=(4.0, 4.0, 2.5), emitter_pos=(1.2, 2.0, 2.5
 def one_bounce_reference(scene: Scene) -> float:
     """First-order DC gain off the floor of :func:`single_floor_scene`, by numerical
     integration over the floor (``scipy.integrate.dblquad``)."""
+    from scipy.integrate import dblquad  # deferred: the benchmarks' runs need not load it
 
     em, rx = scene.emitters[0], scene.receivers[0]
     rho = scene.materials["floor"].reflectance
