@@ -11,11 +11,15 @@ relative to the geometric line-of-sight delay ``d / c``, and the equivalent rang
 from __future__ import annotations
 
 import json
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from .._atomic import atomic_directory
 from .kernels import C_LIGHT
+
+if TYPE_CHECKING:
+    import pandas as pd
 
 
 def link_metrics(result, link) -> dict:
