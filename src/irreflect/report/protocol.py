@@ -97,7 +97,7 @@ def section(ctx: ReportContext) -> Section:
             findings.append(Finding(0, name, (
                 f"the paper's protocol (gammas {gammas} deg) with the power interpolated at "
                 f"its exact angles (protocol evaluation) gives R^2 = {ev.r2:.4g} against "
-                f"{ev.reference_r2:.4g}, polar-area error up to {worst_e:.0f} % (at |gamma| "
+                f"{ev.reference_r2:.4g}, polar-area error up to {worst_e:.4g} % (at |gamma| "
                 f"{worst_g:g} deg); cause: "
                 + ev.failure.split(": ", 1)[-1].split("; ")[0]), key="paper-protocol"))
             if snapped is not None and abs(snapped - ev.r2) > 0.05:
