@@ -1051,7 +1051,13 @@ def _tl_fill(z, pts, gstart, glcg, gv, pd, ps, b0, b1):
         b1[j] = (ld + sj[j] * (ls - ld)) * w
 
 
-@njit(cache=True)
+#: The sums over points of the fast path (Gram matrices, residuals, normal equations) may
+#: be re-associated, so that they compile to vector instructions too: they then differ from
+#: the sequential sums of the generic path in the last bits, as numpy's pairwise sums do.
+_SUMS = {"reassoc", "contract"}
+
+
+@njit(cache=True, fastmath=_SUMS)
 def _tl_project(b0, b1, yw, m, nonneg, residual, alpha, free, inv, g2, rhs, scale, resid):
     """Linear coefficients, residuals and cost of the basis (b0, b1) (as _evaluate; fixed
     columns zeroed)."""
@@ -1093,7 +1099,7 @@ def _tl_project(b0, b1, yw, m, nonneg, residual, alpha, free, inv, g2, rhs, scal
     return cost
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", fastmath=_SUMS)
 def _tl_normal(z, pts, gstart, glcg, gv, pd, ps, b0, b1, alpha, inv, resid, jac, t, coef, grad,
                hess):
     """Kaufman's Jacobian of the projected residual at the point whose lobes and basis are
@@ -1714,6 +1720,201 @@ def _one_subset(codes, nonneg, residual, geo, glcg, power, weights, sw_all, yw_a
             conv[bi] = r == STOP_FTOL or r == STOP_XTOL or r == STOP_STUCK
     c_out[bi] = best
     nfev_each[bi] = nfev
+
+
+# ----------------------------------------------------------------------------- per table, per fit
+@njit(cache=True)
+def kernel_geometry(gamma, theta):
+    """fitting._kernel_geometry in one call: (geometry, log cos of the exact angles of
+    incidence, the rounded ones of the per-angle decomposition (as numpy.round(gamma, 9)),
+    each point's index among those, the exact angles of incidence)."""
+    n = gamma.size
+    order = np.argsort(gamma, kind="mergesort")
+    group = np.empty(n, np.int64)
+    exact = np.empty(n)
+    g = -1
+    for k in range(n):
+        j = order[k]
+        if g < 0 or gamma[j] != exact[g]:
+            g += 1
+            exact[g] = gamma[j]
+        group[j] = g
+    exact = exact[:g + 1].copy()
+    rounded = np.empty(n)
+    for j in range(n):
+        rounded[j] = np.rint(gamma[j] * 1e9) / 1e9
+    order = np.argsort(rounded, kind="mergesort")
+    pgroup = np.empty(n, np.int64)
+    levels = np.empty(n)
+    g = -1
+    for k in range(n):
+        j = order[k]
+        if g < 0 or rounded[j] != levels[g]:
+            g += 1
+            levels[g] = rounded[j]
+        pgroup[j] = g
+    levels = levels[:g + 1].copy()
+    glcg = np.empty(exact.size)
+    for i in range(exact.size):
+        glcg[i] = math.log(math.cos(exact[i]))
+    return make_geometry(gamma, theta, group, exact), glcg, levels, pgroup, exact
+
+
+@njit(cache=True)
+def _close(a, b, rtol, atol):
+    """numpy.allclose(a, b, rtol, atol)."""
+    for i in range(a.size):
+        if not abs(a[i] - b[i]) <= atol + rtol * abs(b[i]):
+            return False
+    return True
+
+
+@njit(cache=True)
+def tl_natural(z, alpha, out):
+    """models.paper._two_lobe_to_natural of one row."""
+    k = alpha[0] + alpha[1]
+    out[0] = alpha[1] / k if k > 0.0 else 0.0
+    out[1] = z[0]
+    out[2] = math.exp(z[1])
+    out[3] = z[2]
+    out[4] = math.exp(z[3])
+    out[5] = z[4]
+    out[6] = k
+
+
+@njit(cache=True)
+def tl_finish(z, alpha, geo, glcg, weights, power, absolute_sigma, cost, n_params):
+    """What fit() computes after the search of the plain two-lobe model, in one call:
+    natural parameters, whether they map back to (z, alpha) (fit's round-trip check),
+    the fitted curve, R^2, RMSE, MSE, the covariance of the natural parameters and which
+    lie along a near-singular direction (fitting._covariance, the same steps). Returns
+    (values, round_trip_ok, fitted, r2, rmse, mse, covariance, singular)."""
+    n = power.size
+    p = 5
+    k = p + 2
+    values = np.empty(k)
+    tl_natural(z, alpha, values)
+    zb = np.empty(p)
+    zb[0] = values[1]
+    zb[1] = math.log(values[2])
+    zb[2] = values[3]
+    zb[3] = math.log(values[4])
+    zb[4] = values[5]
+    ab = np.empty(2)
+    ab[0] = values[6] * (1.0 - values[0])
+    ab[1] = values[6] * values[0]
+    amax = max(abs(alpha[0]), abs(alpha[1]))
+    ok = _close(zb, z, 1e-9, 1e-12) and _close(ab, alpha, 1e-6, 1e-9 * amax)
+    # the fitted curve and the Jacobian in (z, alpha) of the weighted model (jacobian_full)
+    fitted = np.empty(n)
+    jfull = np.empty((n, k))
+    a0 = alpha[0]
+    a1 = alpha[1]
+    gval = np.empty((glcg.size, 5))
+    for g in range(glcg.size):
+        s, nd, ns = _tl_values(z, glcg[g])
+        gval[g, 0] = s
+        gval[g, 1] = nd
+        gval[g, 2] = ns
+        gval[g, 3] = (nd + 1.0) / TWO_PI
+        gval[g, 4] = (ns + 1.0) / TWO_PI
+    lcg_all, lct_all, pt_all, lcp_all, pp_all, group = geo[2], geo[3], geo[4], geo[5], \
+        geo[6], geo[7]
+    for j in range(n):
+        g = group[j]
+        s = gval[g, 0]
+        nd = gval[g, 1]
+        ns = gval[g, 2]
+        a = fexp(nd * lct_all[j]) if pt_all[j] else 0.0
+        b = fexp(ns * lcp_all[j]) if pp_all[j] else 0.0
+        ld = gval[g, 3] * a
+        ls = gval[g, 4] * b
+        diff = ls - ld
+        lcg = lcg_all[j]
+        dd = nd * (a / TWO_PI + ld * lct_all[j])
+        ds = ns * (b / TWO_PI + ls * lcp_all[j])
+        oms = 1.0 - s
+        w = math.sqrt(weights[j])
+        b1 = ld + s * diff
+        fitted[j] = ld * a0 + b1 * a1
+        jfull[j, 0] = (0.0 * a0 + s * diff * lcg * a1) * w
+        jfull[j, 1] = (dd * a0 + oms * dd * a1) * w
+        jfull[j, 2] = (dd * lcg * a0 + oms * dd * lcg * a1) * w
+        jfull[j, 3] = (0.0 * a0 + s * ds * a1) * w
+        jfull[j, 4] = (0.0 * a0 + s * ds * lcg * a1) * w
+        jfull[j, 5] = ld * w
+        jfull[j, 6] = b1 * w
+    mean = 0.0
+    for j in range(n):
+        mean += power[j]
+    mean /= n
+    ss_res = 0.0
+    ss_tot = 0.0
+    for j in range(n):
+        ss_res += (power[j] - fitted[j]) ** 2
+        ss_tot += (power[j] - mean) ** 2
+    r2 = 1.0 - ss_res / ss_tot if ss_tot > 0.0 else (math.nan if ss_res == 0.0 else -math.inf)
+    mse = ss_res / n
+    # covariance (fitting._covariance)
+    col = np.empty(k)
+    for q in range(k):
+        acc = 0.0
+        for j in range(n):
+            acc += jfull[j, q] * jfull[j, q]
+        col[q] = math.sqrt(acc) if acc > 0.0 else 1.0
+    info = np.empty((k, k))
+    for q in range(k):
+        for r in range(q, k):
+            acc = 0.0
+            for j in range(n):
+                acc += (jfull[j, q] / col[q]) * (jfull[j, r] / col[r])
+            info[q, r] = acc
+            info[r, q] = acc
+    dof = max(n - n_params, 1)
+    s2 = 1.0 if absolute_sigma else 2.0 * cost / dof
+    evals, evecs = np.linalg.eigh(info)
+    floor = 1e-12 * max(evals.max(), 1e-300)
+    weak = evals < floor
+    cov_internal = np.zeros((k, k))
+    for e in range(k):
+        ev = max(evals[e], floor)
+        for q in range(k):
+            for r in range(k):
+                cov_internal[q, r] += evecs[q, e] * evecs[r, e] / ev
+    for q in range(k):
+        for r in range(k):
+            cov_internal[q, r] = cov_internal[q, r] * s2 / (col[q] * col[r])
+    x0 = np.empty(k)
+    x0[:p] = z
+    x0[p:] = alpha
+    grad = np.empty((k, k))  # d natural / d internal: (natural, internal)
+    plus = np.empty(k)
+    minus = np.empty(k)
+    xp = np.empty(k)
+    for i in range(k):
+        step = 1e-6 * max(abs(x0[i]), 1e-3)
+        xp[:] = x0
+        xp[i] = x0[i] + step
+        tl_natural(xp[:p], xp[p:], plus)
+        xp[i] = x0[i] - step
+        tl_natural(xp[:p], xp[p:], minus)
+        for q in range(k):
+            grad[q, i] = (plus[q] - minus[q]) / (2.0 * step)
+    cov = grad @ cov_internal @ grad.T
+    singular = np.zeros(k, np.bool_)
+    for q in range(k):
+        total = 0.0
+        along = 0.0
+        for i in range(k):
+            total += (grad[q, i] / col[i]) ** 2
+        for e in range(k):
+            if weak[e]:
+                acc = 0.0
+                for i in range(k):
+                    acc += grad[q, i] / col[i] * evecs[i, e]
+                along += acc * acc
+        singular[q] = math.sqrt(along) > 0.1 * max(math.sqrt(total), 1e-300)
+    return values, ok, fitted, r2, math.sqrt(mse), mse, cov, singular
 
 
 def warm() -> None:
