@@ -1025,30 +1025,24 @@ def _tl_broadcast(z, gstart, glcg, gv):
 
 
 @njit(cache=True, error_model="numpy")
-def _tl_fill(z, pts, gstart, glcg, gv, pd, ps, b0, b1):
-    """The lobes' powers (``pd``, ``ps``: cos^n of the point's angles) and the weighted
-    basis (``b0``, ``b1``) at every point."""
-    _tl_broadcast(z, gstart, glcg, gv)
-    lct = pts[0]
-    pt = pts[1]
-    lcp = pts[2]
-    pp = pts[3]
-    sw = pts[5]
-    ndj = gv[0]
-    nsj = gv[1]
-    sj = gv[2]
-    cdj = gv[3]
-    csj = gv[4]
+def _tl_fill(z, pts, gstart, glcg, vec, k):
+    """The lobes' powers (rows ``k``, ``k + 1`` of ``vec``: cos^n of the point's angles)
+    and the weighted basis (rows ``k + 2``, ``k + 3``) at every point (rows 10-14: the
+    block values). Rows of 2-D arrays are indexed in place, not taken as views: a view
+    costs a reference count, as much as a dozen points."""
+    _tl_broadcast(z, gstart, glcg, vec[10:15])
     for j in range(gstart[glcg.size]):
-        a = fexp(ndj[j] * lct[j]) * pt[j]
-        b = fexp(nsj[j] * lcp[j]) * pp[j]
-        pd[j] = a
-        ps[j] = b
-        ld = cdj[j] * a
-        ls = csj[j] * b
-        w = sw[j]
-        b0[j] = ld * w
-        b1[j] = (ld + sj[j] * (ls - ld)) * w
+        nd = vec[10, j]
+        ns = vec[11, j]
+        a = fexp(nd * pts[0, j]) * pts[1, j]
+        b = fexp(ns * pts[2, j]) * pts[3, j]
+        vec[k, j] = a
+        vec[k + 1, j] = b
+        ld = vec[13, j] * a
+        ls = vec[14, j] * b
+        w = pts[5, j]
+        vec[k + 2, j] = ld * w
+        vec[k + 3, j] = (ld + vec[12, j] * (ls - ld)) * w
 
 
 #: The sums over points of the fast path (Gram matrices, residuals, normal equations) may
@@ -1058,152 +1052,145 @@ _SUMS = {"reassoc", "contract"}
 
 
 @njit(cache=True, fastmath=_SUMS)
-def _tl_project(b0, b1, yw, m, nonneg, residual, alpha, free, inv, g2, rhs, scale, resid):
-    """Linear coefficients, residuals and cost of the basis (b0, b1) (as _evaluate; fixed
-    columns zeroed)."""
+def _tl_project(vec, k, pts, m, nonneg, residual, alpha, free, inv, slot, sm, fl):
+    """Linear coefficients (``alpha[slot]``, ``free[slot]``, ``inv[slot]``), residuals (row
+    ``k + 4``) and cost of the basis in rows ``k + 2``, ``k + 3`` (as _evaluate; fixed
+    columns zeroed). ``sm`` (16,), ``fl`` (2,): scratch."""
     g00 = 0.0
     g01 = 0.0
     g11 = 0.0
     r0 = 0.0
     r1 = 0.0
     for j in range(m):
-        x0 = b0[j]
-        x1 = b1[j]
-        y = yw[j]
+        x0 = vec[k + 2, j]
+        x1 = vec[k + 3, j]
+        y = pts[6, j]
         r0 += x0 * y
         g00 += x0 * x0
         g01 += x0 * x1
         r1 += x1 * y
         g11 += x1 * x1
-    g2[0, 0] = g00
-    g2[0, 1] = g01
-    g2[1, 0] = g01
-    g2[1, 1] = g11
-    rhs[0] = r0
-    rhs[1] = r1
-    _solve_gram(g2, rhs, nonneg, residual, alpha, free, inv, scale)
-    a0 = alpha[0]
-    a1 = alpha[1]
+    _tl_solve(g00, g01, g11, r0, r1, nonneg, residual, alpha, free, inv, slot, sm, fl)
+    a0 = alpha[slot, 0]
+    a1 = alpha[slot, 1]
     cost = 0.0
     for j in range(m):
-        acc = yw[j] - b0[j] * a0 - b1[j] * a1
-        resid[j] = acc
+        acc = pts[6, j] - vec[k + 2, j] * a0 - vec[k + 3, j] * a1
+        vec[k + 4, j] = acc
         cost += acc * acc
     cost *= 0.5
     if not math.isfinite(cost):
         cost = math.inf
-    if not free[0]:
-        b0[:m] = 0.0
-    if not free[1]:
-        b1[:m] = 0.0
+    if not free[slot, 0]:
+        vec[k + 2, :m] = 0.0
+    if not free[slot, 1]:
+        vec[k + 3, :m] = 0.0
     return cost
 
 
+@njit(cache=True)
+def _tl_solve(g00, g01, g11, r0, r1, nonneg, residual, alpha, free, inv, slot, sm, fl):
+    """_solve_gram of the two columns into ``alpha[slot]``, ``free[slot]``, ``inv[slot]``
+    (``sm``: scratch for the Gram matrix, rhs, scale, alpha, inverse)."""
+    g2 = sm[0:4].reshape((2, 2))
+    g2[0, 0] = g00
+    g2[0, 1] = g01
+    g2[1, 0] = g01
+    g2[1, 1] = g11
+    rhs = sm[4:6]
+    rhs[0] = r0
+    rhs[1] = r1
+    al = sm[8:10]
+    iv = sm[10:14].reshape((2, 2))
+    _solve_gram(g2, rhs, nonneg, residual, al, fl, iv, sm[6:8])
+    alpha[slot, 0] = al[0]
+    alpha[slot, 1] = al[1]
+    free[slot, 0] = fl[0]
+    free[slot, 1] = fl[1]
+    for i in range(2):
+        for c in range(2):
+            inv[slot, i, c] = iv[i, c]
+
+
 @njit(cache=True, error_model="numpy", fastmath=_SUMS)
-def _tl_normal(z, pts, gstart, glcg, gv, pd, ps, b0, b1, alpha, inv, resid, jac, t, coef, grad,
-               hess):
-    """Kaufman's Jacobian of the projected residual at the point whose lobes and basis are
-    (pd, ps, b0, b1), and the normal equations' gradient ``J'r`` and matrix ``J'J``
-    (as _jacobian and _lm)."""
-    a0 = alpha[0]
-    a1 = alpha[1]
-    lct = pts[0]
-    lcp = pts[2]
-    lcgs = pts[4]
-    sw = pts[5]
+def _tl_normal(z, pts, gstart, glcg, vec, k, alpha, inv, slot, jac, t, coef, grad, hess):
+    """Kaufman's Jacobian of the projected residual at the point whose lobes, basis and
+    residuals are rows ``k``..``k + 4`` of ``vec``, and the normal equations' gradient
+    ``J'r`` and matrix ``J'J`` (as _jacobian and _lm)."""
+    a0 = alpha[slot, 0]
+    a1 = alpha[slot, 1]
     m = gstart[glcg.size]
-    _tl_broadcast(z, gstart, glcg, gv)
-    ndj = gv[0]
-    nsj = gv[1]
-    sj = gv[2]
-    cdj = gv[3]
-    csj = gv[4]
-    j0 = gv[5]
-    j1 = gv[6]
-    j2 = gv[7]
-    j3 = gv[8]
-    j4 = gv[9]
+    _tl_broadcast(z, gstart, glcg, vec[10:15])
     for j in range(m):
-        a = pd[j]
-        b = ps[j]
-        nd = ndj[j]
-        ns = nsj[j]
-        s = sj[j]
-        ld = cdj[j] * a
-        ls = csj[j] * b
-        lcg = lcgs[j]
-        dd = nd * (a / TWO_PI + ld * lct[j])
-        ds = ns * (b / TWO_PI + ls * lcp[j])
+        a = vec[k, j]
+        b = vec[k + 1, j]
+        nd = vec[10, j]
+        ns = vec[11, j]
+        s = vec[12, j]
+        ld = vec[13, j] * a
+        ls = vec[14, j] * b
+        lcg = pts[4, j]
+        dd = nd * (a / TWO_PI + ld * pts[0, j])
+        ds = ns * (b / TWO_PI + ls * pts[2, j])
         diff = ls - ld
         oms = 1.0 - s
-        w = sw[j]
-        j0[j] = (0.0 * a0 + s * diff * lcg * a1) * w
-        j1[j] = (dd * a0 + oms * dd * a1) * w
-        j2[j] = (dd * lcg * a0 + oms * dd * lcg * a1) * w
-        j3[j] = (0.0 * a0 + s * ds * a1) * w
-        j4[j] = (0.0 * a0 + s * ds * lcg * a1) * w
-    for j in range(m):
-        jac[j, 0] = j0[j]
-        jac[j, 1] = j1[j]
-        jac[j, 2] = j2[j]
-        jac[j, 3] = j3[j]
-        jac[j, 4] = j4[j]
+        w = pts[5, j]
+        vec[15, j] = (0.0 * a0 + s * diff * lcg * a1) * w
+        vec[16, j] = (dd * a0 + oms * dd * a1) * w
+        vec[17, j] = (dd * lcg * a0 + oms * dd * lcg * a1) * w
+        vec[18, j] = (0.0 * a0 + s * ds * a1) * w
+        vec[19, j] = (0.0 * a0 + s * ds * lcg * a1) * w
     t[:, :] = 0.0
-    for j in range(m):
-        x0 = b0[j]
-        x1 = b1[j]
-        for q in range(5):
-            t[0, q] += x0 * jac[j, q]
-            t[1, q] += x1 * jac[j, q]
+    for q in range(5):
+        t0 = 0.0
+        t1 = 0.0
+        for j in range(m):
+            t0 += vec[k + 2, j] * vec[15 + q, j]
+            t1 += vec[k + 3, j] * vec[15 + q, j]
+        t[0, q] = t0
+        t[1, q] = t1
     for col in range(2):
         for q in range(5):
-            coef[col, q] = inv[col, 0] * t[0, q] + inv[col, 1] * t[1, q]
-    grad[:] = 0.0
-    hess[:, :] = 0.0
-    for j in range(m):
-        x0 = b0[j]
-        x1 = b1[j]
-        r = resid[j]
-        for q in range(5):
-            jac[j, q] = -jac[j, q] + x0 * coef[0, q] + x1 * coef[1, q]
-        for q in range(5):
-            jq = jac[j, q]
-            grad[q] += jq * r
-            for k in range(q, 5):
-                hess[q, k] += jq * jac[j, k]
+            coef[col, q] = inv[slot, col, 0] * t[0, q] + inv[slot, col, 1] * t[1, q]
     for q in range(5):
-        for k in range(q + 1, 5):
-            hess[k, q] = hess[q, k]
+        c0 = coef[0, q]
+        c1 = coef[1, q]
+        for j in range(m):
+            jac[q, j] = -vec[15 + q, j] + vec[k + 2, j] * c0 + vec[k + 3, j] * c1
+    for q in range(5):
+        acc = 0.0
+        for j in range(m):
+            acc += jac[q, j] * vec[k + 4, j]
+        grad[q] = acc
+        for r in range(q, 5):
+            acc = 0.0
+            for j in range(m):
+                acc += jac[q, j] * jac[r, j]
+            hess[q, r] = acc
+            hess[r, q] = acc
 
 
 @njit(cache=True)
 def tl_work(n):
-    """Scratch of the fast path for up to ``n`` points: (vectors (10, n): two slots of lobes,
-    basis and residuals; the per-point block values (10, n); the Jacobian (n, 5); small
-    float arrays; linear-step flags)."""
-    return (np.empty((10, n)), np.empty((10, n)), np.empty((n, 5)), np.empty((2, 2)), np.empty((2, 2, 2)),
-            np.empty((2, 2)), np.empty(2), np.empty(2), np.empty((2, 5)), np.empty((2, 5)),
-            np.empty(5), np.empty((5, 5)), np.empty((5, 5)), np.empty(5), np.empty(5),
-            np.empty(5), np.empty(5), np.empty((2, 2), np.bool_), np.empty(5, np.bool_))
-
-
-@njit(cache=True)
-def _tl_cost(z, pts, gstart, glcg, nonneg, residual, ws, slot):
-    """Projected cost at ``z`` (lobes, basis, residuals and linear step left in ``slot``)."""
-    vec, gv, _, alpha, inv, g2, rhs, scale, _, _, _, _, _, _, _, _, _, free, _ = ws
-    k = 5 * slot
-    m = gstart[glcg.size]
-    _tl_fill(z, pts, gstart, glcg, gv, vec[k], vec[k + 1], vec[k + 2], vec[k + 3])
-    return _tl_project(vec[k + 2], vec[k + 3], pts[6], m, nonneg, residual, alpha[slot],
-                       free[slot], inv[slot], g2, rhs, scale, vec[k + 4])
+    """Scratch of the fast path for up to ``n`` points: vectors (20, n) (two slots of
+    lobes, basis and residuals; the per-point block values; the Jacobian's columns before
+    projection), the Jacobian (5, n), linear steps of the two slots (alpha, free,
+    inverse), small scratch."""
+    return (np.empty((20, n)), np.empty((5, n)), np.empty((2, 2)), np.empty((2, 2), np.bool_),
+            np.empty((2, 2, 2)), np.empty(16), np.empty(2, np.bool_), np.empty((2, 5)),
+            np.empty((2, 5)), np.empty(5), np.empty((5, 5)), np.empty((5, 5)), np.empty(5),
+            np.empty(5), np.empty(5), np.empty(5), np.empty(5, np.bool_))
 
 
 @njit(cache=True)
 def _tl_costs(cands, pts, gstart, glcg, nonneg, residual, ws):
     """:func:`_costs` of the plain two-lobe model."""
+    vec, _, alpha, free, inv, sm, fl, _, _, _, _, _, _, _, _, _, _ = ws
+    m = gstart[glcg.size]
     out = np.empty(cands.shape[0])
     for i in range(cands.shape[0]):
-        out[i] = _tl_cost(cands[i], pts, gstart, glcg, nonneg, residual, ws, 0)
+        _tl_fill(cands[i], pts, gstart, glcg, vec, 0)
+        out[i] = _tl_project(vec, 0, pts, m, nonneg, residual, alpha, free, inv, 0, sm, fl)
     return out
 
 
@@ -1214,22 +1201,24 @@ def _tl_lm(nonneg, residual, z0, lo, hi, pts, gstart, glcg, max_iter, ftol, xtol
     trial points are evaluated without derivatives, the Jacobian is formed only at
     accepted points, from the lobes kept there."""
     p = 5
-    vec, gv, jac, alpha, inv, _, _, _, t, coef, grad, hess, a, rhs, step, z, zt, free, pinned = ws
+    vec, jac, alpha, free, inv, sm, fl, t, coef, grad, hess, a, rhs, step, z, zt, pinned = ws
+    m = gstart[glcg.size]
     for q in range(p):
         z[q] = min(max(z0[q], lo[q]), hi[q])
     cur = 0
-    cost = _tl_cost(z, pts, gstart, glcg, nonneg, residual, ws, cur)
+    _tl_fill(z, pts, gstart, glcg, vec, 0)
+    cost = _tl_project(vec, 0, pts, m, nonneg, residual, alpha, free, inv, 0, sm, fl)
     nfev = 1
     lam = 1e-3
     if not math.isfinite(cost):
         z_out[:] = z
-        alpha_out[:] = alpha[cur]
+        alpha_out[0] = alpha[cur, 0]
+        alpha_out[1] = alpha[cur, 1]
         return math.inf, STOP_NONFINITE, nfev
     reason = STOP_MAXITER
     for _ in range(max_iter):
-        k = 5 * cur
-        _tl_normal(z, pts, gstart, glcg, gv, vec[k], vec[k + 1], vec[k + 2], vec[k + 3],
-                   alpha[cur], inv[cur], vec[k + 4], jac, t, coef, grad, hess)
+        _tl_normal(z, pts, gstart, glcg, vec, 5 * cur, alpha, inv, cur, jac, t, coef, grad,
+                   hess)
         for q in range(p):
             pinned[q] = (z[q] <= lo[q] + 1e-12 and grad[q] > 0.0) or \
                 (z[q] >= hi[q] - 1e-12 and grad[q] < 0.0)
@@ -1253,7 +1242,10 @@ def _tl_lm(nonneg, residual, z0, lo, hi, pts, gstart, glcg, max_iter, ftol, xtol
             if not math.isfinite(step[q]):
                 step[q] = 0.0
             zt[q] = min(max(z[q] + step[q], lo[q]), hi[q])
-        tcost = _tl_cost(zt, pts, gstart, glcg, nonneg, residual, ws, 1 - cur)
+        tri = 1 - cur
+        _tl_fill(zt, pts, gstart, glcg, vec, 5 * tri)
+        tcost = _tl_project(vec, 5 * tri, pts, m, nonneg, residual, alpha, free, inv, tri, sm,
+                            fl)
         better = tcost < cost
         gain = cost - tcost
         lam_new = max(lam / 3.0, 1e-12) if better else lam * 4.0
@@ -1271,7 +1263,7 @@ def _tl_lm(nonneg, residual, z0, lo, hi, pts, gstart, glcg, max_iter, ftol, xtol
         if better:
             z[:] = zt
             cost = tcost
-            cur = 1 - cur
+            cur = tri
         if small_gain:
             reason = STOP_FTOL
             break
@@ -1282,7 +1274,8 @@ def _tl_lm(nonneg, residual, z0, lo, hi, pts, gstart, glcg, max_iter, ftol, xtol
             reason = STOP_STUCK
             break
     z_out[:] = z
-    alpha_out[:] = alpha[cur]
+    alpha_out[0] = alpha[cur, 0]
+    alpha_out[1] = alpha[cur, 1]
     return cost, reason, nfev
 
 
@@ -1293,27 +1286,13 @@ def _tl_scan_costs(z, axes, pts, gstart, glcg, nonneg, residual, ws):
     along the diffuse (specular) coordinates only the diffuse (specular) lobe does, so
     each point costs at most one exponential."""
     p, n_axis = axes.shape
-    vec, gv, _, alpha, inv, g2, rhs, scale, _, _, _, _, _, _, _, _, _, free, _ = ws
+    vec, _, alpha, free, inv, sm, fl, _, _, _, _, _, _, _, _, _, _ = ws
     m = gstart[glcg.size]
-    lct = pts[0]
-    pt = pts[1]
-    lcp = pts[2]
-    pp = pts[3]
-    sw = pts[5]
-    ld0 = vec[5]
-    ls0 = vec[6]
-    b0 = vec[7]
-    b1 = vec[8]
-    resid = vec[9]
-    ndj = gv[0]
-    nsj = gv[1]
-    sj = gv[2]
-    cdj = gv[3]
-    csj = gv[4]
+    gv = vec[10:15]
     _tl_broadcast(z, gstart, glcg, gv)
-    for j in range(m):
-        ld0[j] = cdj[j] * (fexp(ndj[j] * lct[j]) * pt[j])
-        ls0[j] = csj[j] * (fexp(nsj[j] * lcp[j]) * pp[j])
+    for j in range(m):  # rows 5, 6: the lobes at z
+        vec[5, j] = vec[13, j] * (fexp(vec[10, j] * pts[0, j]) * pts[1, j])
+        vec[6, j] = vec[14, j] * (fexp(vec[11, j] * pts[2, j]) * pts[3, j])
     out = np.empty(p * n_axis)
     zc = z.copy()
     for q in range(p):
@@ -1323,24 +1302,25 @@ def _tl_scan_costs(z, axes, pts, gstart, glcg, nonneg, residual, ws):
             _tl_broadcast(zc, gstart, glcg, gv)
             if q == 0:
                 for j in range(m):
-                    ld = ld0[j]
-                    w = sw[j]
-                    b0[j] = ld * w
-                    b1[j] = (ld + sj[j] * (ls0[j] - ld)) * w
+                    ld = vec[5, j]
+                    w = pts[5, j]
+                    vec[7, j] = ld * w
+                    vec[8, j] = (ld + vec[12, j] * (vec[6, j] - ld)) * w
             elif q <= 2:
                 for j in range(m):
-                    ld = cdj[j] * (fexp(ndj[j] * lct[j]) * pt[j])
-                    w = sw[j]
-                    b0[j] = ld * w
-                    b1[j] = (ld + sj[j] * (ls0[j] - ld)) * w
+                    ld = vec[13, j] * (fexp(vec[10, j] * pts[0, j]) * pts[1, j])
+                    w = pts[5, j]
+                    vec[7, j] = ld * w
+                    vec[8, j] = (ld + vec[12, j] * (vec[6, j] - ld)) * w
             else:
                 for j in range(m):
-                    ld = ld0[j]
-                    w = sw[j]
-                    b0[j] = ld * w
-                    b1[j] = (ld + sj[j] * (csj[j] * (fexp(nsj[j] * lcp[j]) * pp[j]) - ld)) * w
-            out[q * n_axis + i] = _tl_project(b0, b1, pts[6], m, nonneg, residual, alpha[0],
-                                              free[0], inv[0], g2, rhs, scale, resid)
+                    ld = vec[5, j]
+                    ls = vec[14, j] * (fexp(vec[11, j] * pts[2, j]) * pts[3, j])
+                    w = pts[5, j]
+                    vec[7, j] = ld * w
+                    vec[8, j] = (ld + vec[12, j] * (ls - ld)) * w
+            out[q * n_axis + i] = _tl_project(vec, 5, pts, m, nonneg, residual, alpha, free,
+                                              inv, 0, sm, fl)
     return out
 
 
@@ -1943,6 +1923,28 @@ def warm() -> None:
         fit_subsets(g, t, p, masks, engine="compiled")
 
 
+@njit(cache=True, error_model="numpy")
+def _tl_predict(z, alpha, geo, glcg, gval, out):
+    """The plain two-lobe model (unweighted) at every point of ``geo`` (as predict)."""
+    for g in range(glcg.size):
+        s, nd, ns = _tl_values(z, glcg[g])
+        gval[g, 0] = s
+        gval[g, 1] = nd
+        gval[g, 2] = ns
+        gval[g, 3] = (nd + 1.0) / TWO_PI
+        gval[g, 4] = (ns + 1.0) / TWO_PI
+    lct_all, pt_all, lcp_all, pp_all, group = geo[3], geo[4], geo[5], geo[6], geo[7]
+    a0 = alpha[0]
+    a1 = alpha[1]
+    for j in range(out.size):
+        g = group[j]
+        a = fexp(gval[g, 1] * lct_all[j]) if pt_all[j] else 0.0
+        b = fexp(gval[g, 2] * lcp_all[j]) if pp_all[j] else 0.0
+        ld = gval[g, 3] * a
+        ls = gval[g, 4] * b
+        out[j] = ld * a0 + (ld + gval[g, 0] * (ls - ld)) * a1
+
+
 @njit(cache=True)
 def r2_rows(codes, zs, alphas, geo, glcg, power):
     """R^2 against ``power`` of the model at every row of (zs, alphas) (NaN rows: NaN)."""
@@ -1956,6 +1958,8 @@ def r2_rows(codes, zs, alphas, geo, glcg, power):
     for j in range(n):
         ss_tot += (power[j] - mean) ** 2
     out = np.full(b, np.nan)
+    gval = np.empty((glcg.size, 5))
+    pred = np.empty(n)
     for i in range(b):
         ok = True
         for q in range(zs.shape[1]):
@@ -1964,7 +1968,10 @@ def r2_rows(codes, zs, alphas, geo, glcg, power):
             ok = ok and math.isfinite(alphas[i, q])
         if not ok:
             continue
-        pred = predict(codes, zs[i], alphas[i], geo, glcg)
+        if codes.size == 0:
+            _tl_predict(zs[i], alphas[i], geo, glcg, gval, pred)
+        else:
+            pred = predict(codes, zs[i], alphas[i], geo, glcg)
         ss = 0.0
         for j in range(n):
             ss += (power[j] - pred[j]) ** 2
