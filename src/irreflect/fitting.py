@@ -424,8 +424,8 @@ def _fitted_and_jacobian(model, z, alpha, gamma, theta, weights, engine=None, kg
         from . import _kernel
 
         geo, glcg = (kgeo if kgeo is not None else _kernel_geometry(gamma, theta))[:2]
-        return (_kernel.predict(codes, z, alpha, geo, glcg),
-                _kernel.jacobian_full(codes, z, alpha, geo, glcg, np.sqrt(weights)))
+        return (_kernel.predict(codes, _w(z), _w(alpha), geo, glcg),
+                _kernel.jacobian_full(codes, _w(z), _w(alpha), geo, glcg, _w(np.sqrt(weights))))
     with np.errstate(over="ignore", under="ignore", invalid="ignore", divide="ignore"):
         basis, dbasis = model.basis(Geometry.of(gamma[None], theta[None]), z[None], True)
     jz = np.einsum("mnlp,ml->mnp", dbasis, alpha[None])[0]
@@ -817,10 +817,11 @@ def _search_compiled(model_obj, codes, gamma, theta, power, weights, geom, sw1, 
     extra = (st["no_extra"] if extra_starts is None else
              np.clip(np.asarray(extra_starts, float).reshape(-1, p), st["zlo"], st["zhi"]))
     zb, ab, cb, rb, n_starts, n_evals = _kernel.global_search(
-        codes, st["nonneg"], st["residual"], geo, glcg, power, weights, levels, group,
-        PROFILE_DIFFUSE_INDICES, PROFILE_SPECULAR_INDICES, jitter * st["jitter_width"],
-        st["ext_rows"], extra, screen, st["lo"], st["hi"], st["zlo"], st["zhi"], st["axes"],
-        hops, int(n_data_starts), int(n_keep), int(max_iter), int(max_rounds))
+        codes, st["nonneg"], st["residual"], geo, glcg, _w(power), _w(weights), levels, group,
+        _PROFILE_GRIDS[0], _PROFILE_GRIDS[1], _w(jitter * st["jitter_width"]),
+        st["ext_rows"], _w(extra), _w(screen), st["lo"], st["hi"], st["zlo"], st["zhi"],
+        st["axes"], _w(hops), int(n_data_starts), int(n_keep), int(max_iter),
+        int(max_rounds))
     if not np.isfinite(cb):
         return None
     return zb, ab, float(cb), int(rb), int(n_starts), int(n_evals)
@@ -835,13 +836,13 @@ def _kernel_static(model_obj) -> dict:
     p = model_obj.n_nonlinear
     lo, hi = model_obj.screen_box()
     st = {
-        "nonneg": np.asarray(model_obj.alpha_nonneg, np.bool_),
+        "nonneg": _w(model_obj.alpha_nonneg, np.bool_),
         "residual": int(model_obj.options.get("residual_column", -1)),
-        "lo": np.ascontiguousarray(lo, float), "hi": np.ascontiguousarray(hi, float),
-        "zlo": np.ascontiguousarray(model_obj.z_lower, float),
-        "zhi": np.ascontiguousarray(model_obj.z_upper, float),
-        "axes": np.ascontiguousarray(np.array(_scan_axes(model_obj, 33)).reshape(p, 33)),
-        "ext_rows": _extension_start_rows(model_obj),
+        "lo": _w(lo), "hi": _w(hi),
+        "zlo": _w(model_obj.z_lower.copy()),
+        "zhi": _w(model_obj.z_upper.copy()),
+        "axes": _w(np.array(_scan_axes(model_obj, 33)).reshape(p, 33)),
+        "ext_rows": _w(_extension_start_rows(model_obj)),
         "jitter_width": np.minimum(model_obj.z_upper - model_obj.z_lower, 10.0),
         "no_extra": np.zeros((0, p)),
     }
@@ -865,14 +866,21 @@ def _draws(seed, n_random: int, n_hops: int, rounds: int, p: int):
     return jitter, hops
 
 
+def _w(a, dtype=float) -> np.ndarray:
+    """``a`` as a writeable C-contiguous array (a copy only when it is not one already):
+    numba compiles a kernel once per argument type, and a read-only array (a
+    Measurements column, a cached draw) is another type, so every argument is passed
+    writeable and the cache that ``make`` warms is the one every caller uses."""
+    return np.require(a, dtype, ("C", "W"))
+
+
 def _kernel_geometry(gamma, theta):
     """The compiled kernel's geometry of one table, its exact angles of incidence (log cos)
     and the rounded ones of the per-angle decomposition (as model.lobe_profile), each
     point's index among the rounded ones, the exact angles of incidence."""
     from . import _kernel
 
-    return _kernel.kernel_geometry(np.ascontiguousarray(gamma, float),
-                                   np.ascontiguousarray(theta, float))
+    return _kernel.kernel_geometry(_w(gamma), _w(theta))
 
 
 def _extension_start_rows(model) -> np.ndarray:
@@ -893,6 +901,9 @@ def _extension_start_rows(model) -> np.ndarray:
                  + [np.concatenate([tails[0], v]) for v in values[1:]])
     return np.array(tails, float).reshape(len(tails), -1)
 
+
+#: The index grids of the per-angle decomposition, writeable copies for the kernel.
+_PROFILE_GRIDS = (PROFILE_DIFFUSE_INDICES.copy(), PROFILE_SPECULAR_INDICES.copy())
 
 #: Which implementation fits: "compiled" (the numba kernel, for the models it covers;
 #: numpy for the others) or "numpy" (the reference implementation everywhere).
@@ -1076,7 +1087,8 @@ def fit(measurements, model="two-lobe", *, seed: int = 0, n_random_starts: int =
         from . import _kernel
 
         values, round_trip, fitted, r2, rmse, mse, cov, singular = _kernel.tl_finish(
-            zb, ab, kgeo[0], kgeo[1], weights, power, sigma is not None, cb, model_obj.n_params)
+            _w(zb), _w(ab), kgeo[0], kgeo[1], _w(weights), _w(power), sigma is not None, cb,
+            model_obj.n_params)
     else:
         values = model_obj.to_natural(zb[None], ab[None])[0]
         round_trip = None
@@ -1312,13 +1324,11 @@ def _fit_subsets_compiled(model, codes, gamma, theta, power, masks, weights, ok,
     if shared_starts is not None and len(shared_starts):
         screen = np.vstack([screen, np.asarray(shared_starts, float).reshape(-1, p)])
     z, alpha, cost, conv, nfev = _kernel.subset_search(
-        codes, st["nonneg"], st["residual"], geo, glcg, np.ascontiguousarray(power, float),
-        np.ascontiguousarray(weights, float), np.ascontiguousarray(masks), levels, group,
-        PROFILE_DIFFUSE_INDICES, PROFILE_SPECULAR_INDICES,
-        np.ascontiguousarray(st["ext_rows"][0]), np.ascontiguousarray(screen, float),
-        st["zlo"], st["zhi"], int(n_keep), int(n_data_starts), int(max_iter), float(ftol))
-    r2 = _kernel.r2_rows(codes, np.ascontiguousarray(z), np.ascontiguousarray(alpha), geo, glcg,
-                         np.ascontiguousarray(power, float))
+        codes, st["nonneg"], st["residual"], geo, glcg, _w(power), _w(weights),
+        _w(masks, np.bool_), levels, group, _PROFILE_GRIDS[0], _PROFILE_GRIDS[1],
+        _w(st["ext_rows"][0]), _w(screen), st["zlo"], st["zhi"], int(n_keep),
+        int(n_data_starts), int(max_iter), float(ftol))
+    r2 = _kernel.r2_rows(codes, _w(z), _w(alpha), geo, glcg, _w(power))
     return _subset_result(model, gamma, theta, power, z, alpha, cost, conv, ok, int(nfev), r2)
 
 
