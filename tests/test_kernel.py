@@ -99,3 +99,59 @@ def test_engine_names_and_replaced_starts():
     custom = dataclasses.replace(model, starts=lambda g, t, p: np.zeros((1, 5)))
     assert _kernel_codes(custom) is None
     assert _kernel_codes(get_model("phong")) is None
+
+
+def test_the_kernels_exp_is_within_one_ulp_of_the_library():
+    from numba import njit
+
+    from irreflect._kernel import fexp
+
+    @njit
+    def run(x):
+        out = np.empty_like(x)
+        for i in range(x.size):
+            out[i] = fexp(x[i])
+        return out
+
+    rng = np.random.default_rng(0)
+    x = np.concatenate([rng.uniform(-745, 709.7, 200_000), rng.uniform(-40, 1, 200_000),
+                        [0.0, -0.0, 1e-300, -1e-300, 709.78, -708.4, -745.1]])
+    got, want = run(x), np.exp(x)
+    normal = want > 2.3e-308
+    np.testing.assert_allclose(got[normal], want[normal], rtol=2.5e-16, atol=0)
+    assert np.all(np.abs(got[~normal] - want[~normal]) <= 5e-324)
+    edge = run(np.array([np.nan, -np.inf, np.inf, 710.0, -746.0, -1e10, 1e10]))
+    assert np.isnan(edge[0]) and edge[1] == 0 and edge[2] == np.inf and edge[3] == np.inf
+    assert edge[4] == 0 and edge[5] == 0 and edge[6] == np.inf
+
+
+@pytest.mark.parametrize("kind", ["glossy", "matte"])
+def test_compiled_finish_equals_the_numpy_covariance(kind):
+    """fit()'s compiled finish of the two-lobe model (natural parameters, fitted curve, R^2,
+    covariance, near-singular directions) against the numpy functions it replaces."""
+    from irreflect import _kernel, metrics
+    from irreflect.fitting import _covariance, _fitted_and_jacobian, _kernel_geometry
+
+    model = get_model("two-lobe")
+    tables = [load_bundled("terrazzo")] + [synthetic_material(s, kind).measurements
+                                           for s in range(6)]
+    for meas in tables:
+        res = fit(meas)
+        z, alpha = (a[0] for a in model.from_natural(res.values[None]))
+        g, t = np.radians(meas.gamma_deg), np.radians(meas.theta_deg)
+        w = np.ones(meas.n_points)
+        kgeo = _kernel_geometry(g, t)
+        values, ok, fitted, r2, rmse, mse, cov, singular = _kernel.tl_finish(
+            z, alpha, kgeo[0], kgeo[1], w, meas.power, False, res.cost, model.n_params)
+        ref_fitted, jfull = _fitted_and_jacobian(model, z, alpha, g, t, w, "numpy")
+        ref_cov, ref_singular = _covariance(model, z, alpha, jfull, False, res.cost,
+                                            meas.n_points)
+        assert ok
+        np.testing.assert_allclose(values, model.to_natural(z[None], alpha[None])[0],
+                                   rtol=1e-14)
+        np.testing.assert_allclose(fitted, ref_fitted, rtol=1e-12,
+                                   atol=1e-14 * np.max(np.abs(meas.power)))
+        assert r2 == pytest.approx(metrics.r2(meas.power, ref_fitted), abs=1e-12)
+        assert rmse == pytest.approx(metrics.rmse(meas.power, ref_fitted), rel=1e-10)
+        np.testing.assert_allclose(np.sqrt(np.diag(cov)), np.sqrt(np.diag(ref_cov)), rtol=1e-6)
+        np.testing.assert_array_equal(singular, ref_singular)

@@ -22,7 +22,9 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit
+from llvmlite import ir
+from numba import njit, types
+from numba.extending import intrinsic
 
 TWO_PI = 2.0 * math.pi
 RIDGE = 1e-12
@@ -57,12 +59,65 @@ def model_code(model) -> np.ndarray | None:
     return np.array(codes, np.int64)
 
 
+# ----------------------------------------------------------------------------- exp
+@intrinsic
+def _bits_as_float(typingctx, bits):
+    """The float64 whose IEEE bits are the int64 ``bits`` (a register reinterpretation)."""
+    sig = types.float64(types.int64)
+
+    def codegen(context, builder, signature, args):
+        return builder.bitcast(args[0], ir.DoubleType())
+
+    return sig, codegen
+
+
+_LOG2E = 1.4426950408889634
+_LN2_HI = 6.93147180369123816490e-01  # ln 2 in two parts (Cody and Waite): k * _LN2_HI is
+_LN2_LO = 1.90821492927058770002e-10  # exact for every |k| < 2^11
+_E2, _E3, _E4, _E5, _E6, _E7 = 1 / 2, 1 / 6, 1 / 24, 1 / 120, 1 / 720, 1 / 5040
+_E8, _E9, _E10, _E11, _E12, _E13 = (1 / 40320, 1 / 362880, 1 / 3628800, 1 / 39916800,
+                                    1 / 479001600, 1 / 6227020800)
+
+
+@njit(cache=True, inline="always")
+def fexp(x):
+    """``exp(x)`` within one unit in the last place, in plain arithmetic (no library call),
+    so that loops over points compile to vector instructions: the exponentials are most of
+    a fit's work and the library's ``exp`` is a scalar call (4-7 ns; this: about 1 ns in a
+    vectorised loop). ``x = k ln 2 + r``, ``|r| <= ln 2 / 2``, ``exp(r)`` by its Taylor
+    polynomial of degree 13 (truncation < 1e-17 relative), ``2^k`` built from its bits in
+    two factors (so that subnormal results and overflow come out as IEEE arithmetic gives
+    them). NaN in, NaN out; exp(-inf) = 0, exp(inf) = inf."""
+    xc = x if x > -746.0 else -746.0
+    xc = xc if xc < 710.0 else 710.0
+    kf = math.floor(xc * _LOG2E + 0.5)
+    r = (xc - kf * _LN2_HI) - kf * _LN2_LO
+    p = _E13
+    p = p * r + _E12
+    p = p * r + _E11
+    p = p * r + _E10
+    p = p * r + _E9
+    p = p * r + _E8
+    p = p * r + _E7
+    p = p * r + _E6
+    p = p * r + _E5
+    p = p * r + _E4
+    p = p * r + _E3
+    p = p * r + _E2
+    p = p * r + 1.0
+    p = p * r + 1.0
+    k = np.int64(kf)
+    k1 = k >> 1
+    out = p * _bits_as_float((k1 + 1023) << 52) * _bits_as_float((k - k1 + 1023) << 52)
+    return out if x == x else x
+
+
 # ----------------------------------------------------------------------------- geometry
 @njit(cache=True)
 def _lobe(log_cos, positive, n):
     """Lobe ``(n+1)/2pi cos^n`` and ``d lobe / d n`` from ``log cos``."""
     if positive:
-        power = math.exp(n * log_cos)
+        power = fexp(n * log_cos)
     else:
         power = 0.0
     lobe = (n + 1.0) / TWO_PI * power
@@ -109,9 +164,9 @@ def _group_values(z, glcg, gval):
     angle instead of per point)."""
     for g in range(glcg.size):
         lc = glcg[g]
-        gval[g, 0] = math.exp(z[0] * lc)
-        gval[g, 1] = math.exp(z[1] + z[2] * lc)
-        gval[g, 2] = math.exp(z[3] + z[4] * lc)
+        gval[g, 0] = fexp(z[0] * lc)
+        gval[g, 1] = fexp(z[1] + z[2] * lc)
+        gval[g, 2] = fexp(z[3] + z[4] * lc)
 
 
 @njit(cache=True)
@@ -180,7 +235,7 @@ def _added(code, z, pb, gamma, theta, tilt):
     """The column a wrapper adds (background, retro lobe, halo lobe) and d/d z[pb]."""
     if code == EXT_BACKGROUND:
         return 1.0, 0.0
-    n = math.exp(z[pb])
+    n = fexp(z[pb])
     if code == EXT_RETRO:
         lc, pos = _cos_parts(theta - gamma)
     else:  # halo: about the (tilted) mirror direction
@@ -200,7 +255,7 @@ def _chain_value(codes, upto, z, j, geo, gval, theta_in, tilt_in, b, scratch):
         code = codes[level - 1]
         pb, lb = _sizes(codes, level - 1)
         if code == EXT_INCIDENCE:
-            f = math.exp(z[pb] * geo[2][j])
+            f = fexp(z[pb] * geo[2][j])
             for col in range(lb):
                 b[col] *= f
         elif code == EXT_BACKGROUND or code == EXT_RETRO or code == EXT_HALO:
@@ -225,7 +280,7 @@ def _chain(codes, z, j, geo, gval, b, db, bp, dbp):
                 db[col, pb] = 0.0
         if code == EXT_INCIDENCE:
             lcg = geo[2][j]
-            f = math.exp(z[pb] * lcg)
+            f = fexp(z[pb] * lcg)
             for col in range(lb):
                 b[col] *= f
                 for q in range(pb):
@@ -354,6 +409,14 @@ def _solve_linear(bw, yw, nonneg, residual, alpha, free, inv):
         for k in range(i + 1, ll):
             g[k, i] = g[i, k]
     scale = np.empty(ll)
+    _solve_gram(g, rhs, nonneg, residual, alpha, free, inv, scale)
+
+
+@njit(cache=True)
+def _solve_gram(g, rhs, nonneg, residual, alpha, free, inv, scale):
+    """:func:`_solve_linear` from the Gram matrix ``g`` (symmetric) and ``rhs`` (``scale``:
+    scratch of length L)."""
+    ll = rhs.size
     for i in range(ll):
         scale[i] = max(g[i, i], 1e-300)
         free[i] = g[i, i] > 0.0
@@ -453,8 +516,8 @@ def _two_lobe_fill(geo, gval, sw, deriv, bw, dbw):
         ns = gval[g, 2]
         lct = lct_all[j]
         lcp = lcp_all[j]
-        pd = math.exp(nd * lct) if pt_all[j] else 0.0
-        ps = math.exp(ns * lcp) if pp_all[j] else 0.0
+        pd = fexp(nd * lct) if pt_all[j] else 0.0
+        ps = fexp(ns * lcp) if pp_all[j] else 0.0
         ld = (nd + 1.0) / TWO_PI * pd
         ls = (ns + 1.0) / TWO_PI * ps
         diff = ls - ld
@@ -660,88 +723,6 @@ def _costs(codes, nonneg, residual, cands, geo, glcg, sw, yw):
 
 # ----------------------------------------------------------------------------- data-driven starts
 @njit(cache=True)
-def _profile(geo, power, weights, levels, group, nd_grid, ns_grid):
-    """model.lobe_profile for one weight row: per level (diffuse index, specular index,
-    diffuse, specular, ok). ``levels``/``group``: the rounded angles of incidence."""
-    g_count = levels.size
-    n = power.size
-    lt, post, lp, posp = geo[3], geo[4], geo[5], geo[6]
-    d_count = nd_grid.size
-    s_count = ns_grid.size
-    out = np.full((g_count, 4), np.nan)
-    ok = np.zeros(g_count, np.bool_)
-    for gi in range(g_count):
-        count = 0
-        for j in range(n):
-            if group[j] == gi and weights[j] > 0.0:
-                count += 1
-        if count < 3:
-            continue
-        idx = np.empty(count, np.int64)
-        k = 0
-        for j in range(n):
-            if group[j] == gi and weights[j] > 0.0:
-                idx[k] = j
-                k += 1
-        ld = np.empty((d_count, count))
-        ls = np.empty((s_count, count))
-        for a in range(d_count):
-            nd = nd_grid[a]
-            for c in range(count):
-                j = idx[c]
-                ld[a, c] = (nd + 1.0) / TWO_PI * math.exp(nd * lt[j]) if post[j] else 0.0
-        for a in range(s_count):
-            ns = ns_grid[a]
-            for c in range(count):
-                j = idx[c]
-                ls[a, c] = (ns + 1.0) / TWO_PI * math.exp(ns * lp[j]) if posp[j] else 0.0
-        w = np.empty(count)
-        y = np.empty(count)
-        yy = 0.0
-        for c in range(count):
-            w[c] = weights[idx[c]]
-            y[c] = power[idx[c]]
-            yy += w[c] * y[c] * y[c]
-        gdd = np.zeros(d_count)
-        rd = np.zeros(d_count)
-        for a in range(d_count):
-            for c in range(count):
-                v = w[c] * ld[a, c]
-                gdd[a] += v * ld[a, c]
-                rd[a] += v * y[c]
-        gss = np.zeros(s_count)
-        rs = np.zeros(s_count)
-        for a in range(s_count):
-            for c in range(count):
-                v = w[c] * ls[a, c]
-                gss[a] += v * ls[a, c]
-                rs[a] += v * y[c]
-        best = math.inf
-        bi = 0
-        bk = 0
-        bcd = 0.0
-        bcs = 0.0
-        for a in range(d_count):
-            for s in range(s_count):
-                gds = 0.0
-                for c in range(count):
-                    gds += w[c] * ld[a, c] * ls[s, c]
-                cost, cd, cs = _two_columns(gdd[a], gss[s], gds, rd[a], rs[s], yy)
-                if cost < best:
-                    best = cost
-                    bi = a
-                    bk = s
-                    bcd = cd
-                    bcs = cs
-        ok[gi] = True
-        out[gi, 0] = nd_grid[bi]
-        out[gi, 1] = ns_grid[bk]
-        out[gi, 2] = bcd
-        out[gi, 3] = bcs
-    return out, ok
-
-
-@njit(cache=True)
 def _two_columns(gdd, gss, gds, rd, rs, yy):
     """model._two_column_nnls for one grid node."""
     det = gdd * gss - gds * gds
@@ -850,12 +831,10 @@ def _median_specular(prof, ok):
 
 
 @njit(cache=True)
-def _own_starts(geo, power, levels, group, nd_grid, ns_grid, jitter, lo, hi, ext_start, extra):
-    """The caller's ``extra`` starts, then the model's data-driven starts (profile rows,
-    fixed rows), random perturbations of the first row, clipped and made unique (sorted
-    rows, as numpy.unique(axis=0))."""
-    weights = np.ones(power.size)
-    prof, ok = _profile(geo, power, weights, levels, group, nd_grid, ns_grid)
+def _own_starts(prof, ok, levels, jitter, lo, hi, ext_start, extra):
+    """The caller's ``extra`` starts, then the model's data-driven starts (profile rows of
+    the per-angle decomposition ``prof``/``ok``, fixed rows), random perturbations of the
+    first row, clipped and made unique (sorted rows, as numpy.unique(axis=0))."""
     prow = _profile_starts(levels, prof, ok)
     n_est = _median_specular(prof, ok)
     p = lo.size
@@ -976,72 +955,475 @@ def _scan_candidates(z, axes):
     return out
 
 
+# ----------------------------------------------------------------------------- two-lobe fast path
+# The plain two-lobe model (no extension), whose evaluations are most of every fit and of
+# every `select` run, on its points stored block by block, one block per exact angle of
+# incidence (``gstart[g]:gstart[g + 1]``): within a block cos^v_as, n_d and n_s are
+# scalars, so the loops over points read and write plain rows (compiled to vector
+# instructions, no gathers). Rows of ``pts`` (9, m):
+#   log cos theta, cos theta > 0 (1.0/0.0), log cos phi, cos phi > 0, log cos gamma,
+#   sqrt(weight), sqrt(weight) * power, weight, power.
+# The arithmetic is the generic path's, operation for operation (the sums over points in
+# the same order): the fast path gives the generic path's numbers.
+_TL_ROWS = 9
+
+
 @njit(cache=True)
-def _scan_costs_two_lobe(z, axes, geo, glcg, sw, yw, nonneg, residual):
-    """Projected costs of the one-coordinate scans through ``z`` of the plain two-lobe
-    model (the same numbers as :func:`_costs` of :func:`_scan_candidates`): along v_as the
-    lobes do not change, along the diffuse (specular) coordinates only the diffuse
-    (specular) lobe does, so each point costs at most one exponential."""
-    p, m = axes.shape
-    n = sw.size
-    g_count = glcg.size
-    lct_all, pt_all, lcp_all, pp_all, group = geo[3], geo[4], geo[5], geo[6], geo[7]
-    gval = np.empty((g_count, 3))
-    _group_values(z, glcg, gval)
-    ld0 = np.empty(n)
-    ls0 = np.empty(n)
+def tl_points(geo, n_groups, sw, yw, weights, power, mask, pts, gstart, lgroup, pgroup):
+    """Write the points of ``mask`` into ``pts`` (block order, see above), the blocks'
+    starts into ``gstart`` (G + 1) and each point's level of the per-angle decomposition
+    (``pgroup``, rounded angles) into ``lgroup``; returns the number of points."""
+    group = geo[7]
+    n = group.size
+    for g in range(n_groups + 1):
+        gstart[g] = 0
     for j in range(n):
-        g = group[j]
-        nd = gval[g, 1]
-        ns = gval[g, 2]
-        ld0[j] = (nd + 1.0) / TWO_PI * math.exp(nd * lct_all[j]) if pt_all[j] else 0.0
-        ls0[j] = (ns + 1.0) / TWO_PI * math.exp(ns * lcp_all[j]) if pp_all[j] else 0.0
-    bw = np.empty((n, 2))
-    alpha = np.empty(2)
-    free = np.empty(2, np.bool_)
-    inv = np.empty((2, 2))
-    out = np.empty(p * m)
-    zc = z.copy()
-    gv = np.empty(g_count)
+        if mask[j]:
+            gstart[group[j] + 1] += 1
+    for g in range(n_groups):
+        gstart[g + 1] += gstart[g]
+    fill = gstart[:n_groups].copy()
+    for j in range(n):
+        if mask[j]:
+            g = group[j]
+            k = fill[g]
+            fill[g] += 1
+            pts[0, k] = geo[3][j]
+            pts[1, k] = 1.0 if geo[4][j] else 0.0
+            pts[2, k] = geo[5][j]
+            pts[3, k] = 1.0 if geo[6][j] else 0.0
+            pts[4, k] = geo[2][j]
+            pts[5, k] = sw[j]
+            pts[6, k] = yw[j]
+            pts[7, k] = weights[j]
+            pts[8, k] = power[j]
+            lgroup[k] = pgroup[j]
+    return gstart[n_groups]
+
+
+@njit(cache=True, inline="always")
+def _tl_values(z, lc):
+    """cos^v_as, n_d, n_s at one angle of incidence (``lc``: its log cos)."""
+    return fexp(z[0] * lc), fexp(z[1] + z[2] * lc), fexp(z[3] + z[4] * lc)
+
+
+@njit(cache=True)
+def _tl_broadcast(z, gstart, glcg, gv):
+    """Every point's n_d, n_s, cos^v_as, (n_d + 1)/2pi and (n_s + 1)/2pi (rows of ``gv``),
+    from its block: the loops over points then read plain rows (a loop per block leaves
+    most points to the scalar remainder of the vector loop)."""
+    for g in range(glcg.size):
+        s, nd, ns = _tl_values(z, glcg[g])
+        cd = (nd + 1.0) / TWO_PI
+        cs = (ns + 1.0) / TWO_PI
+        for j in range(gstart[g], gstart[g + 1]):
+            gv[0, j] = nd
+            gv[1, j] = ns
+            gv[2, j] = s
+            gv[3, j] = cd
+            gv[4, j] = cs
+
+
+@njit(cache=True, error_model="numpy")
+def _tl_fill(z, pts, gstart, glcg, vec, k):
+    """The lobes' powers (rows ``k``, ``k + 1`` of ``vec``: cos^n of the point's angles)
+    and the weighted basis (rows ``k + 2``, ``k + 3``) at every point (rows 10-14: the
+    block values). Rows of 2-D arrays are indexed in place, not taken as views: a view
+    costs a reference count, as much as a dozen points."""
+    _tl_broadcast(z, gstart, glcg, vec[10:15])
+    for j in range(gstart[glcg.size]):
+        nd = vec[10, j]
+        ns = vec[11, j]
+        a = fexp(nd * pts[0, j]) * pts[1, j]
+        b = fexp(ns * pts[2, j]) * pts[3, j]
+        vec[k, j] = a
+        vec[k + 1, j] = b
+        ld = vec[13, j] * a
+        ls = vec[14, j] * b
+        w = pts[5, j]
+        vec[k + 2, j] = ld * w
+        vec[k + 3, j] = (ld + vec[12, j] * (ls - ld)) * w
+
+
+#: The sums over points of the fast path (Gram matrices, residuals, normal equations) may
+#: be re-associated, so that they compile to vector instructions too: they then differ from
+#: the sequential sums of the generic path in the last bits, as numpy's pairwise sums do.
+_SUMS = {"reassoc", "contract"}
+
+
+@njit(cache=True, fastmath=_SUMS)
+def _tl_project(vec, k, pts, m, nonneg, residual, alpha, free, inv, slot, sm, fl):
+    """Linear coefficients (``alpha[slot]``, ``free[slot]``, ``inv[slot]``), residuals (row
+    ``k + 4``) and cost of the basis in rows ``k + 2``, ``k + 3`` (as _evaluate; fixed
+    columns zeroed). ``sm`` (16,), ``fl`` (2,): scratch."""
+    g00 = 0.0
+    g01 = 0.0
+    g11 = 0.0
+    r0 = 0.0
+    r1 = 0.0
+    for j in range(m):
+        x0 = vec[k + 2, j]
+        x1 = vec[k + 3, j]
+        y = pts[6, j]
+        r0 += x0 * y
+        g00 += x0 * x0
+        g01 += x0 * x1
+        r1 += x1 * y
+        g11 += x1 * x1
+    _tl_solve(g00, g01, g11, r0, r1, nonneg, residual, alpha, free, inv, slot, sm, fl)
+    a0 = alpha[slot, 0]
+    a1 = alpha[slot, 1]
+    cost = 0.0
+    for j in range(m):
+        acc = pts[6, j] - vec[k + 2, j] * a0 - vec[k + 3, j] * a1
+        vec[k + 4, j] = acc
+        cost += acc * acc
+    cost *= 0.5
+    if not math.isfinite(cost):
+        cost = math.inf
+    if not free[slot, 0]:
+        vec[k + 2, :m] = 0.0
+    if not free[slot, 1]:
+        vec[k + 3, :m] = 0.0
+    return cost
+
+
+@njit(cache=True)
+def _tl_solve(g00, g01, g11, r0, r1, nonneg, residual, alpha, free, inv, slot, sm, fl):
+    """_solve_gram of the two columns into ``alpha[slot]``, ``free[slot]``, ``inv[slot]``
+    (``sm``: scratch for the Gram matrix, rhs, scale, alpha, inverse)."""
+    g2 = sm[0:4].reshape((2, 2))
+    g2[0, 0] = g00
+    g2[0, 1] = g01
+    g2[1, 0] = g01
+    g2[1, 1] = g11
+    rhs = sm[4:6]
+    rhs[0] = r0
+    rhs[1] = r1
+    al = sm[8:10]
+    iv = sm[10:14].reshape((2, 2))
+    _solve_gram(g2, rhs, nonneg, residual, al, fl, iv, sm[6:8])
+    alpha[slot, 0] = al[0]
+    alpha[slot, 1] = al[1]
+    free[slot, 0] = fl[0]
+    free[slot, 1] = fl[1]
+    for i in range(2):
+        for c in range(2):
+            inv[slot, i, c] = iv[i, c]
+
+
+@njit(cache=True, error_model="numpy", fastmath=_SUMS)
+def _tl_normal(z, pts, gstart, glcg, vec, k, alpha, inv, slot, jac, t, coef, grad, hess):
+    """Kaufman's Jacobian of the projected residual at the point whose lobes, basis and
+    residuals are rows ``k``..``k + 4`` of ``vec``, and the normal equations' gradient
+    ``J'r`` and matrix ``J'J`` (as _jacobian and _lm)."""
+    a0 = alpha[slot, 0]
+    a1 = alpha[slot, 1]
+    m = gstart[glcg.size]
+    _tl_broadcast(z, gstart, glcg, vec[10:15])
+    for j in range(m):
+        a = vec[k, j]
+        b = vec[k + 1, j]
+        nd = vec[10, j]
+        ns = vec[11, j]
+        s = vec[12, j]
+        ld = vec[13, j] * a
+        ls = vec[14, j] * b
+        lcg = pts[4, j]
+        dd = nd * (a / TWO_PI + ld * pts[0, j])
+        ds = ns * (b / TWO_PI + ls * pts[2, j])
+        diff = ls - ld
+        oms = 1.0 - s
+        w = pts[5, j]
+        vec[15, j] = (0.0 * a0 + s * diff * lcg * a1) * w
+        vec[16, j] = (dd * a0 + oms * dd * a1) * w
+        vec[17, j] = (dd * lcg * a0 + oms * dd * lcg * a1) * w
+        vec[18, j] = (0.0 * a0 + s * ds * a1) * w
+        vec[19, j] = (0.0 * a0 + s * ds * lcg * a1) * w
+    t[:, :] = 0.0
+    for q in range(5):
+        t0 = 0.0
+        t1 = 0.0
+        for j in range(m):
+            t0 += vec[k + 2, j] * vec[15 + q, j]
+            t1 += vec[k + 3, j] * vec[15 + q, j]
+        t[0, q] = t0
+        t[1, q] = t1
+    for col in range(2):
+        for q in range(5):
+            coef[col, q] = inv[slot, col, 0] * t[0, q] + inv[slot, col, 1] * t[1, q]
+    for q in range(5):
+        c0 = coef[0, q]
+        c1 = coef[1, q]
+        for j in range(m):
+            jac[q, j] = -vec[15 + q, j] + vec[k + 2, j] * c0 + vec[k + 3, j] * c1
+    for q in range(5):
+        acc = 0.0
+        for j in range(m):
+            acc += jac[q, j] * vec[k + 4, j]
+        grad[q] = acc
+        for r in range(q, 5):
+            acc = 0.0
+            for j in range(m):
+                acc += jac[q, j] * jac[r, j]
+            hess[q, r] = acc
+            hess[r, q] = acc
+
+
+@njit(cache=True)
+def tl_work(n):
+    """Scratch of the fast path for up to ``n`` points: vectors (20, n) (two slots of
+    lobes, basis and residuals; the per-point block values; the Jacobian's columns before
+    projection), the Jacobian (5, n), linear steps of the two slots (alpha, free,
+    inverse), small scratch."""
+    return (np.empty((20, n)), np.empty((5, n)), np.empty((2, 2)), np.empty((2, 2), np.bool_),
+            np.empty((2, 2, 2)), np.empty(16), np.empty(2, np.bool_), np.empty((2, 5)),
+            np.empty((2, 5)), np.empty(5), np.empty((5, 5)), np.empty((5, 5)), np.empty(5),
+            np.empty(5), np.empty(5), np.empty(5), np.empty(5, np.bool_))
+
+
+@njit(cache=True)
+def _tl_costs(cands, pts, gstart, glcg, nonneg, residual, ws):
+    """:func:`_costs` of the plain two-lobe model."""
+    vec, _, alpha, free, inv, sm, fl, _, _, _, _, _, _, _, _, _, _ = ws
+    m = gstart[glcg.size]
+    out = np.empty(cands.shape[0])
+    for i in range(cands.shape[0]):
+        _tl_fill(cands[i], pts, gstart, glcg, vec, 0)
+        out[i] = _tl_project(vec, 0, pts, m, nonneg, residual, alpha, free, inv, 0, sm, fl)
+    return out
+
+
+@njit(cache=True)
+def _tl_lm(nonneg, residual, z0, lo, hi, pts, gstart, glcg, max_iter, ftol, xtol, z_out,
+           alpha_out, ws):
+    """:func:`_lm` of the plain two-lobe model (the same steps and stopping rules): the
+    trial points are evaluated without derivatives, the Jacobian is formed only at
+    accepted points, from the lobes kept there."""
+    p = 5
+    vec, jac, alpha, free, inv, sm, fl, t, coef, grad, hess, a, rhs, step, z, zt, pinned = ws
+    m = gstart[glcg.size]
     for q in range(p):
-        for i in range(m):
+        z[q] = min(max(z0[q], lo[q]), hi[q])
+    cur = 0
+    _tl_fill(z, pts, gstart, glcg, vec, 0)
+    cost = _tl_project(vec, 0, pts, m, nonneg, residual, alpha, free, inv, 0, sm, fl)
+    nfev = 1
+    lam = 1e-3
+    if not math.isfinite(cost):
+        z_out[:] = z
+        alpha_out[0] = alpha[cur, 0]
+        alpha_out[1] = alpha[cur, 1]
+        return math.inf, STOP_NONFINITE, nfev
+    reason = STOP_MAXITER
+    for _ in range(max_iter):
+        _tl_normal(z, pts, gstart, glcg, vec, 5 * cur, alpha, inv, cur, jac, t, coef, grad,
+                   hess)
+        for q in range(p):
+            pinned[q] = (z[q] <= lo[q] + 1e-12 and grad[q] > 0.0) or \
+                (z[q] >= hi[q] - 1e-12 and grad[q] < 0.0)
+        for q in range(p):
+            if pinned[q]:
+                for r in range(p):
+                    hess[q, r] = 0.0
+                    hess[r, q] = 0.0
+                hess[q, q] = 1.0
+                grad[q] = 0.0
+        dmax = 0.0
+        for q in range(p):
+            dmax = max(dmax, hess[q, q])
+        a[:, :] = hess
+        for q in range(p):
+            d = max(hess[q, q], 1e-12 * dmax + 1e-300)
+            a[q, q] += lam * d
+            rhs[q] = -grad[q]
+        _solve_small(a, rhs, step)
+        for q in range(p):
+            if not math.isfinite(step[q]):
+                step[q] = 0.0
+            zt[q] = min(max(z[q] + step[q], lo[q]), hi[q])
+        tri = 1 - cur
+        _tl_fill(zt, pts, gstart, glcg, vec, 5 * tri)
+        tcost = _tl_project(vec, 5 * tri, pts, m, nonneg, residual, alpha, free, inv, tri, sm,
+                            fl)
+        better = tcost < cost
+        gain = cost - tcost
+        lam_new = max(lam / 3.0, 1e-12) if better else lam * 4.0
+        dz = 0.0
+        zn = 0.0
+        for q in range(p):
+            dz += (zt[q] - z[q]) ** 2
+            zn += z[q] * z[q]
+        dz = math.sqrt(dz)
+        small_step = dz <= xtol * (math.sqrt(zn) + xtol)
+        small_gain = better and gain <= ftol * max(cost, 1e-300)
+        stuck = lam_new > 1e10
+        nfev += 1
+        lam = lam_new
+        if better:
+            z[:] = zt
+            cost = tcost
+            cur = tri
+        if small_gain:
+            reason = STOP_FTOL
+            break
+        if small_step:
+            reason = STOP_XTOL
+            break
+        if stuck:
+            reason = STOP_STUCK
+            break
+    z_out[:] = z
+    alpha_out[0] = alpha[cur, 0]
+    alpha_out[1] = alpha[cur, 1]
+    return cost, reason, nfev
+
+
+@njit(cache=True, error_model="numpy")
+def _tl_scan_costs(z, axes, pts, gstart, glcg, nonneg, residual, ws):
+    """Projected costs of the one-coordinate scans through ``z`` (the numbers of
+    :func:`_tl_costs` of :func:`_scan_candidates`): along v_as the lobes do not change,
+    along the diffuse (specular) coordinates only the diffuse (specular) lobe does, so
+    each point costs at most one exponential."""
+    p, n_axis = axes.shape
+    vec, _, alpha, free, inv, sm, fl, _, _, _, _, _, _, _, _, _, _ = ws
+    m = gstart[glcg.size]
+    gv = vec[10:15]
+    _tl_broadcast(z, gstart, glcg, gv)
+    for j in range(m):  # rows 5, 6: the lobes at z
+        vec[5, j] = vec[13, j] * (fexp(vec[10, j] * pts[0, j]) * pts[1, j])
+        vec[6, j] = vec[14, j] * (fexp(vec[11, j] * pts[2, j]) * pts[3, j])
+    out = np.empty(p * n_axis)
+    zc = z.copy()
+    for q in range(p):
+        for i in range(n_axis):
             zc[:] = z
             zc[q] = axes[q, i]
-            for g in range(g_count):
-                lc = glcg[g]
-                if q == 0:
-                    gv[g] = math.exp(zc[0] * lc)
-                elif q <= 2:
-                    gv[g] = math.exp(zc[1] + zc[2] * lc)
-                else:
-                    gv[g] = math.exp(zc[3] + zc[4] * lc)
-            for j in range(n):
-                g = group[j]
-                if q == 0:
-                    sj = gv[g]
-                    ld = ld0[j]
-                    ls = ls0[j]
-                elif q <= 2:
-                    sj = gval[g, 0]
-                    nd = gv[g]
-                    ld = (nd + 1.0) / TWO_PI * math.exp(nd * lct_all[j]) if pt_all[j] else 0.0
-                    ls = ls0[j]
-                else:
-                    sj = gval[g, 0]
-                    ns = gv[g]
-                    ld = ld0[j]
-                    ls = (ns + 1.0) / TWO_PI * math.exp(ns * lcp_all[j]) if pp_all[j] else 0.0
-                w = sw[j]
-                bw[j, 0] = ld * w
-                bw[j, 1] = (ld + sj * (ls - ld)) * w
-            _solve_linear(bw, yw, nonneg, residual, alpha, free, inv)
-            cost = 0.0
-            for j in range(n):
-                acc = yw[j] - bw[j, 0] * alpha[0] - bw[j, 1] * alpha[1]
-                cost += acc * acc
-            cost *= 0.5
-            out[q * m + i] = cost if math.isfinite(cost) else math.inf
+            _tl_broadcast(zc, gstart, glcg, gv)
+            if q == 0:
+                for j in range(m):
+                    ld = vec[5, j]
+                    w = pts[5, j]
+                    vec[7, j] = ld * w
+                    vec[8, j] = (ld + vec[12, j] * (vec[6, j] - ld)) * w
+            elif q <= 2:
+                for j in range(m):
+                    ld = vec[13, j] * (fexp(vec[10, j] * pts[0, j]) * pts[1, j])
+                    w = pts[5, j]
+                    vec[7, j] = ld * w
+                    vec[8, j] = (ld + vec[12, j] * (vec[6, j] - ld)) * w
+            else:
+                for j in range(m):
+                    ld = vec[5, j]
+                    ls = vec[14, j] * (fexp(vec[11, j] * pts[2, j]) * pts[3, j])
+                    w = pts[5, j]
+                    vec[7, j] = ld * w
+                    vec[8, j] = (ld + vec[12, j] * (ls - ld)) * w
+            out[q * n_axis + i] = _tl_project(vec, 5, pts, m, nonneg, residual, alpha, free,
+                                              inv, 0, sm, fl)
     return out
+
+
+@njit(cache=True, error_model="numpy")
+def _tl_profile(pts, m, lgroup, n_levels, nd_grid, ns_grid):
+    """:func:`_profile` of the points ``pts[:, :m]`` (weights and power from its rows, the
+    level of each in ``lgroup``): per level (diffuse index, specular index, diffuse,
+    specular) and ok. The products of every diffuse and specular grid lobe are summed
+    point by point along the specular grid (the same sums, in the same order)."""
+    d_count = nd_grid.size
+    s_count = ns_grid.size
+    out = np.full((n_levels, 4), np.nan)
+    ok = np.zeros(n_levels, np.bool_)
+    counts = np.zeros(n_levels, np.int64)
+    for k in range(m):
+        if pts[7, k] > 0.0:
+            counts[lgroup[k]] += 1
+    biggest = 0
+    for gi in range(n_levels):
+        biggest = max(biggest, counts[gi])
+    ld = np.empty((biggest, d_count))
+    ls = np.empty((biggest, s_count))
+    w = np.empty(biggest)
+    y = np.empty(biggest)
+    gdd = np.empty(d_count)
+    rd = np.empty(d_count)
+    gss = np.empty(s_count)
+    rs = np.empty(s_count)
+    gds = np.empty((d_count, s_count))
+    costs = np.empty(s_count)
+    c1s = np.empty(s_count)
+    c2s = np.empty(s_count)
+    cdd = np.empty(d_count)
+    css = np.empty(s_count)
+    for a in range(d_count):
+        cdd[a] = (nd_grid[a] + 1.0) / TWO_PI
+    for a in range(s_count):
+        css[a] = (ns_grid[a] + 1.0) / TWO_PI
+    for gi in range(n_levels):
+        count = counts[gi]
+        if count < 3:
+            continue
+        c = 0
+        for k in range(m):
+            if lgroup[k] == gi and pts[7, k] > 0.0:
+                lt = pts[0, k]
+                lp = pts[2, k]
+                pos_t = pts[1, k]
+                pos_p = pts[3, k]
+                for a in range(d_count):
+                    ld[c, a] = cdd[a] * (fexp(nd_grid[a] * lt) * pos_t)
+                for a in range(s_count):
+                    ls[c, a] = css[a] * (fexp(ns_grid[a] * lp) * pos_p)
+                w[c] = pts[7, k]
+                y[c] = pts[8, k]
+                c += 1
+        yy = 0.0
+        for c in range(count):
+            yy += w[c] * y[c] * y[c]
+        gdd[:] = 0.0
+        rd[:] = 0.0
+        gss[:] = 0.0
+        rs[:] = 0.0
+        gds[:, :] = 0.0
+        for c in range(count):
+            wc = w[c]
+            yc = y[c]
+            for a in range(d_count):
+                v = wc * ld[c, a]
+                gdd[a] += v * ld[c, a]
+                rd[a] += v * yc
+            for a in range(s_count):
+                v = wc * ls[c, a]
+                gss[a] += v * ls[c, a]
+                rs[a] += v * yc
+            for a in range(d_count):
+                v = wc * ld[c, a]
+                for s in range(s_count):
+                    gds[a, s] += v * ls[c, s]
+        best = math.inf
+        bi = 0
+        bk = 0
+        bcd = 0.0
+        bcs = 0.0
+        for a in range(d_count):
+            for s in range(s_count):
+                cost, cd, cs = _two_columns(gdd[a], gss[s], gds[a, s], rd[a], rs[s], yy)
+                costs[s] = cost
+                c1s[s] = cd
+                c2s[s] = cs
+            for s in range(s_count):
+                if costs[s] < best:
+                    best = costs[s]
+                    bi = a
+                    bk = s
+                    bcd = c1s[s]
+                    bcs = c2s[s]
+        ok[gi] = True
+        out[gi, 0] = nd_grid[bi]
+        out[gi, 1] = ns_grid[bk]
+        out[gi, 2] = bcd
+        out[gi, 3] = bcs
+    return out, ok
 
 
 # ----------------------------------------------------------------------------- the search
@@ -1055,10 +1437,18 @@ def global_search(codes, nonneg, residual, geo, glcg, power, weights, levels, gr
     ``levels``/``group``: the rounded ones of the per-angle decomposition."""
     p = zlo.size
     pp, ll = _sizes(codes, codes.size)
+    fast = codes.size == 0
+    n = power.size
     sw = np.sqrt(weights)
     yw = sw * power
-    own = _own_starts(geo, power, levels, group, nd_grid, ns_grid, jitter, zlo, zhi,
-                      ext_start, extra)
+    pts = np.empty((_TL_ROWS, n))
+    gstart = np.empty(glcg.size + 1, np.int64)
+    lgroup = np.empty(n, np.int64)
+    tl_points(geo, glcg.size, sw, yw, np.ones(n), power, np.ones(n, np.bool_), pts, gstart,
+              lgroup, group)
+    ws = tl_work(n)
+    prof, ok = _tl_profile(pts, n, lgroup, levels.size, nd_grid, ns_grid)
+    own = _own_starts(prof, ok, levels, jitter, zlo, zhi, ext_start, extra)
     n_own = own.shape[0]
     m = n_own + screen.shape[0]
     cands = np.empty((m, p))
@@ -1066,7 +1456,10 @@ def global_search(codes, nonneg, residual, geo, glcg, power, weights, levels, gr
     for i in range(screen.shape[0]):
         for q in range(p):
             cands[n_own + i, q] = min(max(screen[i, q], zlo[q]), zhi[q])
-    costs = _costs(codes, nonneg, residual, cands, geo, glcg, sw, yw)
+    if fast:
+        costs = _tl_costs(cands, pts, gstart, glcg, nonneg, residual, ws)
+    else:
+        costs = _costs(codes, nonneg, residual, cands, geo, glcg, sw, yw)
     n_evals = m
     first = _diverse(own, costs[:n_own], n_data_starts, lo, hi, 1e-9)
     others = _diverse(cands, costs, n_keep, lo, hi, 0.08)
@@ -1081,8 +1474,12 @@ def global_search(codes, nonneg, residual, geo, glcg, power, weights, levels, gr
     at = np.empty(ll)
     n_starts = picks.size
     for i in picks:
-        c, r, nf = _lm(codes, nonneg, residual, cands[i], zlo, zhi, geo, glcg, sw, yw,
-                       max_iter, 1e-10, 1e-9, zt, at)
+        if fast:
+            c, r, nf = _tl_lm(nonneg, residual, cands[i], zlo, zhi, pts, gstart, glcg,
+                              max_iter, 1e-10, 1e-9, zt, at, ws)
+        else:
+            c, r, nf = _lm(codes, nonneg, residual, cands[i], zlo, zhi, geo, glcg, sw, yw,
+                           max_iter, 1e-10, 1e-9, zt, at)
         n_evals += nf
         if c < cb:
             cb = c
@@ -1097,8 +1494,8 @@ def global_search(codes, nonneg, residual, geo, glcg, power, weights, levels, gr
         width[q] = hi[q] - lo[q] if hi[q] > lo[q] else 1.0
     for rnd in range(max_rounds):
         scan = _scan_candidates(zb, axes)
-        if codes.size == 0:
-            sc = _scan_costs_two_lobe(zb, axes, geo, glcg, sw, yw, nonneg, residual)
+        if fast:
+            sc = _tl_scan_costs(zb, axes, pts, gstart, glcg, nonneg, residual, ws)
         else:
             sc = _costs(codes, nonneg, residual, scan, geo, glcg, sw, yw)
         n_evals += scan.shape[0]
@@ -1123,8 +1520,12 @@ def global_search(codes, nonneg, residual, geo, glcg, power, weights, levels, gr
         for i in range(k):
             for q in range(p):
                 extra[i, q] = min(max(extra[i, q], zlo[q]), zhi[q])
-            c, r, nf = _lm(codes, nonneg, residual, extra[i], zlo, zhi, geo, glcg, sw, yw,
-                           max_iter, 1e-10, 1e-9, zt, at)
+            if fast:
+                c, r, nf = _tl_lm(nonneg, residual, extra[i], zlo, zhi, pts, gstart, glcg,
+                                  max_iter, 1e-10, 1e-9, zt, at, ws)
+            else:
+                c, r, nf = _lm(codes, nonneg, residual, extra[i], zlo, zhi, geo, glcg, sw,
+                               yw, max_iter, 1e-10, 1e-9, zt, at)
             n_evals += nf
             n_starts += 1
             if c < best_c:
@@ -1216,38 +1617,33 @@ def subset_search(codes, nonneg, residual, geo, glcg, power, weights, masks, lev
     for i in range(n_screen):
         for q in range(p):
             clipped[i, q] = min(max(screen[i, q], zlo[q]), zhi[q])
+    # per call, not per subset: the whole table's sqrt(weights) and weighted power, the
+    # scratch of the subsets' points and of the fast path
+    sw = np.sqrt(weights)
+    yw = sw * power
+    pts = np.empty((_TL_ROWS, n))
+    gstart = np.empty(glcg.size + 1, np.int64)
+    lgroup = np.empty(n, np.int64)
+    ws = tl_work(n)
     for bi in range(b_count):
-        _one_subset(codes, nonneg, residual, geo, glcg, power, weights, masks[bi], levels,
-                    group, nd_grid, ns_grid, ext_first, clipped, zlo, zhi, n_keep,
+        _one_subset(codes, nonneg, residual, geo, glcg, power, weights, sw, yw, masks[bi],
+                    levels, group, nd_grid, ns_grid, ext_first, clipped, zlo, zhi, n_keep,
                     n_data_starts, max_iter, ftol, z_out[bi], a_out[bi], c_out, conv,
-                    nfev_each, bi)
+                    nfev_each, bi, pts, gstart, lgroup, ws)
     return z_out, a_out, c_out, conv, nfev_each.sum()
 
 
 @njit(cache=True)
-def _one_subset(codes, nonneg, residual, geo, glcg, power, weights, mask, levels, group,
-                nd_grid, ns_grid, ext_first, clipped, zlo, zhi, n_keep, n_data_starts, max_iter,
-                ftol, z_row, a_row, c_out, conv, nfev_each, bi):
-    n = mask.size
+def _one_subset(codes, nonneg, residual, geo, glcg, power, weights, sw_all, yw_all, mask,
+                levels, group, nd_grid, ns_grid, ext_first, clipped, zlo, zhi, n_keep,
+                n_data_starts, max_iter, ftol, z_row, a_row, c_out, conv, nfev_each, bi, pts,
+                gstart, lgroup, ws):
     p = zlo.size
     pp, ll = _sizes(codes, codes.size)
-    count = 0
-    for j in range(n):
-        if mask[j]:
-            count += 1
-    idx = np.empty(count, np.int64)
-    k = 0
-    for j in range(n):
-        if mask[j]:
-            idx[k] = j
-            k += 1
-    sub = _take(geo, idx)
-    sw = np.sqrt(weights[idx])
-    yw = sw * power[idx]
-    full_w = np.zeros(n)
-    for j in idx:
-        full_w[j] = weights[j]
-    prof, ok = _profile(geo, power, full_w, levels, group, nd_grid, ns_grid)
+    fast = codes.size == 0
+    count = tl_points(geo, glcg.size, sw_all, yw_all, weights, power, mask, pts, gstart,
+                      lgroup, group)
+    prof, ok = _tl_profile(pts, count, lgroup, levels.size, nd_grid, ns_grid)
     data = _profile_starts(levels, prof, ok)
     n_data = data.shape[0]
     n_screen = clipped.shape[0]
@@ -1257,7 +1653,22 @@ def _one_subset(codes, nonneg, residual, geo, glcg, power, weights, mask, levels
             v = data[i, q] if q < 5 else ext_first[q - 5]
             cands[i, q] = min(max(v, zlo[q]), zhi[q])
     cands[n_data:] = clipped
-    costs = _costs(codes, nonneg, residual, cands, sub, glcg, sw, yw)
+    if fast:
+        costs = _tl_costs(cands, pts, gstart, glcg, nonneg, residual, ws)
+        sub = geo
+        sw = sw_all
+        yw = yw_all
+    else:
+        idx = np.empty(count, np.int64)
+        k = 0
+        for j in range(mask.size):
+            if mask[j]:
+                idx[k] = j
+                k += 1
+        sub = _take(geo, idx)
+        sw = sw_all[idx]
+        yw = yw_all[idx]
+        costs = _costs(codes, nonneg, residual, cands, sub, glcg, sw, yw)
     nfev = cands.shape[0]
     order = _stable_order(costs)
     data_order = _stable_order(costs[:n_data])
@@ -1266,10 +1677,21 @@ def _one_subset(codes, nonneg, residual, geo, glcg, power, weights, mask, levels
     best = math.inf
     zt = np.empty(p)
     at = np.empty(ll)
+    done = np.empty(n1 + n2, np.int64)
     for k in range(n1 + n2):
         s = order[k] if k < n1 else data_order[k - n1]
-        c, r, nf = _lm(codes, nonneg, residual, cands[s], zlo, zhi, sub, glcg, sw, yw,
-                       max_iter, ftol, 1e-9, zt, at)
+        done[k] = s
+        again = False
+        for i in range(k):  # the same start again would end at the same point
+            again = again or done[i] == s
+        if again:
+            continue
+        if fast:
+            c, r, nf = _tl_lm(nonneg, residual, cands[s], zlo, zhi, pts, gstart, glcg,
+                              max_iter, ftol, 1e-9, zt, at, ws)
+        else:
+            c, r, nf = _lm(codes, nonneg, residual, cands[s], zlo, zhi, sub, glcg, sw, yw,
+                           max_iter, ftol, 1e-9, zt, at)
         nfev += nf
         if c < best:
             best = c
@@ -1278,6 +1700,201 @@ def _one_subset(codes, nonneg, residual, geo, glcg, power, weights, mask, levels
             conv[bi] = r == STOP_FTOL or r == STOP_XTOL or r == STOP_STUCK
     c_out[bi] = best
     nfev_each[bi] = nfev
+
+
+# ----------------------------------------------------------------------------- per table, per fit
+@njit(cache=True)
+def kernel_geometry(gamma, theta):
+    """fitting._kernel_geometry in one call: (geometry, log cos of the exact angles of
+    incidence, the rounded ones of the per-angle decomposition (as numpy.round(gamma, 9)),
+    each point's index among those, the exact angles of incidence)."""
+    n = gamma.size
+    order = np.argsort(gamma, kind="mergesort")
+    group = np.empty(n, np.int64)
+    exact = np.empty(n)
+    g = -1
+    for k in range(n):
+        j = order[k]
+        if g < 0 or gamma[j] != exact[g]:
+            g += 1
+            exact[g] = gamma[j]
+        group[j] = g
+    exact = exact[:g + 1].copy()
+    rounded = np.empty(n)
+    for j in range(n):
+        rounded[j] = np.rint(gamma[j] * 1e9) / 1e9
+    order = np.argsort(rounded, kind="mergesort")
+    pgroup = np.empty(n, np.int64)
+    levels = np.empty(n)
+    g = -1
+    for k in range(n):
+        j = order[k]
+        if g < 0 or rounded[j] != levels[g]:
+            g += 1
+            levels[g] = rounded[j]
+        pgroup[j] = g
+    levels = levels[:g + 1].copy()
+    glcg = np.empty(exact.size)
+    for i in range(exact.size):
+        glcg[i] = math.log(math.cos(exact[i]))
+    return make_geometry(gamma, theta, group, exact), glcg, levels, pgroup, exact
+
+
+@njit(cache=True)
+def _close(a, b, rtol, atol):
+    """numpy.allclose(a, b, rtol, atol)."""
+    for i in range(a.size):
+        if not abs(a[i] - b[i]) <= atol + rtol * abs(b[i]):
+            return False
+    return True
+
+
+@njit(cache=True)
+def tl_natural(z, alpha, out):
+    """models.paper._two_lobe_to_natural of one row."""
+    k = alpha[0] + alpha[1]
+    out[0] = alpha[1] / k if k > 0.0 else 0.0
+    out[1] = z[0]
+    out[2] = math.exp(z[1])
+    out[3] = z[2]
+    out[4] = math.exp(z[3])
+    out[5] = z[4]
+    out[6] = k
+
+
+@njit(cache=True)
+def tl_finish(z, alpha, geo, glcg, weights, power, absolute_sigma, cost, n_params):
+    """What fit() computes after the search of the plain two-lobe model, in one call:
+    natural parameters, whether they map back to (z, alpha) (fit's round-trip check),
+    the fitted curve, R^2, RMSE, MSE, the covariance of the natural parameters and which
+    lie along a near-singular direction (fitting._covariance, the same steps). Returns
+    (values, round_trip_ok, fitted, r2, rmse, mse, covariance, singular)."""
+    n = power.size
+    p = 5
+    k = p + 2
+    values = np.empty(k)
+    tl_natural(z, alpha, values)
+    zb = np.empty(p)
+    zb[0] = values[1]
+    zb[1] = math.log(values[2])
+    zb[2] = values[3]
+    zb[3] = math.log(values[4])
+    zb[4] = values[5]
+    ab = np.empty(2)
+    ab[0] = values[6] * (1.0 - values[0])
+    ab[1] = values[6] * values[0]
+    amax = max(abs(alpha[0]), abs(alpha[1]))
+    ok = _close(zb, z, 1e-9, 1e-12) and _close(ab, alpha, 1e-6, 1e-9 * amax)
+    # the fitted curve and the Jacobian in (z, alpha) of the weighted model (jacobian_full)
+    fitted = np.empty(n)
+    jfull = np.empty((n, k))
+    a0 = alpha[0]
+    a1 = alpha[1]
+    gval = np.empty((glcg.size, 5))
+    for g in range(glcg.size):
+        s, nd, ns = _tl_values(z, glcg[g])
+        gval[g, 0] = s
+        gval[g, 1] = nd
+        gval[g, 2] = ns
+        gval[g, 3] = (nd + 1.0) / TWO_PI
+        gval[g, 4] = (ns + 1.0) / TWO_PI
+    lcg_all, lct_all, pt_all, lcp_all, pp_all, group = geo[2], geo[3], geo[4], geo[5], \
+        geo[6], geo[7]
+    for j in range(n):
+        g = group[j]
+        s = gval[g, 0]
+        nd = gval[g, 1]
+        ns = gval[g, 2]
+        a = fexp(nd * lct_all[j]) if pt_all[j] else 0.0
+        b = fexp(ns * lcp_all[j]) if pp_all[j] else 0.0
+        ld = gval[g, 3] * a
+        ls = gval[g, 4] * b
+        diff = ls - ld
+        lcg = lcg_all[j]
+        dd = nd * (a / TWO_PI + ld * lct_all[j])
+        ds = ns * (b / TWO_PI + ls * lcp_all[j])
+        oms = 1.0 - s
+        w = math.sqrt(weights[j])
+        b1 = ld + s * diff
+        fitted[j] = ld * a0 + b1 * a1
+        jfull[j, 0] = (0.0 * a0 + s * diff * lcg * a1) * w
+        jfull[j, 1] = (dd * a0 + oms * dd * a1) * w
+        jfull[j, 2] = (dd * lcg * a0 + oms * dd * lcg * a1) * w
+        jfull[j, 3] = (0.0 * a0 + s * ds * a1) * w
+        jfull[j, 4] = (0.0 * a0 + s * ds * lcg * a1) * w
+        jfull[j, 5] = ld * w
+        jfull[j, 6] = b1 * w
+    mean = 0.0
+    for j in range(n):
+        mean += power[j]
+    mean /= n
+    ss_res = 0.0
+    ss_tot = 0.0
+    for j in range(n):
+        ss_res += (power[j] - fitted[j]) ** 2
+        ss_tot += (power[j] - mean) ** 2
+    r2 = 1.0 - ss_res / ss_tot if ss_tot > 0.0 else (math.nan if ss_res == 0.0 else -math.inf)
+    mse = ss_res / n
+    # covariance (fitting._covariance)
+    col = np.empty(k)
+    for q in range(k):
+        acc = 0.0
+        for j in range(n):
+            acc += jfull[j, q] * jfull[j, q]
+        col[q] = math.sqrt(acc) if acc > 0.0 else 1.0
+    info = np.empty((k, k))
+    for q in range(k):
+        for r in range(q, k):
+            acc = 0.0
+            for j in range(n):
+                acc += (jfull[j, q] / col[q]) * (jfull[j, r] / col[r])
+            info[q, r] = acc
+            info[r, q] = acc
+    dof = max(n - n_params, 1)
+    s2 = 1.0 if absolute_sigma else 2.0 * cost / dof
+    evals, evecs = np.linalg.eigh(info)
+    floor = 1e-12 * max(evals.max(), 1e-300)
+    weak = evals < floor
+    cov_internal = np.zeros((k, k))
+    for e in range(k):
+        ev = max(evals[e], floor)
+        for q in range(k):
+            for r in range(k):
+                cov_internal[q, r] += evecs[q, e] * evecs[r, e] / ev
+    for q in range(k):
+        for r in range(k):
+            cov_internal[q, r] = cov_internal[q, r] * s2 / (col[q] * col[r])
+    x0 = np.empty(k)
+    x0[:p] = z
+    x0[p:] = alpha
+    grad = np.empty((k, k))  # d natural / d internal: (natural, internal)
+    plus = np.empty(k)
+    minus = np.empty(k)
+    xp = np.empty(k)
+    for i in range(k):
+        step = 1e-6 * max(abs(x0[i]), 1e-3)
+        xp[:] = x0
+        xp[i] = x0[i] + step
+        tl_natural(xp[:p], xp[p:], plus)
+        xp[i] = x0[i] - step
+        tl_natural(xp[:p], xp[p:], minus)
+        for q in range(k):
+            grad[q, i] = (plus[q] - minus[q]) / (2.0 * step)
+    cov = grad @ cov_internal @ grad.T
+    singular = np.zeros(k, np.bool_)
+    for q in range(k):
+        total = 0.0
+        along = 0.0
+        for i in range(k):
+            total += (grad[q, i] / col[i]) ** 2
+        for e in range(k):
+            if weak[e]:
+                acc = 0.0
+                for i in range(k):
+                    acc += grad[q, i] / col[i] * evecs[i, e]
+                along += acc * acc
+        singular[q] = math.sqrt(along) > 0.1 * max(math.sqrt(total), 1e-300)
+    return values, ok, fitted, r2, math.sqrt(mse), mse, cov, singular
 
 
 def warm() -> None:
@@ -1306,6 +1923,28 @@ def warm() -> None:
         fit_subsets(g, t, p, masks, engine="compiled")
 
 
+@njit(cache=True, error_model="numpy")
+def _tl_predict(z, alpha, geo, glcg, gval, out):
+    """The plain two-lobe model (unweighted) at every point of ``geo`` (as predict)."""
+    for g in range(glcg.size):
+        s, nd, ns = _tl_values(z, glcg[g])
+        gval[g, 0] = s
+        gval[g, 1] = nd
+        gval[g, 2] = ns
+        gval[g, 3] = (nd + 1.0) / TWO_PI
+        gval[g, 4] = (ns + 1.0) / TWO_PI
+    lct_all, pt_all, lcp_all, pp_all, group = geo[3], geo[4], geo[5], geo[6], geo[7]
+    a0 = alpha[0]
+    a1 = alpha[1]
+    for j in range(out.size):
+        g = group[j]
+        a = fexp(gval[g, 1] * lct_all[j]) if pt_all[j] else 0.0
+        b = fexp(gval[g, 2] * lcp_all[j]) if pp_all[j] else 0.0
+        ld = gval[g, 3] * a
+        ls = gval[g, 4] * b
+        out[j] = ld * a0 + (ld + gval[g, 0] * (ls - ld)) * a1
+
+
 @njit(cache=True)
 def r2_rows(codes, zs, alphas, geo, glcg, power):
     """R^2 against ``power`` of the model at every row of (zs, alphas) (NaN rows: NaN)."""
@@ -1319,6 +1958,8 @@ def r2_rows(codes, zs, alphas, geo, glcg, power):
     for j in range(n):
         ss_tot += (power[j] - mean) ** 2
     out = np.full(b, np.nan)
+    gval = np.empty((glcg.size, 5))
+    pred = np.empty(n)
     for i in range(b):
         ok = True
         for q in range(zs.shape[1]):
@@ -1327,7 +1968,10 @@ def r2_rows(codes, zs, alphas, geo, glcg, power):
             ok = ok and math.isfinite(alphas[i, q])
         if not ok:
             continue
-        pred = predict(codes, zs[i], alphas[i], geo, glcg)
+        if codes.size == 0:
+            _tl_predict(zs[i], alphas[i], geo, glcg, gval, pred)
+        else:
+            pred = predict(codes, zs[i], alphas[i], geo, glcg)
         ss = 0.0
         for j in range(n):
             ss += (power[j] - pred[j]) ** 2

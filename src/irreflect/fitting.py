@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import dataclasses
 import functools
+import math
 import time
 from dataclasses import dataclass, field
 from warnings import warn
@@ -422,9 +423,9 @@ def _fitted_and_jacobian(model, z, alpha, gamma, theta, weights, engine=None, kg
     if codes is not None:
         from . import _kernel
 
-        geo, glcg, _, _ = kgeo if kgeo is not None else _kernel_geometry(gamma, theta)
-        return (_kernel.predict(codes, z, alpha, geo, glcg),
-                _kernel.jacobian_full(codes, z, alpha, geo, glcg, np.sqrt(weights)))
+        geo, glcg = (kgeo if kgeo is not None else _kernel_geometry(gamma, theta))[:2]
+        return (_kernel.predict(codes, _w(z), _w(alpha), geo, glcg),
+                _kernel.jacobian_full(codes, _w(z), _w(alpha), geo, glcg, _w(np.sqrt(weights))))
     with np.errstate(over="ignore", under="ignore", invalid="ignore", divide="ignore"):
         basis, dbasis = model.basis(Geometry.of(gamma[None], theta[None]), z[None], True)
     jz = np.einsum("mnlp,ml->mnp", dbasis, alpha[None])[0]
@@ -502,7 +503,8 @@ def screen_samples(model, n: int, seed: int) -> np.ndarray:
     Conover 1979). Plain numpy on purpose: ``scipy.stats.qmc`` would cost every command
     a second of import time for the same coverage of the box.
     """
-    key = (model.name, model.n_nonlinear, n, seed, tuple(np.concatenate(model.screen_box())))
+    box = _screen_box_key(model)
+    key = (model.name, model.n_nonlinear, n, seed, box)
     if key not in _SCREEN_CACHE:
         lo, hi = model.screen_box()
         p = lo.size
@@ -519,8 +521,24 @@ def screen_samples(model, n: int, seed: int) -> np.ndarray:
             strata = rng.permuted(np.tile(np.arange(n), (p, 1)), axis=1).T
             unit = (strata + rng.random((n, p))) / n
             out = lo + unit * (hi - lo)
+        if len(_SCREEN_CACHE) >= 256:  # bounded: one entry per seed a process has used
+            _SCREEN_CACHE.pop(next(iter(_SCREEN_CACHE)))
         _SCREEN_CACHE[key] = out
     return _SCREEN_CACHE[key]
+
+
+def _screen_box_key(model) -> tuple:
+    """The screening box as a hashable tuple (kept on the model object: it is asked on
+    every fit)."""
+    cached = model.options.get("_screen_box_key")
+    if cached is not None and cached[0] is model:
+        return cached[1]
+    key = tuple(np.concatenate(model.screen_box()).tolist())
+    try:
+        model.options["_screen_box_key"] = (model, key)
+    except TypeError:
+        pass
+    return key
 
 
 def _screen_costs(model, geom, z, sw, yw):
@@ -659,17 +677,19 @@ def _fmt_bound(b):
 def judge(model, values, stderr, singular, gamma_rad, converged, message) -> tuple:
     """(at_bound, ill_determined, warnings) of a fit: the checks every command prints."""
     at_bound, detail = [], []
-    for p, v in zip(model.params, values, strict=True):
+    values_f = np.asarray(values, float).tolist()  # Python floats: scalar tests in µs, not 10s
+    for p, v in zip(model.params, values_f, strict=True):
         for side, b in (("lower", p.lower), ("upper", p.upper)):
-            if not np.isfinite(b):
+            if not math.isfinite(b):
                 continue
             tol = 1e-6 * abs(b) if b != 0 else 1e-12
             if (side == "lower" and v <= b + tol) or (side == "upper" and v >= b - tol):
                 at_bound.append(p.name)
                 detail.append(f"{p.name} = {v:.4g} ({side} bound {_fmt_bound(b)})")
     ill, ill_detail = [], []
-    for p, v, s, sing in zip(model.params, values, stderr, singular, strict=True):
-        if not np.isfinite(s) or s > abs(v) or sing:
+    for p, v, s, sing in zip(model.params, values_f, np.asarray(stderr, float).tolist(),
+                             np.asarray(singular, bool).tolist(), strict=True):
+        if not math.isfinite(s) or s > abs(v) or sing:
             ill.append(p.name)
             why = "near-singular covariance" if sing else "std. error > |value|"
             ill_detail.append(f"{p.name} = {v:.4g} +- {s:.2g} ({why})")
@@ -788,7 +808,8 @@ def _search_compiled(model_obj, codes, gamma, theta, power, weights, geom, sw1, 
 
     p = model_obj.n_nonlinear
     st = _kernel_static(model_obj)
-    geo, glcg, levels, group = kgeo if kgeo is not None else _kernel_geometry(gamma, theta)
+    geo, glcg, levels, group = (kgeo if kgeo is not None else
+                                _kernel_geometry(gamma, theta))[:4]
     jitter, hops = _draws(seed, n_random_starts, _default_hops(model_obj, n_keep), max_rounds,
                           p)
     screen = (screen_samples(model_obj, n_screen, seed) if n_screen and p
@@ -796,10 +817,11 @@ def _search_compiled(model_obj, codes, gamma, theta, power, weights, geom, sw1, 
     extra = (st["no_extra"] if extra_starts is None else
              np.clip(np.asarray(extra_starts, float).reshape(-1, p), st["zlo"], st["zhi"]))
     zb, ab, cb, rb, n_starts, n_evals = _kernel.global_search(
-        codes, st["nonneg"], st["residual"], geo, glcg, power, weights, levels, group,
-        PROFILE_DIFFUSE_INDICES, PROFILE_SPECULAR_INDICES, jitter * st["jitter_width"],
-        st["ext_rows"], extra, screen, st["lo"], st["hi"], st["zlo"], st["zhi"], st["axes"],
-        hops, int(n_data_starts), int(n_keep), int(max_iter), int(max_rounds))
+        codes, st["nonneg"], st["residual"], geo, glcg, _w(power), _w(weights), levels, group,
+        _PROFILE_GRIDS[0], _PROFILE_GRIDS[1], _w(jitter * st["jitter_width"]),
+        st["ext_rows"], _w(extra), _w(screen), st["lo"], st["hi"], st["zlo"], st["zhi"],
+        st["axes"], _w(hops), int(n_data_starts), int(n_keep), int(max_iter),
+        int(max_rounds))
     if not np.isfinite(cb):
         return None
     return zb, ab, float(cb), int(rb), int(n_starts), int(n_evals)
@@ -814,13 +836,13 @@ def _kernel_static(model_obj) -> dict:
     p = model_obj.n_nonlinear
     lo, hi = model_obj.screen_box()
     st = {
-        "nonneg": np.asarray(model_obj.alpha_nonneg, np.bool_),
+        "nonneg": _w(model_obj.alpha_nonneg, np.bool_),
         "residual": int(model_obj.options.get("residual_column", -1)),
-        "lo": np.ascontiguousarray(lo, float), "hi": np.ascontiguousarray(hi, float),
-        "zlo": np.ascontiguousarray(model_obj.z_lower, float),
-        "zhi": np.ascontiguousarray(model_obj.z_upper, float),
-        "axes": np.ascontiguousarray(np.array(_scan_axes(model_obj, 33)).reshape(p, 33)),
-        "ext_rows": _extension_start_rows(model_obj),
+        "lo": _w(lo), "hi": _w(hi),
+        "zlo": _w(model_obj.z_lower.copy()),
+        "zhi": _w(model_obj.z_upper.copy()),
+        "axes": _w(np.array(_scan_axes(model_obj, 33)).reshape(p, 33)),
+        "ext_rows": _w(_extension_start_rows(model_obj)),
         "jitter_width": np.minimum(model_obj.z_upper - model_obj.z_lower, 10.0),
         "no_extra": np.zeros((0, p)),
     }
@@ -837,23 +859,28 @@ def _draws(seed, n_random: int, n_hops: int, rounds: int, p: int):
     first start (times 0.15; the caller scales it) and the basin hops of every round."""
     jitter = (np.random.default_rng(seed).normal(0.0, 0.15, (n_random, p)) if n_random
               else np.zeros((0, p)))
-    hops = np.random.default_rng([seed, 1]).normal(0.0, 0.15, (rounds, n_hops, p))
+    hops = (np.random.default_rng([seed, 1]).normal(0.0, 0.15, (rounds, n_hops, p)) if n_hops
+            else np.zeros((rounds, 0, p)))
     jitter.flags.writeable = False
     hops.flags.writeable = False
     return jitter, hops
 
 
+def _w(a, dtype=float) -> np.ndarray:
+    """``a`` as a writeable C-contiguous array (a copy only when it is not one already):
+    numba compiles a kernel once per argument type, and a read-only array (a
+    Measurements column, a cached draw) is another type, so every argument is passed
+    writeable and the cache that ``make`` warms is the one every caller uses."""
+    return np.require(a, dtype, ("C", "W"))
+
+
 def _kernel_geometry(gamma, theta):
     """The compiled kernel's geometry of one table, its exact angles of incidence (log cos)
-    and the rounded ones of the per-angle decomposition (as model.lobe_profile)."""
+    and the rounded ones of the per-angle decomposition (as model.lobe_profile), each
+    point's index among the rounded ones, the exact angles of incidence."""
     from . import _kernel
 
-    gamma = np.ascontiguousarray(gamma, float)
-    theta = np.ascontiguousarray(theta, float)
-    exact, group = np.unique(gamma, return_inverse=True)
-    levels, pgroup = np.unique(np.round(gamma, 9), return_inverse=True)
-    geo = _kernel.make_geometry(gamma, theta, group.astype(np.int64), exact)
-    return geo, np.log(np.cos(exact)), levels, pgroup.astype(np.int64)
+    return _kernel.kernel_geometry(_w(gamma), _w(theta))
 
 
 def _extension_start_rows(model) -> np.ndarray:
@@ -874,6 +901,9 @@ def _extension_start_rows(model) -> np.ndarray:
                  + [np.concatenate([tails[0], v]) for v in values[1:]])
     return np.array(tails, float).reshape(len(tails), -1)
 
+
+#: The index grids of the per-angle decomposition, writeable copies for the kernel.
+_PROFILE_GRIDS = (PROFILE_DIFFUSE_INDICES.copy(), PROFILE_SPECULAR_INDICES.copy())
 
 #: Which implementation fits: "compiled" (the numba kernel, for the models it covers;
 #: numpy for the others) or "numpy" (the reference implementation everywhere).
@@ -1041,8 +1071,8 @@ def fit(measurements, model="two-lobe", *, seed: int = 0, n_random_starts: int =
             "sigma column to fit unweighted"
         )
     weights = np.ones_like(power) if sigma is None else 1.0 / sigma**2
-    kgeo = _kernel_geometry(gamma, theta) if _kernel_codes(model_obj, engine) is not None \
-        else None
+    codes = _kernel_codes(model_obj, engine)
+    kgeo = _kernel_geometry(gamma, theta) if codes is not None else None
     out = _global_search(model_obj, gamma, theta, power, weights, seed=seed,
                          n_random_starts=n_random_starts, n_screen=n_screen, n_keep=n_keep,
                          n_data_starts=n_data_starts, max_iter=max_iter, max_rounds=max_rounds,
@@ -1053,16 +1083,30 @@ def fit(measurements, model="two-lobe", *, seed: int = 0, n_random_starts: int =
             "check the data for extreme values"
         )
     zb, ab, cb, converged, message, n_starts, n_evals = out
-    values = model_obj.to_natural(zb[None], ab[None])[0]
+    if codes is not None and codes.size == 0:  # the plain two-lobe model: one compiled call
+        from . import _kernel
+
+        values, round_trip, fitted, r2, rmse, mse, cov, singular = _kernel.tl_finish(
+            _w(zb), _w(ab), kgeo[0], kgeo[1], _w(weights), _w(power), sigma is not None, cb,
+            model_obj.n_params)
+    else:
+        values = model_obj.to_natural(zb[None], ab[None])[0]
+        round_trip = None
     if not np.all(np.isfinite(values)):
         raise FitError(
             f"fit of '{model_obj.name}' to {source} ended at non-finite parameters "
             f"{np.array2string(values, precision=4)}: check the data for extreme values"
         )
-    fitted, jfull = _fitted_and_jacobian(model_obj, zb, ab, gamma, theta, weights, engine, kgeo)
-    z_back, a_back = model_obj.from_natural(values[None])
-    if not (np.allclose(z_back[0], zb, rtol=1e-9, atol=1e-12)
-            and np.allclose(a_back[0], ab, rtol=1e-6, atol=1e-9 * np.max(np.abs(ab)))):
+    if round_trip is None:
+        fitted, jfull = _fitted_and_jacobian(model_obj, zb, ab, gamma, theta, weights, engine,
+                                             kgeo)
+        z_back, a_back = model_obj.from_natural(values[None])
+        round_trip = (np.allclose(z_back[0], zb, rtol=1e-9, atol=1e-12)
+                      and np.allclose(a_back[0], ab, rtol=1e-6, atol=1e-9 * np.max(np.abs(ab))))
+        r2 = metrics.r2(power, fitted)
+        rmse, mse = metrics.rmse(power, fitted), metrics.mse(power, fitted)
+        cov = singular = None
+    if not round_trip:
         raise FitError(
             f"fit of '{model_obj.name}' to {source}: the coefficients "
             f"{np.array2string(values, precision=4)} do not reproduce the fitted curve in "
@@ -1070,17 +1114,20 @@ def fit(measurements, model="two-lobe", *, seed: int = 0, n_random_starts: int =
             "values"
         )
     resid = power - fitted
-    r2 = metrics.r2(power, fitted)
+    r2 = float(r2)
     if not np.isfinite(r2) or r2 <= 0:
         raise FitError(
             f"fit of '{model_obj.name}' to {source} cannot beat a constant (R^2 = {r2:.4g} "
             "<= 0): check that power is the reflected power and that the angles follow the "
             "convention (gamma < 0 on the source side, mirror at theta = -gamma)"
         )
-    cov, singular = _covariance(model_obj, zb, ab, jfull, sigma is not None, cb, meas.n_points)
+    if cov is None:
+        cov, singular = _covariance(model_obj, zb, ab, jfull, sigma is not None, cb,
+                                    meas.n_points)
     stderr = np.sqrt(np.clip(np.diag(cov), 0, None))
-    at_bound, ill, warnings = judge(model_obj, values, stderr, singular, gamma, converged,
-                                    message)
+    # the distinct angles of incidence stand for all (judge's checks look at each once)
+    at_bound, ill, warnings = judge(model_obj, values, stderr, singular,
+                                    gamma if kgeo is None else kgeo[4], converged, message)
     for text in warnings:
         warn(FitWarning(f"{source}, {model_obj.name}: {text}"), stacklevel=2)
     dof = meas.n_points - model_obj.n_params
@@ -1093,8 +1140,8 @@ def fit(measurements, model="two-lobe", *, seed: int = 0, n_random_starts: int =
         stderr=stderr,
         covariance=cov,
         r2=r2,
-        rmse=metrics.rmse(power, fitted),
-        mse=metrics.mse(power, fitted),
+        rmse=float(rmse),
+        mse=float(mse),
         chi2_reduced=chi2,
         residuals=resid,
         gamma_deg=meas.gamma_deg.copy(),
@@ -1271,19 +1318,17 @@ def _fit_subsets_compiled(model, codes, gamma, theta, power, masks, weights, ok,
     from . import _kernel
 
     st = _kernel_static(model)
-    geo, glcg, levels, group = _kernel_geometry(gamma, theta)
+    geo, glcg, levels, group = _kernel_geometry(gamma, theta)[:4]
     p = model.n_nonlinear
     screen = screen_samples(model, n_screen, seed) if n_screen else np.zeros((0, p))
     if shared_starts is not None and len(shared_starts):
         screen = np.vstack([screen, np.asarray(shared_starts, float).reshape(-1, p)])
     z, alpha, cost, conv, nfev = _kernel.subset_search(
-        codes, st["nonneg"], st["residual"], geo, glcg, np.ascontiguousarray(power, float),
-        np.ascontiguousarray(weights, float), np.ascontiguousarray(masks), levels, group,
-        PROFILE_DIFFUSE_INDICES, PROFILE_SPECULAR_INDICES,
-        np.ascontiguousarray(st["ext_rows"][0]), np.ascontiguousarray(screen, float),
-        st["zlo"], st["zhi"], int(n_keep), int(n_data_starts), int(max_iter), float(ftol))
-    r2 = _kernel.r2_rows(codes, np.ascontiguousarray(z), np.ascontiguousarray(alpha), geo, glcg,
-                         np.ascontiguousarray(power, float))
+        codes, st["nonneg"], st["residual"], geo, glcg, _w(power), _w(weights),
+        _w(masks, np.bool_), levels, group, _PROFILE_GRIDS[0], _PROFILE_GRIDS[1],
+        _w(st["ext_rows"][0]), _w(screen), st["zlo"], st["zhi"], int(n_keep),
+        int(n_data_starts), int(max_iter), float(ftol))
+    r2 = _kernel.r2_rows(codes, _w(z), _w(alpha), geo, glcg, _w(power))
     return _subset_result(model, gamma, theta, power, z, alpha, cost, conv, ok, int(nfev), r2)
 
 

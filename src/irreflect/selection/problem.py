@@ -34,7 +34,7 @@ from pymoo.util.nds.non_dominated_sorting import NonDominatedSorting
 from pymoo.util.randomized_argsort import randomized_argsort
 
 from ..errors import IrreflectError
-from ..fitting import fit_subsets
+from ..fitting import _kernel_codes, fit_subsets
 from ..models import get_model
 
 #: what a FitSettings may set: the keyword-only options of fit_subsets that tune a fit
@@ -218,7 +218,12 @@ class SubsetEvaluator:
         # gets the same (the scores do not depend on how the batch is split)
         extra = {"shared_starts": self.elites} if share and len(self.elites) else {}
         found = []
-        for idx in _chunks(counts[fittable]):
+        # the compiled kernel fits subset by subset (no padding to the largest of a chunk):
+        # one call for the whole batch; the numpy path pads, chunks by size pay off there
+        compiled = not options.get("exhaustive", False) and \
+            _kernel_codes(self.model, options.get("engine")) is not None
+        chunks = [np.arange(fittable.size)] if compiled else _chunks(counts[fittable])
+        for idx in chunks:
             for piece in _bounded(fittable[idx], counts, per_point):
                 res = fit_subsets(self.gamma_deg, self.theta_deg, self.power, masks[piece],
                                   self.model, sigma=self.sigma, **options, **extra)
