@@ -158,3 +158,16 @@ def test_the_public_api_resolves_every_name():
     for name in irreflect.__all__:
         assert getattr(irreflect, name) is not None, name
     assert irreflect.get_model("two-lobe+background").n_params == 8
+
+
+def test_a_closed_pipe_ends_quietly(monkeypatch, capsys):
+    """``irreflect ... | head``: the reader leaves, the command stops without an error."""
+    import io
+
+    class ClosedPipe(io.StringIO):
+        def write(self, text):
+            raise BrokenPipeError(32, "Broken pipe")
+
+    monkeypatch.setattr("sys.stdout", ClosedPipe())
+    assert main(["models"]) == 141
+    assert capsys.readouterr().err == ""

@@ -72,6 +72,10 @@ def main(argv=None) -> int:
         warnings.simplefilter("always")
         try:
             code = args.handler(args)
+            sys.stdout.flush()
+        except BrokenPipeError:  # `irreflect ... | head`: the reader left; no error to report
+            _silence_stdout()
+            return 141
         except IrreflectError as exc:
             _print_notes(caught)
             print(f"irreflect: error: {_one_line(exc)}", file=sys.stderr)
@@ -95,6 +99,18 @@ def main(argv=None) -> int:
             return 130
     _print_notes(caught)
     return int(code or 0)
+
+
+def _silence_stdout() -> None:
+    """Point stdout at /dev/null, so that the interpreter's final flush into a closed pipe
+    does not print a traceback (the recipe of Python's signal documentation)."""
+    import os
+
+    try:
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+    except (OSError, ValueError):  # stdout is not a file (e.g. captured by a test)
+        pass
 
 
 def _one_line(exc: BaseException) -> str:
