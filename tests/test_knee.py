@@ -16,7 +16,7 @@ def test_knee_is_the_same_for_two_budgets_and_two_seeds(name, tmp_path):
     """The knee after 100 and after 200 generations (the 200-generation run continues the
     100-generation one from its checkpoint, which gives the uninterrupted run's result), for
     seeds 0 and 1; and Methods A >= B >= 12. Population 20 keeps the test short; the
-    report's population 100 gives the same knee, 7 on every set (README, step 2)."""
+    report's population 100 gives the same knee on every set (README, step 2)."""
     meas = load_bundled(name)
     knees, last = {}, None
     for seed in (0, 1):

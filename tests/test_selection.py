@@ -51,7 +51,8 @@ def test_front_is_non_dominated_and_monotone(small_run):
     n, f = front["n_points"].to_numpy(), front["one_minus_r2"].to_numpy()
     assert len(front) >= 3
     assert np.all(np.diff(n) > 0) and np.all(np.diff(f) < 0)
-    assert n.min() >= 7 and n.max() <= SMALL["max_points"]
+    # a subset keeps a degree of freedom, as fit() requires: 8 points for the 7 parameters
+    assert n.min() >= 8 and n.max() <= SMALL["max_points"]
     # no checked subset dominates a front point
     for k, (score, _mask) in small_run.verified.items():
         dominated = (n >= k) & (f >= score) & ((n > k) | (f > score))
@@ -99,7 +100,7 @@ def test_knee_rule_uses_a_fixed_normalisation():
 
 def test_front_holds_every_n_up_to_12_and_the_best_12_is_on_it(small_run):
     front = small_run.front.set_index("n_points")
-    assert set(range(7, 13)) <= set(front.index)
+    assert set(range(8, 13)) <= set(front.index)
     assert small_run.front_summary.completed_up_to == max(small_run.knee_n, 12)
     np.testing.assert_array_equal(small_run.best_mask(12), small_run.masks[12])
     if small_run.knee_n < 12:
@@ -261,10 +262,12 @@ def test_cli_writes_every_output(noisy, tmp_path, capsys):
     assert list(opt.columns) == ["gamma_deg", "theta_deg"] and len(opt) == 12
     summary = json.loads((out / "summary.json").read_text())
     assert summary["knee_n"] in pareto["n_points"].tolist()
+    # the recommended points can be fitted: fit() refuses fewer than 8 for 7 parameters
+    assert summary["knee_n"] >= 8 and pareto["n_points"].min() >= 8
     assert set(summary["methods"]) == {"A", "B", "12"}
     assert summary["methods"]["A"]["n_points"] == noisy.n_points
     assert summary["evaluations"] > 0 and summary["seed"] == 0
-    assert summary["enough_points"]["n"] is None or summary["enough_points"]["n"] >= 7
+    assert summary["enough_points"]["n"] is None or summary["enough_points"]["n"] >= 8
     assert "knee: N =" in printed.out
 
 
@@ -290,7 +293,8 @@ def test_cli_errors_are_one_line(noisy, tmp_path, capsys):
     assert code == 2 and "unknown selector 'nsga3'" in err and "nsga2" in err
     assert len(err.strip().splitlines()) == 1
     code = main(["select", str(data), "--max-points", "5", "--out", str(tmp_path / "o")])
-    assert code == 2 and "at least the 7 model parameters" in capsys.readouterr().err
+    assert code == 2 and "at least 8 (the model's 7 parameters and a degree of freedom)" in \
+        capsys.readouterr().err
     assert not (tmp_path / "o").exists()
 
 

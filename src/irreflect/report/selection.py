@@ -103,7 +103,7 @@ def section(ctx: ReportContext) -> Section:
         f"generations, seed {ctx.seed}"
         + (f", at most {budget['max_points']} points" if "max_points" in budget else "")
         + ". Every subset on the frontier was fitted again with the full fitter's global "
-        "search before being reported, and the frontier was completed for every N from 7 "
+        "search before being reported, and the frontier was completed for every N from 8 "
         f"to the larger of the knee and {PAPER_N} (the best subset of N - 1 points grown by "
         "its best extra point, the best of N + 1 shrunk by its least useful one), so the "
         f"best {PAPER_N} points are always a frontier point. Three answers to \"how many "
@@ -111,9 +111,10 @@ def section(ctx: ReportContext) -> Section:
         "",
         "- **the knee** (the paper's rule, Fig. 18): the frontier point closest to the ideal "
         "point, in a fixed normalisation that does not depend on how far the frontier "
-        "extends: N scaled from the model's 7 parameters (0) to all points (1), 1 - R^2 "
+        "extends: N scaled from the fewest points a fit takes (0; 8: the model's 7 parameters "
+        "and a degree of freedom) to all points (1), 1 - R^2 "
         "from the all-points fit's (0) to 1, no better than the mean (1). One more point is "
-        "worth it when it gains more R^2 than about R^2_A / (n - 7);",
+        "worth it when it gains more R^2 than about R^2_A / (n - 8);",
         "- **enough points** (noise-aware): the fewest points whose fit's RMSE on all points "
         "exceeds the all-points fit's by at most the measurement noise sigma (the table's "
         "`sigma` column, or estimated from the all-points fit's residuals along theta); the "

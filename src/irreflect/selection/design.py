@@ -149,17 +149,18 @@ def design_protocol(dense, n_points: int | None = None, model="two-lobe", *,
                                                             mask)
         mask &= np.isin(dense.gamma_deg, chosen_gammas)
     n_allowed = int(mask.sum())
-    if n_allowed < model_obj.n_params:
+    k = model_obj.n_params
+    if n_allowed <= k:
         raise IrreflectError(
-            f"only {n_allowed} points of {dense.name} are within the tool's limits, fewer than "
-            f"the {model_obj.n_params} parameters of '{model_obj.name}': widen the limits"
+            f"only {n_allowed} points of {dense.name} are within the tool's limits; fitting "
+            f"the {k} parameters of '{model_obj.name}' needs at least {k + 1}: widen the limits"
         )
     if n_points is not None:
         n_points = int(n_points)
-        if not model_obj.n_params <= n_points <= n_allowed:
+        if not k < n_points <= n_allowed:
             raise IrreflectError(
-                f"--n must be between the model's {model_obj.n_params} parameters and the "
-                f"{n_allowed} allowed points; found {n_points}"
+                f"--n must be between {k + 1} (the model's {k} parameters and a degree of "
+                f"freedom) and the {n_allowed} allowed points; found {n_points}"
             )
     res = run_selection(dense, model_obj, selector=selector, pop_size=pop_size,
                         generations=generations, seed=seed, candidates=mask, progress=progress)

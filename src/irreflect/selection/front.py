@@ -8,8 +8,10 @@ distance is measured in a *fixed* normalisation, set by the data and the model, 
 how far the frontier found in one run happens to extend (which moved the knee between
 runs and budgets)::
 
-    x = (N - k) / (n - k)                 k: model parameters (the fewest points a fit
-                                          needs), n: points that may be chosen
+    x = (N - m) / (n - m)                 m = k + 1: the fewest points a fit takes (the
+                                          model's k parameters and a degree of freedom,
+                                          as irreflect.fit requires), n: points that may
+                                          be chosen
     y = (e - e_A) / (1 - e_A)             e = 1 - R^2 of the subset's fit; e_A the same
                                           for the fit on all n points (Method A)
 
@@ -17,7 +19,7 @@ so x runs from the smallest possible subset (0) to all points (1), and y from "a
 the fit on all points" (0) to "no better than the mean" (R^2 = 0, y = 1); points better
 than Method A count as y = 0. The knee is the frontier point nearest to (0, 0); ties go to
 fewer points. One more point is worth measuring when it lowers y by more than it raises
-x, i.e. when it gains more than about R^2_A / (n - k) of R^2.
+x, i.e. when it gains more than about R^2_A / (n - m) of R^2.
 
 **Enough points** (noise-aware): the fewest points whose fit predicts all points as well
 as the all-points fit within the measurement noise, i.e. whose RMSE on all points exceeds
@@ -94,7 +96,8 @@ def knee_coordinates(n_points, one_minus_r2, *, n_min: int, n_total: int,
                      reference: float) -> tuple[np.ndarray, np.ndarray]:
     """The fixed normalisation of the knee rule (see the module docstring): ``(x, y)``.
 
-    n_min : fewest points a fit needs (the model's parameter count)
+    n_min : fewest points a fit takes (the model's parameter count plus one: a degree of
+        freedom, as :func:`irreflect.fit` requires)
     n_total : points that may be chosen (all candidates)
     reference : 1 - R^2 of the fit on all ``n_total`` points (Method A)
     """

@@ -208,7 +208,7 @@ class SubsetEvaluator:
         scores = np.full(len(masks), FAILED_SCORE)
         failed = np.ones(len(masks), bool)
         counts = masks.sum(axis=1)
-        fittable = np.nonzero(counts >= self.model.n_params)[0]
+        fittable = np.nonzero(counts > self.model.n_params)[0]  # a degree of freedom, as fit
         if fittable.size == 0:
             return scores, failed
         options = settings.kwargs()
@@ -314,7 +314,7 @@ class SubsetEvaluator:
 class SubsetProblem(Problem):
     """pymoo problem: minimise (N, 1 - R^2) over boolean masks of the measured points.
 
-    Constraints (``G <= 0``): ``n_min - N`` (at least the model's parameter count) and
+    Constraints (``G <= 0``): ``n_min - N`` (more points than the model has parameters) and
     ``N - n_max``; points outside ``candidates`` may not be chosen (the operators never
     set them; a mask that does is infeasible).
     """
@@ -453,7 +453,8 @@ class MaskDuplicateElimination(DuplicateElimination):
 
 
 def check_sizes(n: int, n_params: int, max_points: int | None, candidates) -> tuple[int, int]:
-    """Validate the size bounds of a selection run; returns ``(n_min, n_max)``."""
+    """Validate the size bounds of a selection run; returns ``(n_min, n_max)``, with
+    ``n_min = n_params + 1``: the fewest points :func:`irreflect.fit` fits."""
     n_allowed = n if candidates is None else int(np.asarray(candidates, bool).sum())
     if candidates is not None and np.asarray(candidates).shape != (n,):
         raise IrreflectError(
@@ -466,12 +467,16 @@ def check_sizes(n: int, n_params: int, max_points: int | None, candidates) -> tu
             f"{n_params} model parameters; found {n_allowed}: measure a denser set or allow "
             "more candidate points"
         )
+    # a subset must leave the fit a degree of freedom, as irreflect.fit requires: a plan
+    # of exactly n_params points interpolates them and cannot be fitted or checked
+    n_min = n_params + 1
     n_max = n_allowed if max_points is None else int(max_points)
-    if n_max < n_params:
+    if n_max < n_min:
         raise IrreflectError(
-            f"--max-points must be at least the {n_params} model parameters; found {n_max}"
+            f"--max-points must be at least {n_min} (the model's {n_params} parameters and a "
+            f"degree of freedom); found {n_max}"
         )
-    return n_params, min(n_max, n_allowed)
+    return n_min, min(n_max, n_allowed)
 
 
 class FeasibleRankAndCrowding(Survival):

@@ -147,7 +147,8 @@ class SelectionResult:
             "seed": self.seed,
             "knee_n": self.knee_n,
             "knee_r2": float(self.front.set_index("n_points").loc[self.knee_n, "r2"]),
-            "knee_rule": ("closest to the ideal point in x = (N - k) / (n - k), "
+            "knee_rule": ("closest to the ideal point in x = (N - m) / (n - m), m = k + 1 "
+                          "(k model parameters and a degree of freedom), "
                           "y = (e - e_A) / (1 - e_A), e = 1 - R^2, e_A of the fit on all "
                           "points"),
             "reference_r2_all_points": (None if self.front_summary is None
