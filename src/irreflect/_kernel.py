@@ -112,6 +112,23 @@ def fexp(x):
     return out if x == x else x
 
 
+#: Below exp(LOBE_FLOOR) (about 1e-148) a lobe's power counts as 0 in the search: its
+#: products (squares, times weights) then never leave the normal range of floating point,
+#: where the processor is fast (a subnormal or underflowing result costs it twice as long
+#: or more); the costs change by less than 1e-290 of the lobes' peak values.
+LOBE_FLOOR = -340.0
+
+
+@njit(cache=True, inline="always")
+def lexp(x):
+    """``exp(x)`` of a lobe's power in the search: :func:`fexp`, 0 below LOBE_FLOOR (the
+    input is replaced there, so that no lane of a vector loop computes an underflow)."""
+    keep = x > LOBE_FLOOR
+    out = fexp(x if keep else 0.0)
+    out = out if keep else 0.0
+    return out if x == x else x
+
+
 # ----------------------------------------------------------------------------- geometry
 @njit(cache=True)
 def _lobe(log_cos, positive, n):
@@ -1058,8 +1075,8 @@ def _tl_fill(z, pts, gstart, glcg, vec, k):
     r0 = 0.0
     r1 = 0.0
     for j in range(gstart[glcg.size]):
-        a = fexp(vec[o + 5, j] * pts[0, j]) * pts[1, j]
-        b = fexp(vec[o + 6, j] * pts[2, j]) * pts[3, j]
+        a = lexp(vec[o + 5, j] * pts[0, j]) * pts[1, j]
+        b = lexp(vec[o + 6, j] * pts[2, j]) * pts[3, j]
         vec[o, j] = a
         vec[o + 1, j] = b
         ld = vec[o + 8, j] * a
@@ -1179,6 +1196,12 @@ def _tl_eval(z, pts, gstart, glcg, vec, k, nonneg, residual, lin):
     return _tl_residual(vec, k, pts, gstart[glcg.size], a0, a1)
 
 
+#: Below this fraction of y'y a cost from the Gram matrix (:func:`_gram_cost`) keeps too
+#: few digits (it is the small difference of numbers of the size of y'y: about 1e-16 y'y
+#: of rounding): the residuals are then summed instead.
+GRAM_DIGITS = 1e-5
+
+
 @njit(cache=True, inline="always")
 def _gram_cost(g00, g01, g11, r0, r1, yy, nn0, nn1, residual):
     """The projected cost from the Gram matrix, right-hand side and y'y (the residual's
@@ -1189,7 +1212,7 @@ def _gram_cost(g00, g01, g11, r0, r1, yy, nn0, nn1, residual):
                   + a1 * a1 * g11)
     if not math.isfinite(cost):
         return math.inf, False
-    return cost, cost < 1e-7 * yy
+    return cost, cost < GRAM_DIGITS * yy
 
 
 @njit(cache=True, error_model="numpy", fastmath=_SUMS)
@@ -1440,64 +1463,141 @@ def _tl_lm(nonneg, residual, z0, lo, hi, pts, gstart, glcg, max_iter, ftol, xtol
     return cost, reason, nfev
 
 
+@njit(cache=True, error_model="numpy", fastmath=_SUMS, inline="always")
+def _gram_add(ld, ls, vec, pts, j, g00, g01, g11, r0, r1):
+    w = pts[5, j]
+    x0 = ld * w
+    x1 = (ld + vec[7, j] * (ls - ld)) * w
+    y = pts[6, j]
+    return g00 + x0 * x0, g01 + x0 * x1, g11 + x1 * x1, r0 + x0 * y, r1 + x1 * y
+
+
 @njit(cache=True, error_model="numpy", fastmath=_SUMS)
-def _tl_scan_fill(pts, m, vec, q):
-    """The weighted basis (rows 2, 3) and its Gram sums along scan coordinate ``q``, the
-    block values of the scan point in rows 5..9 and the lobes at the scan's centre in rows
-    0, 1 (times their block factors): along v_as the lobes do not change, along the
-    diffuse (specular) coordinates only the diffuse (specular) lobe does, so each point
-    costs at most one exponential."""
+def _tl_gram(pts, m, vec, q):
+    """The Gram matrix and right-hand side of the linear step (g00, g01, g11, r0, r1) of the
+    basis whose block values are in rows 5..9 of ``vec``, in one pass without stores.
+    ``q``: -1, both lobes from their exponentials; 1 or 2 (3 or 4), the diffuse
+    (specular) lobe from its exponential, the other from row 1 (row 0): the lobes at the
+    centre of a scan, times their block factors (along the diffuse (specular) coordinates
+    only the diffuse (specular) lobe changes). One loop per case: a branch inside the
+    loop would keep it from vectorising."""
     g00 = 0.0
     g01 = 0.0
     g11 = 0.0
     r0 = 0.0
     r1 = 0.0
-    for j in range(m):
-        if q == 0:
-            ld = vec[0, j]
-            ls = vec[1, j]
-        elif q <= 2:
-            ld = vec[8, j] * (fexp(vec[5, j] * pts[0, j]) * pts[1, j])
-            ls = vec[1, j]
-        else:
-            ld = vec[0, j]
-            ls = vec[9, j] * (fexp(vec[6, j] * pts[2, j]) * pts[3, j])
-        w = pts[5, j]
-        x0 = ld * w
-        x1 = (ld + vec[7, j] * (ls - ld)) * w
-        vec[2, j] = x0
-        vec[3, j] = x1
-        y = pts[6, j]
-        g00 += x0 * x0
-        g01 += x0 * x1
-        g11 += x1 * x1
-        r0 += x0 * y
-        r1 += x1 * y
+    if q < 0:
+        for j in range(m):
+            ld = vec[8, j] * (lexp(vec[5, j] * pts[0, j]) * pts[1, j])
+            ls = vec[9, j] * (lexp(vec[6, j] * pts[2, j]) * pts[3, j])
+            g00, g01, g11, r0, r1 = _gram_add(ld, ls, vec, pts, j, g00, g01, g11, r0, r1)
+    elif q <= 2:
+        for j in range(m):
+            ld = vec[8, j] * (lexp(vec[5, j] * pts[0, j]) * pts[1, j])
+            g00, g01, g11, r0, r1 = _gram_add(ld, vec[1, j], vec, pts, j, g00, g01, g11, r0,
+                                              r1)
+    else:
+        for j in range(m):
+            ls = vec[9, j] * (lexp(vec[6, j] * pts[2, j]) * pts[3, j])
+            g00, g01, g11, r0, r1 = _gram_add(vec[0, j], ls, vec, pts, j, g00, g01, g11, r0,
+                                              r1)
     return g00, g01, g11, r0, r1
+
+
+@njit(cache=True, error_model="numpy", fastmath=_SUMS)
+def _tl_yy(pts, m):
+    """y'y of the weighted power."""
+    yy = 0.0
+    for j in range(m):
+        yy += pts[6, j] * pts[6, j]
+    return yy
+
+
+@njit(cache=True, error_model="numpy")
+def _tl_cost(z, pts, gstart, glcg, nonneg, residual, ws, yy):
+    """The projected cost at ``z`` (as :func:`_tl_eval`) from the Gram matrix, in one pass;
+    from the residuals where that keeps too few digits (GRAM_DIGITS)."""
+    vec = ws[0]
+    _tl_broadcast(z, gstart, glcg, vec, 5)
+    g00, g01, g11, r0, r1 = _tl_gram(pts, gstart[glcg.size], vec, -1)
+    cost, few = _gram_cost(g00, g01, g11, r0, r1, yy, nonneg[0], nonneg[1], residual)
+    if few:
+        cost = _tl_eval(z, pts, gstart, glcg, vec, 0, nonneg, residual, ws[1])
+    return cost
+
+
+@njit(cache=True)
+def _tl_screen_costs(cands, pts, gstart, glcg, nonneg, residual, ws):
+    """:func:`_tl_costs` of many candidates (:func:`_tl_cost`)."""
+    yy = _tl_yy(pts, gstart[glcg.size])
+    out = np.empty(cands.shape[0])
+    for i in range(cands.shape[0]):
+        out[i] = _tl_cost(cands[i], pts, gstart, glcg, nonneg, residual, ws, yy)
+    return out
 
 
 @njit(cache=True, error_model="numpy")
 def _tl_scan_costs(z, axes, pts, gstart, glcg, nonneg, residual, ws):
     """Projected costs of the one-coordinate scans through ``z`` (the numbers of
-    :func:`_tl_costs` of :func:`_scan_candidates`)."""
+    :func:`_tl_costs` of :func:`_scan_candidates`, from the Gram matrices as
+    :func:`_tl_cost`). Along v_as only the blocks' shares cos^v_as change: the Gram
+    matrix is then a sum over blocks of the lobes' products at ``z``, without a pass over
+    the points."""
     p, n_axis = axes.shape
     vec = ws[0]
+    lin = ws[1]
     m = gstart[glcg.size]
+    n_groups = glcg.size
+    yy = _tl_yy(pts, m)
     _tl_broadcast(z, gstart, glcg, vec, 5)
     for j in range(m):  # rows 0, 1: the lobes at z
-        vec[0, j] = vec[8, j] * (fexp(vec[5, j] * pts[0, j]) * pts[1, j])
-        vec[1, j] = vec[9, j] * (fexp(vec[6, j] * pts[2, j]) * pts[3, j])
+        vec[0, j] = vec[8, j] * (lexp(vec[5, j] * pts[0, j]) * pts[1, j])
+        vec[1, j] = vec[9, j] * (lexp(vec[6, j] * pts[2, j]) * pts[3, j])
+    # per block: sums of the weighted lobes' products at z
+    blk = np.zeros((n_groups, 5))
+    for g in range(n_groups):
+        for j in range(np.uint64(gstart[g]), np.uint64(gstart[g + 1])):
+            w = pts[5, j]
+            xd = vec[0, j] * w
+            xs = vec[1, j] * w
+            y = pts[6, j]
+            blk[g, 0] += xd * xd
+            blk[g, 1] += xd * xs
+            blk[g, 2] += xs * xs
+            blk[g, 3] += xd * y
+            blk[g, 4] += xs * y
     out = np.empty(p * n_axis)
     zc = z.copy()
     for q in range(p):
         for i in range(n_axis):
             zc[:] = z
             zc[q] = axes[q, i]
-            _tl_broadcast(zc, gstart, glcg, vec, 5)
-            g00, g01, g11, r0, r1 = _tl_scan_fill(pts, m, vec, q)
-            a0, a1, f0, f1, i00, i01, i11 = _tl_solve2(g00, g01, g11, r0, r1, nonneg[0],
-                                                       nonneg[1], residual)
-            out[q * n_axis + i] = _tl_residual(vec, 0, pts, m, a0, a1)
+            if q == 0:
+                g00 = 0.0
+                g01 = 0.0
+                g11 = 0.0
+                r0 = 0.0
+                r1 = 0.0
+                for g in range(n_groups):
+                    sh = fexp(zc[0] * glcg[g])
+                    om = 1.0 - sh
+                    a_, b_, c_, d_, e_ = blk[g, 0], blk[g, 1], blk[g, 2], blk[g, 3], blk[g, 4]
+                    g00 += a_
+                    g01 += om * a_ + sh * b_
+                    g11 += om * om * a_ + 2.0 * sh * om * b_ + sh * sh * c_
+                    r0 += d_
+                    r1 += om * d_ + sh * e_
+            else:
+                _tl_broadcast(zc, gstart, glcg, vec, 5)
+                g00, g01, g11, r0, r1 = _tl_gram(pts, m, vec, q)
+            cost, few = _gram_cost(g00, g01, g11, r0, r1, yy, nonneg[0], nonneg[1], residual)
+            if few:
+                cost = _tl_eval(zc, pts, gstart, glcg, vec, 0, nonneg, residual, lin)
+                _tl_broadcast(z, gstart, glcg, vec, 5)
+                for j in range(m):
+                    vec[0, j] = vec[8, j] * (lexp(vec[5, j] * pts[0, j]) * pts[1, j])
+                    vec[1, j] = vec[9, j] * (lexp(vec[6, j] * pts[2, j]) * pts[3, j])
+            out[q * n_axis + i] = cost
     return out
 
 
@@ -1505,16 +1605,59 @@ def _tl_scan_costs(z, axes, pts, gstart, glcg, nonneg, residual, ws):
 def _tl_profile(pts, m, lgroup, n_levels, nd_grid, ns_grid):
     """:func:`_profile` of the points ``pts[:, :m]`` (weights and power from its rows, the
     level of each in ``lgroup``): per level (diffuse index, specular index, diffuse,
-    specular) and ok. Every point's products of the diffuse and specular grid lobes
-    (:func:`_profile_add`) are summed level by level, point by point."""
+    specular) and ok. The products of every diffuse and specular grid lobe are summed
+    level by level, point by point (the sums of :func:`_profile_add`, in its order)."""
+    d_count = nd_grid.size
+    s_count = ns_grid.size
     ldt, lst = _profile_lobes(pts, m, nd_grid, ns_grid)
-    sums = np.zeros((n_levels, _profile_width(nd_grid.size, ns_grid.size)))
+    sums = np.zeros((n_levels, _profile_width(d_count, s_count)))
     counts = np.zeros(n_levels, np.int64)
-    for k in range(m):
-        if pts[7, k] > 0.0:
-            gi = lgroup[k]
-            counts[gi] += 1
-            _profile_add(ldt, lst, k, pts[7, k], pts[8, k], sums, gi)
+    gdd = np.empty(d_count)
+    rd = np.empty(d_count)
+    gss = np.empty(s_count)
+    rs = np.empty(s_count)
+    gds = np.empty((d_count, s_count))
+    o_rd = 1 + d_count
+    o_ss = 1 + 2 * d_count
+    o_rs = o_ss + s_count
+    o_ds = o_rs + s_count
+    for gi in range(n_levels):
+        yy = 0.0
+        gdd[:] = 0.0
+        rd[:] = 0.0
+        gss[:] = 0.0
+        rs[:] = 0.0
+        gds[:, :] = 0.0
+        count = 0
+        for k in range(m):
+            if lgroup[k] != gi or not pts[7, k] > 0.0:
+                continue
+            count += 1
+            wc = pts[7, k]
+            yc = pts[8, k]
+            yy += wc * yc * yc
+            for a in range(d_count):
+                v = wc * ldt[k, a]
+                gdd[a] += v * ldt[k, a]
+                rd[a] += v * yc
+            for a in range(s_count):
+                v = wc * lst[k, a]
+                gss[a] += v * lst[k, a]
+                rs[a] += v * yc
+            for a in range(d_count):
+                v = wc * ldt[k, a]
+                for b in range(s_count):
+                    gds[a, b] += v * lst[k, b]
+        counts[gi] = count
+        sums[gi, 0] = yy
+        for a in range(d_count):
+            sums[gi, 1 + a] = gdd[a]
+            sums[gi, o_rd + a] = rd[a]
+            for b in range(s_count):
+                sums[gi, o_ds + a * s_count + b] = gds[a, b]
+        for a in range(s_count):
+            sums[gi, o_ss + a] = gss[a]
+            sums[gi, o_rs + a] = rs[a]
     return _profile_pick(sums, counts, nd_grid, ns_grid)
 
 
@@ -1532,24 +1675,19 @@ def _profile_lobes(pts, m, nd_grid, ns_grid):
     stored point by point for the sums)."""
     d_count = nd_grid.size
     s_count = ns_grid.size
-    tmp = np.empty(m)
-    ldt = np.empty((m, d_count))
-    lst = np.empty((m, s_count))
+    ld = np.empty((d_count, m))
+    ls = np.empty((s_count, m))
     for a in range(d_count):
         n = nd_grid[a]
         c = (n + 1.0) / TWO_PI
         for k in range(m):
-            tmp[k] = c * (fexp(n * pts[0, k]) * pts[1, k])
-        for k in range(m):
-            ldt[k, a] = tmp[k]
+            ld[a, k] = c * (lexp(n * pts[0, k]) * pts[1, k])
     for a in range(s_count):
         n = ns_grid[a]
         c = (n + 1.0) / TWO_PI
         for k in range(m):
-            tmp[k] = c * (fexp(n * pts[2, k]) * pts[3, k])
-        for k in range(m):
-            lst[k, a] = tmp[k]
-    return ldt, lst
+            ls[a, k] = c * (lexp(n * pts[2, k]) * pts[3, k])
+    return ld.T.copy(), ls.T.copy()
 
 
 @njit(cache=True, error_model="numpy", inline="always")
@@ -1684,7 +1822,7 @@ def global_search(codes, nonneg, residual, geo, glcg, power, weights, levels, gr
         for q in range(p):
             cands[n_own + i, q] = min(max(screen[i, q], zlo[q]), zhi[q])
     if fast:
-        costs = _tl_costs(cands, pts, gstart, glcg, nonneg, residual, ws)
+        costs = _tl_screen_costs(cands, pts, gstart, glcg, nonneg, residual, ws)
     else:
         costs = _costs(codes, nonneg, residual, cands, geo, glcg, sw, yw)
     n_evals = m
@@ -1863,8 +2001,8 @@ def _shared_products(cands, geo, glcg, sw, yw):
             gval[g, 4] = (ns + 1.0) / TWO_PI
         for j in range(n):
             g = group[j]
-            a = fexp(gval[g, 1] * lct_all[j]) * (1.0 if pt_all[j] else 0.0)
-            b = fexp(gval[g, 2] * lcp_all[j]) * (1.0 if pp_all[j] else 0.0)
+            a = lexp(gval[g, 1] * lct_all[j]) * (1.0 if pt_all[j] else 0.0)
+            b = lexp(gval[g, 2] * lcp_all[j]) * (1.0 if pp_all[j] else 0.0)
             ld = gval[g, 3] * a
             ls = gval[g, 4] * b
             w = sw[j]
@@ -2230,6 +2368,57 @@ def tl_finish(z, alpha, geo, glcg, weights, power, absolute_sigma, cost, n_param
                 along += acc * acc
         singular[q] = math.sqrt(along) > 0.1 * max(math.sqrt(total), 1e-300)
     return values, ok, fitted, r2, math.sqrt(mse), mse, cov, singular
+
+
+@njit(cache=True)
+def tl_fit(gamma, theta, power, weights, scale, absolute_sigma, n_params, nonneg, residual,
+           nd_grid, ns_grid, jitter, ext_start, extra, screen, lo, hi, zlo, zhi, axes, hops,
+           n_data_starts, n_keep, max_iter, max_rounds):
+    """fit() of the plain two-lobe model in one call: the table's geometry
+    (kernel_geometry), the global search on the power divided by ``scale`` (global_search)
+    and, unless the search ended where fit() polishes or checks the gradient (the
+    iteration limit, no step lowering the cost: then fit() finishes in Python), the finish
+    in the units of power (tl_finish, the linear coefficients and the cost scaled back).
+    Returns (z, alpha, cost (search units), reason, n_starts, n_evals, the exact angles of
+    incidence, finished, values, round_trip_ok, fitted, r2, rmse, mse, covariance,
+    singular, standard errors, residuals, all values finite, the largest specular share
+    at the angles of incidence)."""
+    geo, glcg, levels, pgroup, exact = kernel_geometry(gamma, theta)
+    pn = power / scale
+    z, alpha, cost, reason, n_starts, n_evals = global_search(
+        np.zeros(0, np.int64), nonneg, residual, geo, glcg, pn, weights, levels, pgroup,
+        nd_grid, ns_grid, jitter, ext_start, extra, screen, lo, hi, zlo, zhi, axes, hops,
+        n_data_starts, n_keep, max_iter, max_rounds)
+    finished = math.isfinite(cost) and reason != STOP_STUCK and reason != STOP_MAXITER
+    k = z.size + alpha.size
+    if finished:
+        values, ok, fitted, r2, rmse, mse, cov, singular = tl_finish(
+            z, alpha * scale, geo, glcg, weights, power, absolute_sigma,
+            cost * scale * scale, n_params)
+    else:
+        values = np.full(k, np.nan)
+        ok = False
+        fitted = np.full(power.size, np.nan)
+        r2 = math.nan
+        rmse = math.nan
+        mse = math.nan
+        cov = np.full((k, k), np.nan)
+        singular = np.zeros(k, np.bool_)
+    # what fit() reports besides: standard errors, residuals, whether every value is
+    # finite, the largest specular share u_as cos^v_as(gamma) at the angles of incidence
+    stderr = np.empty(k)
+    finite = True
+    for q in range(k):
+        v = cov[q, q]
+        stderr[q] = math.sqrt(v) if v > 0.0 else (0.0 if v <= 0.0 else v)
+        finite = finite and math.isfinite(values[q])
+    resid = power - fitted
+    share = -math.inf
+    for g in range(exact.size):
+        v = values[0] * math.cos(abs(exact[g])) ** values[1]
+        share = max(share, v) if v == v else math.inf
+    return (z, alpha, cost, reason, n_starts, n_evals, exact, finished, values, ok, fitted,
+            r2, rmse, mse, cov, singular, stderr, resid, finite, share)
 
 
 def warm() -> None:
