@@ -1038,13 +1038,26 @@ _TL_VEC = 25
 
 
 @njit(cache=True, error_model="numpy")
-def _tl_broadcast(z, gstart, glcg, vec, r):
+def _tl_broadcast(z, gstart, glcg, vec, r, gbuf):
     """Every point's block values (rows ``r``..``r + 4`` of ``vec``, see above): the loops
     over points then read plain rows (a loop per block leaves most points to the scalar
-    remainder of the vector loop). Unsigned indices: no negative-index wraparound in the
-    loop."""
-    for g in range(glcg.size):
-        s, nd, ns = _tl_values(z, glcg[g])
+    remainder of the vector loop). The blocks' exponentials are taken eight at a time in
+    ``gbuf`` (a loop of constant length vectorises; one over the few blocks would not),
+    the loops over a block's points use unsigned indices (no negative-index wraparound)."""
+    n_groups = glcg.size
+    for g in range(n_groups):
+        lc = glcg[g]
+        gbuf[g] = z[0] * lc
+        gbuf[n_groups + g] = z[1] + z[2] * lc
+        gbuf[2 * n_groups + g] = z[3] + z[4] * lc
+    for c in range((3 * n_groups + 7) // 8):
+        o = 8 * c
+        for i in range(8):
+            gbuf[o + i] = fexp(gbuf[o + i])
+    for g in range(n_groups):
+        s = gbuf[g]
+        nd = gbuf[n_groups + g]
+        ns = gbuf[2 * n_groups + g]
         cd = (nd + 1.0) / TWO_PI
         cs = (ns + 1.0) / TWO_PI
         for j in range(np.uint64(gstart[g]), np.uint64(gstart[g + 1])):
@@ -1055,6 +1068,20 @@ def _tl_broadcast(z, gstart, glcg, vec, r):
             vec[r + 4, j] = cs
 
 
+@njit(cache=True, error_model="numpy")
+def _tl_broadcast_lobe(z, gstart, glcg, vec, r, specular):
+    """One lobe's block values of :func:`_tl_broadcast`: the diffuse (specular) lobe's
+    index into row ``r + 0`` (``r + 1``) and its normalisation into row ``r + 3``
+    (``r + 4``); the other rows are left (a scan along that lobe's coordinates)."""
+    k = 2 if specular else 0
+    for g in range(glcg.size):
+        n = fexp(z[k + 1] + z[k + 2] * glcg[g])
+        c = (n + 1.0) / TWO_PI
+        for j in range(np.uint64(gstart[g]), np.uint64(gstart[g + 1])):
+            vec[r, j] = n
+            vec[r + 3, j] = c
+
+
 #: The sums over points of the fast path (Gram matrices, residuals, normal equations) may
 #: be re-associated, so that they compile to vector instructions too: they then differ from
 #: the sequential sums of the generic path in the last bits, as numpy's pairwise sums do.
@@ -1062,13 +1089,13 @@ _SUMS = {"reassoc", "contract"}
 
 
 @njit(cache=True, error_model="numpy", fastmath=_SUMS)
-def _tl_fill(z, pts, gstart, glcg, vec, k):
+def _tl_fill(z, pts, gstart, glcg, vec, k, gbuf):
     """The lobes and the weighted basis at ``z`` into slot ``k`` of ``vec`` and, in the same
     pass, the Gram matrix and right-hand side of the linear step: (g00, g01, g11, r0, r1).
     Rows of 2-D arrays are indexed in place, not taken as views: a view costs a reference
     count, as much as a dozen points."""
     o = _SLOT * k
-    _tl_broadcast(z, gstart, glcg, vec, o + 5)
+    _tl_broadcast(z, gstart, glcg, vec, o + 5, gbuf)
     g00 = 0.0
     g01 = 0.0
     g11 = 0.0
@@ -1179,11 +1206,11 @@ def _tl_solve2(g00, g01, g11, r0, r1, nn0, nn1, residual):
 
 
 @njit(cache=True, error_model="numpy")
-def _tl_eval(z, pts, gstart, glcg, vec, k, nonneg, residual, lin):
+def _tl_eval(z, pts, gstart, glcg, vec, k, nonneg, residual, lin, gbuf):
     """Lobes, basis, linear step (``lin[k]``: alpha0, alpha1, free0, free1 as 1.0/0.0, the
     inverse i00, i01, i11) and residuals at ``z`` in slot ``k``; returns the cost (as
     _evaluate)."""
-    g00, g01, g11, r0, r1 = _tl_fill(z, pts, gstart, glcg, vec, k)
+    g00, g01, g11, r0, r1 = _tl_fill(z, pts, gstart, glcg, vec, k, gbuf)
     a0, a1, f0, f1, i00, i01, i11 = _tl_solve2(g00, g01, g11, r0, r1, nonneg[0], nonneg[1],
                                                residual)
     lin[k, 0] = a0
@@ -1366,19 +1393,20 @@ def tl_work(n):
     """Scratch of the fast path for up to ``n`` points: the per-point rows (_TL_VEC, n; see
     _SLOT), the linear steps of the two slots (2, 7; see _tl_eval), the projection's
     coefficients (2, 5), gradient, normal matrix, the damped system and its right-hand
-    side, the step, the current and trial coordinates, the pinned ones."""
+    side, the step, the current and trial coordinates, the pinned ones, the blocks'
+    exponentials (_tl_broadcast; at most ``n`` blocks)."""
     return (np.empty((_TL_VEC, n)), np.empty((2, 7)), np.empty((2, 5)), np.empty(5),
             np.empty((5, 5)), np.empty((5, 5)), np.empty(5), np.empty(5), np.empty(5),
-            np.empty(5), np.empty(5, np.bool_))
+            np.empty(5), np.empty(5, np.bool_), np.zeros(3 * n + 8))
 
 
 @njit(cache=True)
 def _tl_costs(cands, pts, gstart, glcg, nonneg, residual, ws):
     """:func:`_costs` of the plain two-lobe model."""
-    vec, lin = ws[0], ws[1]
+    vec, lin, gbuf = ws[0], ws[1], ws[11]
     out = np.empty(cands.shape[0])
     for i in range(cands.shape[0]):
-        out[i] = _tl_eval(cands[i], pts, gstart, glcg, vec, 0, nonneg, residual, lin)
+        out[i] = _tl_eval(cands[i], pts, gstart, glcg, vec, 0, nonneg, residual, lin, gbuf)
     return out
 
 
@@ -1389,12 +1417,12 @@ def _tl_lm(nonneg, residual, z0, lo, hi, pts, gstart, glcg, max_iter, ftol, xtol
     trial points are evaluated without derivatives, the Jacobian is formed only at
     accepted points, from the lobes kept there."""
     p = 5
-    vec, lin, coef, grad, hess, a, rhs, step, z, zt, pinned = ws
+    vec, lin, coef, grad, hess, a, rhs, step, z, zt, pinned, gbuf = ws
     m = gstart[glcg.size]
     for q in range(p):
         z[q] = min(max(z0[q], lo[q]), hi[q])
     cur = 0
-    cost = _tl_eval(z, pts, gstart, glcg, vec, 0, nonneg, residual, lin)
+    cost = _tl_eval(z, pts, gstart, glcg, vec, 0, nonneg, residual, lin, gbuf)
     nfev = 1
     lam = 1e-3
     if not math.isfinite(cost):
@@ -1429,7 +1457,7 @@ def _tl_lm(nonneg, residual, z0, lo, hi, pts, gstart, glcg, max_iter, ftol, xtol
                 step[q] = 0.0
             zt[q] = min(max(z[q] + step[q], lo[q]), hi[q])
         tri = 1 - cur
-        tcost = _tl_eval(zt, pts, gstart, glcg, vec, tri, nonneg, residual, lin)
+        tcost = _tl_eval(zt, pts, gstart, glcg, vec, tri, nonneg, residual, lin, gbuf)
         better = tcost < cost
         gain = cost - tcost
         lam_new = max(lam / 3.0, 1e-12) if better else lam * 4.0
@@ -1518,11 +1546,12 @@ def _tl_cost(z, pts, gstart, glcg, nonneg, residual, ws, yy):
     """The projected cost at ``z`` (as :func:`_tl_eval`) from the Gram matrix, in one pass;
     from the residuals where that keeps too few digits (GRAM_DIGITS)."""
     vec = ws[0]
-    _tl_broadcast(z, gstart, glcg, vec, 5)
+    gbuf = ws[11]
+    _tl_broadcast(z, gstart, glcg, vec, 5, gbuf)
     g00, g01, g11, r0, r1 = _tl_gram(pts, gstart[glcg.size], vec, -1)
     cost, few = _gram_cost(g00, g01, g11, r0, r1, yy, nonneg[0], nonneg[1], residual)
     if few:
-        cost = _tl_eval(z, pts, gstart, glcg, vec, 0, nonneg, residual, ws[1])
+        cost = _tl_eval(z, pts, gstart, glcg, vec, 0, nonneg, residual, ws[1], gbuf)
     return cost
 
 
@@ -1546,10 +1575,11 @@ def _tl_scan_costs(z, axes, pts, gstart, glcg, nonneg, residual, ws):
     p, n_axis = axes.shape
     vec = ws[0]
     lin = ws[1]
+    gbuf = ws[11]
     m = gstart[glcg.size]
     n_groups = glcg.size
     yy = _tl_yy(pts, m)
-    _tl_broadcast(z, gstart, glcg, vec, 5)
+    _tl_broadcast(z, gstart, glcg, vec, 5, gbuf)
     for j in range(m):  # rows 0, 1: the lobes at z
         vec[0, j] = vec[8, j] * (lexp(vec[5, j] * pts[0, j]) * pts[1, j])
         vec[1, j] = vec[9, j] * (lexp(vec[6, j] * pts[2, j]) * pts[3, j])
@@ -1587,13 +1617,13 @@ def _tl_scan_costs(z, axes, pts, gstart, glcg, nonneg, residual, ws):
                     g11 += om * om * a_ + 2.0 * sh * om * b_ + sh * sh * c_
                     r0 += d_
                     r1 += om * d_ + sh * e_
-            else:
-                _tl_broadcast(zc, gstart, glcg, vec, 5)
+            else:  # only the scanned lobe's block values change
+                _tl_broadcast_lobe(zc, gstart, glcg, vec, 5 if q <= 2 else 6, q >= 3)
                 g00, g01, g11, r0, r1 = _tl_gram(pts, m, vec, q)
             cost, few = _gram_cost(g00, g01, g11, r0, r1, yy, nonneg[0], nonneg[1], residual)
             if few:
-                cost = _tl_eval(zc, pts, gstart, glcg, vec, 0, nonneg, residual, lin)
-                _tl_broadcast(z, gstart, glcg, vec, 5)
+                cost = _tl_eval(zc, pts, gstart, glcg, vec, 0, nonneg, residual, lin, gbuf)
+                _tl_broadcast(z, gstart, glcg, vec, 5, gbuf)
                 for j in range(m):
                     vec[0, j] = vec[8, j] * (lexp(vec[5, j] * pts[0, j]) * pts[1, j])
                     vec[1, j] = vec[9, j] * (lexp(vec[6, j] * pts[2, j]) * pts[3, j])
@@ -2469,6 +2499,19 @@ def _tl_predict(z, alpha, geo, glcg, gval, out):
         out[j] = ld * a0 + (ld + gval[g, 0] * (ls - ld)) * a1
 
 
+@njit(cache=True, error_model="numpy", fastmath=_SUMS)
+def _tl_ss(pts, m, vec, a0, a1):
+    """Sum of squared differences between the power (row 8 of ``pts``) and the plain
+    two-lobe model whose block values are in rows 5..9 of ``vec``."""
+    ss = 0.0
+    for j in range(m):
+        ld = vec[8, j] * (lexp(vec[5, j] * pts[0, j]) * pts[1, j])
+        ls = vec[9, j] * (lexp(vec[6, j] * pts[2, j]) * pts[3, j])
+        r = pts[8, j] - (ld * a0 + (ld + vec[7, j] * (ls - ld)) * a1)
+        ss += r * r
+    return ss
+
+
 @njit(cache=True)
 def r2_rows(codes, zs, alphas, geo, glcg, power):
     """R^2 against ``power`` of the model at every row of (zs, alphas) (NaN rows: NaN)."""
@@ -2482,8 +2525,17 @@ def r2_rows(codes, zs, alphas, geo, glcg, power):
     for j in range(n):
         ss_tot += (power[j] - mean) ** 2
     out = np.full(b, np.nan)
-    gval = np.empty((glcg.size, 5))
     pred = np.empty(n)
+    fast = codes.size == 0
+    if fast:  # the points by blocks, as the search stores them
+        pts = np.empty((_TL_ROWS, n))
+        gstart = np.empty(glcg.size + 1, np.int64)
+        lgroup = np.empty(n, np.int64)
+        ones = np.ones(n)
+        tl_points(geo, glcg.size, ones, ones, ones, power, np.ones(n, np.bool_), pts, gstart,
+                  lgroup, geo[7])
+        vec = np.empty((10, n))
+        gbuf = np.zeros(3 * glcg.size + 8)
     for i in range(b):
         ok = True
         for q in range(zs.shape[1]):
@@ -2492,12 +2544,13 @@ def r2_rows(codes, zs, alphas, geo, glcg, power):
             ok = ok and math.isfinite(alphas[i, q])
         if not ok:
             continue
-        if codes.size == 0:
-            _tl_predict(zs[i], alphas[i], geo, glcg, gval, pred)
+        if fast:
+            _tl_broadcast(zs[i], gstart, glcg, vec, 5, gbuf)
+            ss = _tl_ss(pts, n, vec, alphas[i, 0], alphas[i, 1])
         else:
             pred = predict(codes, zs[i], alphas[i], geo, glcg)
-        ss = 0.0
-        for j in range(n):
-            ss += (power[j] - pred[j]) ** 2
+            ss = 0.0
+            for j in range(n):
+                ss += (power[j] - pred[j]) ** 2
         out[i] = 1.0 - ss / ss_tot if ss_tot > 0.0 else math.nan
     return out

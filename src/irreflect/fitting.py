@@ -504,8 +504,7 @@ def screen_samples(model, n: int, seed: int) -> np.ndarray:
     Conover 1979). Plain numpy on purpose: ``scipy.stats.qmc`` would cost every command
     a second of import time for the same coverage of the box.
     """
-    box = _screen_box_key(model)
-    key = (model.name, model.n_nonlinear, n, seed, box)
+    key = _screen_key(model, n, seed)
     if key not in _SCREEN_CACHE:
         lo, hi = model.screen_box()
         p = lo.size
@@ -518,14 +517,35 @@ def screen_samples(model, n: int, seed: int) -> np.ndarray:
             a, b = np.meshgrid(np.linspace(lo[0], hi[0], k), np.linspace(lo[1], hi[1], k))
             out = np.column_stack([a.ravel(), b.ravel()])
         else:
-            rng = np.random.default_rng(seed)
-            strata = rng.permuted(np.tile(np.arange(n), (p, 1)), axis=1).T
-            unit = (strata + rng.random((n, p))) / n
-            out = lo + unit * (hi - lo)
-        if len(_SCREEN_CACHE) >= 256:  # bounded: one entry per seed a process has used
-            _SCREEN_CACHE.pop(next(iter(_SCREEN_CACHE)))
-        _SCREEN_CACHE[key] = out
+            out = _latin_hypercube(np.random.default_rng(seed), n, lo, hi)
+        _remember_screen(key, out)
     return _SCREEN_CACHE[key]
+
+
+def _screen_key(model, n: int, seed) -> tuple:
+    return (model.name, model.n_nonlinear, n, seed, _screen_box_key(model))
+
+
+def _remember_screen(key, out) -> None:
+    if len(_SCREEN_CACHE) >= 256:  # bounded: one entry per seed a process has used
+        _SCREEN_CACHE.pop(next(iter(_SCREEN_CACHE)))
+    _SCREEN_CACHE[key] = out
+
+
+_STRATA: dict = {}
+
+
+def _latin_hypercube(rng, n: int, lo, hi) -> np.ndarray:
+    """``n`` points of a Latin hypercube in the box (lo, hi) from the generator ``rng``
+    (screen_samples' draws: the strata of every coordinate permuted, then uniform
+    offsets within them)."""
+    p = lo.size
+    tiles = _STRATA.get((n, p))
+    if tiles is None:
+        tiles = _STRATA[(n, p)] = np.tile(np.arange(n), (p, 1))
+    strata = rng.permuted(tiles, axis=1).T
+    unit = (strata + rng.random((n, p))) / n
+    return lo + unit * (hi - lo)
 
 
 def _screen_box_key(model) -> tuple:
@@ -851,8 +871,21 @@ def _search_plain_compiled(model_obj, gamma, theta, power, weights, absolute_sig
         n_data_starts = int(model_obj.options.get("n_data_starts", 2))
     p = model_obj.n_nonlinear
     st = _kernel_static(model_obj)
-    jitter, hops = _draws(seed, n_random_starts, _default_hops(model_obj, n_keep), max_rounds,
-                          p)
+    n_hops = _default_hops(model_obj, n_keep)
+    key = _screen_key(model_obj, n_screen, seed) if n_screen and p >= 3 else None
+    if key is not None and key not in _SCREEN_CACHE and n_random_starts and not n_hops:
+        # a new seed: the Latin hypercube and the random starts' jitter are both drawn
+        # from default_rng(seed) as it starts; one generator, its state restored between
+        bits = np.random.PCG64(seed)
+        rng = np.random.Generator(bits)
+        start = bits.state
+        lo, hi = model_obj.screen_box()
+        _remember_screen(key, _latin_hypercube(rng, n_screen, lo, hi))
+        bits.state = start
+        jitter = rng.normal(0.0, 0.15, (n_random_starts, p))
+        hops = np.zeros((max_rounds, 0, p))
+    else:
+        jitter, hops = _draws(seed, n_random_starts, n_hops, max_rounds, p)
     screen = (screen_samples(model_obj, n_screen, seed) if n_screen and p
               else np.zeros((0, p)))
     extra = (st["no_extra"] if extra_starts is None else

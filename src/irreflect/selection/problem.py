@@ -254,14 +254,17 @@ class SubsetEvaluator:
         all_scores = np.concatenate([self.elite_scores, scores[ok]])
         all_z = np.vstack([self.elites, z])
         order = np.argsort(all_scores, kind="stable")
-        keep, kept_z = [], []
+        finite = np.all(np.isfinite(all_z), axis=1)
+        keep = []
         for i in order:
-            if not np.all(np.isfinite(all_z[i])):
+            if not finite[i]:
                 continue
-            if any(np.allclose(all_z[i], k, rtol=1e-6, atol=1e-9) for k in kept_z):
-                continue
+            if keep:  # np.allclose(all_z[i], kept, rtol=1e-6, atol=1e-9) for any kept
+                kept = all_z[keep]
+                if np.any(np.all(np.abs(all_z[i] - kept) <= 1e-9 + 1e-6 * np.abs(kept),
+                                 axis=1)):
+                    continue
             keep.append(i)
-            kept_z.append(all_z[i])
             if len(keep) == N_ELITES:
                 break
         self.elite_scores = all_scores[keep]
