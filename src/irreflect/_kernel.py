@@ -1749,9 +1749,9 @@ def _profile_add(ldt, lst, k, wc, yc, sums, gi):
 @njit(cache=True, error_model="numpy")
 def _profile_pick(sums, counts, nd_grid, ns_grid):
     """The per-angle decomposition from each level's summed products (_profile_width):
-    per level the grid node of least cost (_two_columns, its one-column fits taken once per
-    row and column of the grid), levels of fewer than 3 points not ok. Returns
-    (prof (levels, 4), ok)."""
+    per level the grid node of least cost (_two_columns' numbers: the one-column fits
+    once per row and column of the grid, the coefficients kept for the best node only),
+    levels of fewer than 3 points not ok. Returns (prof (levels, 4), ok)."""
     n_levels = counts.size
     d_count = nd_grid.size
     s_count = ns_grid.size
@@ -1761,11 +1761,8 @@ def _profile_pick(sums, counts, nd_grid, ns_grid):
     o_ds = o_rs + s_count
     out = np.full((n_levels, 4), np.nan)
     ok = np.zeros(n_levels, np.bool_)
-    costs = np.empty(s_count)
-    cds = np.empty(s_count)
-    css = np.empty(s_count)
-    s_only = np.empty(s_count)
     cost_s = np.empty(s_count)
+    costs = np.empty(s_count)
     for gi in range(n_levels):
         if counts[gi] < 3:
             continue
@@ -1774,20 +1771,17 @@ def _profile_pick(sums, counts, nd_grid, ns_grid):
             gss = sums[gi, o_ss + s]
             rs = sums[gi, o_rs + s]
             so = max(rs, 0.0) / gss if gss > 0.0 else 0.0
-            s_only[s] = so
             cost_s[s] = yy - so * rs
         best = math.inf
         bi = 0
         bk = 0
-        bcd = 0.0
-        bcs = 0.0
         for a in range(d_count):
             gdd = sums[gi, 1 + a]
             rd = sums[gi, o_rd + a]
             d_only = max(rd, 0.0) / gdd if gdd > 0.0 else 0.0
             cost_d = yy - d_only * rd
             o = o_ds + a * s_count
-            for s in range(s_count):  # _two_columns, vectorised along the row
+            for s in range(s_count):
                 gss = sums[gi, o_ss + s]
                 gds = sums[gi, o + s]
                 rs = sums[gi, o_rs + s]
@@ -1797,22 +1791,20 @@ def _profile_pick(sums, counts, nd_grid, ns_grid):
                 cs = (gdd * rs - gds * rd) / det if good else -1.0
                 both = cd >= 0.0 and cs >= 0.0
                 cost_both = yy - cd * rd - cs * rs if both else math.inf
-                single_d = cost_d <= cost_s[s]
-                cost_single = cost_d if single_d else cost_s[s]
-                c1 = d_only if single_d else 0.0
-                c2 = 0.0 if single_d else s_only[s]
-                use_both = cost_both < cost_single
-                cost = cost_both if use_both else cost_single
+                cost_single = min(cost_d, cost_s[s])
+                cost = cost_both if cost_both < cost_single else cost_single
                 costs[s] = cost if math.isfinite(cost) else math.inf
-                cds[s] = cd if use_both else c1
-                css[s] = cs if use_both else c2
             for s in range(s_count):
                 if costs[s] < best:
                     best = costs[s]
                     bi = a
                     bk = s
-                    bcd = cds[s]
-                    bcs = css[s]
+        bcd = 0.0
+        bcs = 0.0
+        if best < math.inf:  # the best node's coefficients (_two_columns)
+            cost, bcd, bcs = _two_columns(sums[gi, 1 + bi], sums[gi, o_ss + bk],
+                                          sums[gi, o_ds + bi * s_count + bk],
+                                          sums[gi, o_rd + bi], sums[gi, o_rs + bk], yy)
         ok[gi] = True
         out[gi, 0] = nd_grid[bi]
         out[gi, 1] = ns_grid[bk]

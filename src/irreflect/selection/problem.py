@@ -622,10 +622,15 @@ class MaskEvaluator(Evaluator):
                 len(pop) and pop[0].config == Individual.default_config():
             cv = np.maximum(0.0, G - 0.0).sum(axis=1)
         keys = out.keys()
+        attrs = [(k, v, hasattr(Individual, k)) for k, v in values]
         for i, ind in enumerate(pop):
-            for k, v in values:
+            for k, v, attr in attrs:  # Individual.set: an attribute, else a data entry
                 row = v[i]
-                setattr(ind, k, row.copy() if isinstance(row, np.ndarray) else row)
+                row = row.copy() if isinstance(row, np.ndarray) else row
+                if attr:
+                    setattr(ind, k, row)
+                else:
+                    ind.data[k] = row
             if cv is not None:
                 ind.CV = np.array([cv[i] + 0.0])
             ind.evaluated.update(keys)
