@@ -10,7 +10,11 @@ global scans and the basin hops) is a loop over scalars compiled once and cached
 The numpy code in :mod:`irreflect.fitting` is the reference implementation: the kernel
 follows it step by step (same candidates in the same order, same tie-breaking, same
 stopping rules), so the two reach the same optimum; sums are taken in another order, so
-the numbers agree to rounding, not to the bit (tests hold R^2 to 1e-9).
+the numbers agree to rounding, not to the bit (tests hold R^2 to 1e-9). The plain
+two-lobe model's fast path scores screening and scan candidates from their Gram matrices
+(the residuals themselves only where that would keep too few digits) and counts lobes
+below exp(-340) of their peak as 0; subset batches score the shared candidates and the
+per-angle decomposition from per-point products summed over each subset's points.
 
 Models: the paper's two-lobe model (Eqs. 19-22) with any chain of the diagnosis
 catalogue's extensions (:mod:`irreflect.models.extensions`), described by
@@ -980,8 +984,8 @@ def _scan_candidates(z, axes):
 # instructions, no gathers). Rows of ``pts`` (9, m):
 #   log cos theta, cos theta > 0 (1.0/0.0), log cos phi, cos phi > 0, log cos gamma,
 #   sqrt(weight), sqrt(weight) * power, weight, power.
-# The arithmetic is the generic path's, operation for operation (the sums over points in
-# the same order): the fast path gives the generic path's numbers.
+# The arithmetic is the generic path's up to the order of sums over points and the
+# lobes' floor (LOBE_FLOOR): the fast path gives the generic path's numbers to rounding.
 _TL_ROWS = 9
 
 
@@ -2467,28 +2471,6 @@ def warm() -> None:
         masks = np.ones((2, p.size), bool)
         masks[0, ::2] = False
         fit_subsets(g, t, p, masks, engine="compiled")
-
-
-@njit(cache=True, error_model="numpy")
-def _tl_predict(z, alpha, geo, glcg, gval, out):
-    """The plain two-lobe model (unweighted) at every point of ``geo`` (as predict)."""
-    for g in range(glcg.size):
-        s, nd, ns = _tl_values(z, glcg[g])
-        gval[g, 0] = s
-        gval[g, 1] = nd
-        gval[g, 2] = ns
-        gval[g, 3] = (nd + 1.0) / TWO_PI
-        gval[g, 4] = (ns + 1.0) / TWO_PI
-    lct_all, pt_all, lcp_all, pp_all, group = geo[3], geo[4], geo[5], geo[6], geo[7]
-    a0 = alpha[0]
-    a1 = alpha[1]
-    for j in range(out.size):
-        g = group[j]
-        a = fexp(gval[g, 1] * lct_all[j]) if pt_all[j] else 0.0
-        b = fexp(gval[g, 2] * lcp_all[j]) if pp_all[j] else 0.0
-        ld = gval[g, 3] * a
-        ls = gval[g, 4] * b
-        out[j] = ld * a0 + (ld + gval[g, 0] * (ls - ld)) * a1
 
 
 @njit(cache=True, error_model="numpy", fastmath=_SUMS)
