@@ -10,7 +10,11 @@ global scans and the basin hops) is a loop over scalars compiled once and cached
 The numpy code in :mod:`irreflect.fitting` is the reference implementation: the kernel
 follows it step by step (same candidates in the same order, same tie-breaking, same
 stopping rules), so the two reach the same optimum; sums are taken in another order, so
-the numbers agree to rounding, not to the bit (tests hold R^2 to 1e-9).
+the numbers agree to rounding, not to the bit (tests hold R^2 to 1e-9). The plain
+two-lobe model's fast path scores screening and scan candidates from their Gram matrices
+(the residuals themselves only where that would keep too few digits) and counts lobes
+below exp(-340) of their peak as 0; subset batches score the shared candidates and the
+per-angle decomposition from per-point products summed over each subset's points.
 
 Models: the paper's two-lobe model (Eqs. 19-22) with any chain of the diagnosis
 catalogue's extensions (:mod:`irreflect.models.extensions`), described by
@@ -109,6 +113,23 @@ def fexp(x):
     k = np.int64(kf)
     k1 = k >> 1
     out = p * _bits_as_float((k1 + 1023) << 52) * _bits_as_float((k - k1 + 1023) << 52)
+    return out if x == x else x
+
+
+#: Below exp(LOBE_FLOOR) (about 1e-148) a lobe's power counts as 0 in the search: its
+#: products (squares, times weights) then never leave the normal range of floating point,
+#: where the processor is fast (a subnormal or underflowing result costs it twice as long
+#: or more); the costs change by less than 1e-290 of the lobes' peak values.
+LOBE_FLOOR = -340.0
+
+
+@njit(cache=True, inline="always")
+def lexp(x):
+    """``exp(x)`` of a lobe's power in the search: :func:`fexp`, 0 below LOBE_FLOOR (the
+    input is replaced there, so that no lane of a vector loop computes an underflow)."""
+    keep = x > LOBE_FLOOR
+    out = fexp(x if keep else 0.0)
+    out = out if keep else 0.0
     return out if x == x else x
 
 
@@ -963,8 +984,8 @@ def _scan_candidates(z, axes):
 # instructions, no gathers). Rows of ``pts`` (9, m):
 #   log cos theta, cos theta > 0 (1.0/0.0), log cos phi, cos phi > 0, log cos gamma,
 #   sqrt(weight), sqrt(weight) * power, weight, power.
-# The arithmetic is the generic path's, operation for operation (the sums over points in
-# the same order): the fast path gives the generic path's numbers.
+# The arithmetic is the generic path's up to the order of sums over points and the
+# lobes' floor (LOBE_FLOOR): the fast path gives the generic path's numbers to rounding.
 _TL_ROWS = 9
 
 
@@ -1007,42 +1028,62 @@ def _tl_values(z, lc):
     return fexp(z[0] * lc), fexp(z[1] + z[2] * lc), fexp(z[3] + z[4] * lc)
 
 
-@njit(cache=True)
-def _tl_broadcast(z, gstart, glcg, gv):
-    """Every point's n_d, n_s, cos^v_as, (n_d + 1)/2pi and (n_s + 1)/2pi (rows of ``gv``),
-    from its block: the loops over points then read plain rows (a loop per block leaves
-    most points to the scalar remainder of the vector loop)."""
-    for g in range(glcg.size):
-        s, nd, ns = _tl_values(z, glcg[g])
-        cd = (nd + 1.0) / TWO_PI
-        cs = (ns + 1.0) / TWO_PI
-        for j in range(gstart[g], gstart[g + 1]):
-            gv[0, j] = nd
-            gv[1, j] = ns
-            gv[2, j] = s
-            gv[3, j] = cd
-            gv[4, j] = cs
+# Rows of the fast path's per-point scratch ``vec`` (see tl_work): two slots (the current
+# point of a Levenberg-Marquardt run and its trial), slot k at rows _SLOT * k:
+#   +0, +1  the lobes' powers cos^n_d theta, cos^n_s phi
+#   +2, +3  the weighted basis x0, x1 (a fixed column's row is not zeroed: the linear
+#           step's ``free`` says which are)
+#   +4      the residuals
+#   +5..+9  the block values at every point: n_d, n_s, cos^v_as, (n_d + 1)/2pi, (n_s + 1)/2pi
+# then rows _JM.._JM + 4: the Jacobian's columns before projection, dB/dz alpha (weighted).
+_SLOT = 10
+_JM = 20
+_TL_VEC = 25
 
 
 @njit(cache=True, error_model="numpy")
-def _tl_fill(z, pts, gstart, glcg, vec, k):
-    """The lobes' powers (rows ``k``, ``k + 1`` of ``vec``: cos^n of the point's angles)
-    and the weighted basis (rows ``k + 2``, ``k + 3``) at every point (rows 10-14: the
-    block values). Rows of 2-D arrays are indexed in place, not taken as views: a view
-    costs a reference count, as much as a dozen points."""
-    _tl_broadcast(z, gstart, glcg, vec[10:15])
-    for j in range(gstart[glcg.size]):
-        nd = vec[10, j]
-        ns = vec[11, j]
-        a = fexp(nd * pts[0, j]) * pts[1, j]
-        b = fexp(ns * pts[2, j]) * pts[3, j]
-        vec[k, j] = a
-        vec[k + 1, j] = b
-        ld = vec[13, j] * a
-        ls = vec[14, j] * b
-        w = pts[5, j]
-        vec[k + 2, j] = ld * w
-        vec[k + 3, j] = (ld + vec[12, j] * (ls - ld)) * w
+def _tl_broadcast(z, gstart, glcg, vec, r, gbuf):
+    """Every point's block values (rows ``r``..``r + 4`` of ``vec``, see above): the loops
+    over points then read plain rows (a loop per block leaves most points to the scalar
+    remainder of the vector loop). The blocks' exponentials are taken eight at a time in
+    ``gbuf`` (a loop of constant length vectorises; one over the few blocks would not),
+    the loops over a block's points use unsigned indices (no negative-index wraparound)."""
+    n_groups = glcg.size
+    for g in range(n_groups):
+        lc = glcg[g]
+        gbuf[g] = z[0] * lc
+        gbuf[n_groups + g] = z[1] + z[2] * lc
+        gbuf[2 * n_groups + g] = z[3] + z[4] * lc
+    for c in range((3 * n_groups + 7) // 8):
+        o = 8 * c
+        for i in range(8):
+            gbuf[o + i] = fexp(gbuf[o + i])
+    for g in range(n_groups):
+        s = gbuf[g]
+        nd = gbuf[n_groups + g]
+        ns = gbuf[2 * n_groups + g]
+        cd = (nd + 1.0) / TWO_PI
+        cs = (ns + 1.0) / TWO_PI
+        for j in range(np.uint64(gstart[g]), np.uint64(gstart[g + 1])):
+            vec[r, j] = nd
+            vec[r + 1, j] = ns
+            vec[r + 2, j] = s
+            vec[r + 3, j] = cd
+            vec[r + 4, j] = cs
+
+
+@njit(cache=True, error_model="numpy")
+def _tl_broadcast_lobe(z, gstart, glcg, vec, r, specular):
+    """One lobe's block values of :func:`_tl_broadcast`: the diffuse (specular) lobe's
+    index into row ``r + 0`` (``r + 1``) and its normalisation into row ``r + 3``
+    (``r + 4``); the other rows are left (a scan along that lobe's coordinates)."""
+    k = 2 if specular else 0
+    for g in range(glcg.size):
+        n = fexp(z[k + 1] + z[k + 2] * glcg[g])
+        c = (n + 1.0) / TWO_PI
+        for j in range(np.uint64(gstart[g]), np.uint64(gstart[g + 1])):
+            vec[r, j] = n
+            vec[r + 3, j] = c
 
 
 #: The sums over points of the fast path (Gram matrices, residuals, normal equations) may
@@ -1051,146 +1092,325 @@ def _tl_fill(z, pts, gstart, glcg, vec, k):
 _SUMS = {"reassoc", "contract"}
 
 
-@njit(cache=True, fastmath=_SUMS)
-def _tl_project(vec, k, pts, m, nonneg, residual, alpha, free, inv, slot, sm, fl):
-    """Linear coefficients (``alpha[slot]``, ``free[slot]``, ``inv[slot]``), residuals (row
-    ``k + 4``) and cost of the basis in rows ``k + 2``, ``k + 3`` (as _evaluate; fixed
-    columns zeroed). ``sm`` (16,), ``fl`` (2,): scratch."""
+@njit(cache=True, error_model="numpy", fastmath=_SUMS)
+def _tl_fill(z, pts, gstart, glcg, vec, k, gbuf):
+    """The lobes and the weighted basis at ``z`` into slot ``k`` of ``vec`` and, in the same
+    pass, the Gram matrix and right-hand side of the linear step: (g00, g01, g11, r0, r1).
+    Rows of 2-D arrays are indexed in place, not taken as views: a view costs a reference
+    count, as much as a dozen points."""
+    o = _SLOT * k
+    _tl_broadcast(z, gstart, glcg, vec, o + 5, gbuf)
     g00 = 0.0
     g01 = 0.0
     g11 = 0.0
     r0 = 0.0
     r1 = 0.0
-    for j in range(m):
-        x0 = vec[k + 2, j]
-        x1 = vec[k + 3, j]
+    for j in range(gstart[glcg.size]):
+        a = lexp(vec[o + 5, j] * pts[0, j]) * pts[1, j]
+        b = lexp(vec[o + 6, j] * pts[2, j]) * pts[3, j]
+        vec[o, j] = a
+        vec[o + 1, j] = b
+        ld = vec[o + 8, j] * a
+        ls = vec[o + 9, j] * b
+        w = pts[5, j]
+        x0 = ld * w
+        x1 = (ld + vec[o + 7, j] * (ls - ld)) * w
+        vec[o + 2, j] = x0
+        vec[o + 3, j] = x1
         y = pts[6, j]
-        r0 += x0 * y
         g00 += x0 * x0
         g01 += x0 * x1
-        r1 += x1 * y
         g11 += x1 * x1
-    _tl_solve(g00, g01, g11, r0, r1, nonneg, residual, alpha, free, inv, slot, sm, fl)
-    a0 = alpha[slot, 0]
-    a1 = alpha[slot, 1]
+        r0 += x0 * y
+        r1 += x1 * y
+    return g00, g01, g11, r0, r1
+
+
+@njit(cache=True, error_model="numpy", fastmath=_SUMS)
+def _tl_residual(vec, k, pts, m, a0, a1):
+    """Residuals (row ``+4`` of slot ``k``) and cost of the basis in the slot."""
+    o = _SLOT * k
     cost = 0.0
     for j in range(m):
-        acc = pts[6, j] - vec[k + 2, j] * a0 - vec[k + 3, j] * a1
-        vec[k + 4, j] = acc
+        acc = pts[6, j] - vec[o + 2, j] * a0 - vec[o + 3, j] * a1
+        vec[o + 4, j] = acc
         cost += acc * acc
     cost *= 0.5
     if not math.isfinite(cost):
         cost = math.inf
-    if not free[slot, 0]:
-        vec[k + 2, :m] = 0.0
-    if not free[slot, 1]:
-        vec[k + 3, :m] = 0.0
     return cost
 
 
-@njit(cache=True)
-def _tl_solve(g00, g01, g11, r0, r1, nonneg, residual, alpha, free, inv, slot, sm, fl):
-    """_solve_gram of the two columns into ``alpha[slot]``, ``free[slot]``, ``inv[slot]``
-    (``sm``: scratch for the Gram matrix, rhs, scale, alpha, inverse)."""
-    g2 = sm[0:4].reshape((2, 2))
-    g2[0, 0] = g00
-    g2[0, 1] = g01
-    g2[1, 0] = g01
-    g2[1, 1] = g11
-    rhs = sm[4:6]
-    rhs[0] = r0
-    rhs[1] = r1
-    al = sm[8:10]
-    iv = sm[10:14].reshape((2, 2))
-    _solve_gram(g2, rhs, nonneg, residual, al, fl, iv, sm[6:8])
-    alpha[slot, 0] = al[0]
-    alpha[slot, 1] = al[1]
-    free[slot, 0] = fl[0]
-    free[slot, 1] = fl[1]
-    for i in range(2):
-        for c in range(2):
-            inv[slot, i, c] = iv[i, c]
+@njit(cache=True, inline="always")
+def _tl_solve2(g00, g01, g11, r0, r1, nn0, nn1, residual):
+    """_solve_gram of two columns on scalars (the same steps): (alpha0, alpha1, free0,
+    free1, and the free block's inverse: i00, i01, i11)."""
+    sc0 = max(g00, 1e-300)
+    sc1 = max(g11, 1e-300)
+    f0 = g00 > 0.0
+    f1 = g11 > 0.0
+    a0 = 0.0
+    a1 = 0.0
+    i00 = 0.0
+    i01 = 0.0
+    i11 = 0.0
+    for it in range(3):
+        b00 = g00 + RIDGE * sc0 if f0 else 1.0
+        b11 = g11 + RIDGE * sc1 if f1 else 1.0
+        b01 = g01 if (f0 and f1) else 0.0
+        det = b00 * b11 - b01 * b01
+        i00 = b11 / det if f0 else 0.0
+        i11 = b00 / det if f1 else 0.0
+        i01 = -b01 / det if (f0 and f1) else 0.0
+        a0 = 0.0
+        a1 = 0.0
+        if f0:
+            a0 += i00 * r0
+            a1 += i01 * r0
+        if f1:
+            a0 += i01 * r1
+            a1 += i11 * r1
+        if it == 2:
+            break
+        worst = -1
+        worst_value = 0.0
+        total = 0.0
+        largest = -1
+        largest_value = -1.0
+        if f0:
+            if nn0 and a0 < 0.0:
+                worst = 0
+                worst_value = a0 * math.sqrt(sc0)
+            total += abs(a0)
+            largest = 0
+            largest_value = abs(a0)
+        if f1:
+            if nn1 and a1 < 0.0:
+                if worst < 0 or a1 * math.sqrt(sc1) < worst_value:
+                    worst = 1
+            total += abs(a1)
+            if abs(a1) > largest_value:
+                largest = 1
+        drop = worst
+        if drop < 0 and (residual == 0 and f0 or residual == 1 and f1):
+            r = abs(a0) if residual == 0 else abs(a1)
+            if r > 0.0 and r < total / EXTREME:
+                drop = largest
+        if drop < 0:
+            break
+        if drop == 0:
+            f0 = False
+        else:
+            f1 = False
+    if not f0:
+        a0 = 0.0
+    if not f1:
+        a1 = 0.0
+    return a0, a1, f0, f1, i00, i01, i11
+
+
+@njit(cache=True, error_model="numpy")
+def _tl_eval(z, pts, gstart, glcg, vec, k, nonneg, residual, lin, gbuf):
+    """Lobes, basis, linear step (``lin[k]``: alpha0, alpha1, free0, free1 as 1.0/0.0, the
+    inverse i00, i01, i11) and residuals at ``z`` in slot ``k``; returns the cost (as
+    _evaluate)."""
+    g00, g01, g11, r0, r1 = _tl_fill(z, pts, gstart, glcg, vec, k, gbuf)
+    a0, a1, f0, f1, i00, i01, i11 = _tl_solve2(g00, g01, g11, r0, r1, nonneg[0], nonneg[1],
+                                               residual)
+    lin[k, 0] = a0
+    lin[k, 1] = a1
+    lin[k, 2] = 1.0 if f0 else 0.0
+    lin[k, 3] = 1.0 if f1 else 0.0
+    lin[k, 4] = i00
+    lin[k, 5] = i01
+    lin[k, 6] = i11
+    return _tl_residual(vec, k, pts, gstart[glcg.size], a0, a1)
+
+
+#: Below this fraction of y'y a cost from the Gram matrix (:func:`_gram_cost`) keeps too
+#: few digits (it is the small difference of numbers of the size of y'y: about 1e-16 y'y
+#: of rounding): the residuals are then summed instead.
+GRAM_DIGITS = 1e-5
+
+
+@njit(cache=True, inline="always")
+def _gram_cost(g00, g01, g11, r0, r1, yy, nn0, nn1, residual):
+    """The projected cost from the Gram matrix, right-hand side and y'y (the residual's
+    norm expanded: 0.5 (y'y - 2 a'r + a'G a)); the second value: whether cancellation
+    leaves it too few digits (then the caller takes the residuals themselves)."""
+    a0, a1, f0, f1, i00, i01, i11 = _tl_solve2(g00, g01, g11, r0, r1, nn0, nn1, residual)
+    cost = 0.5 * (yy - 2.0 * (a0 * r0 + a1 * r1) + a0 * a0 * g00 + 2.0 * a0 * a1 * g01
+                  + a1 * a1 * g11)
+    if not math.isfinite(cost):
+        return math.inf, False
+    return cost, cost < GRAM_DIGITS * yy
 
 
 @njit(cache=True, error_model="numpy", fastmath=_SUMS)
-def _tl_normal(z, pts, gstart, glcg, vec, k, alpha, inv, slot, jac, t, coef, grad, hess):
-    """Kaufman's Jacobian of the projected residual at the point whose lobes, basis and
-    residuals are rows ``k``..``k + 4`` of ``vec``, and the normal equations' gradient
-    ``J'r`` and matrix ``J'J`` (as _jacobian and _lm)."""
-    a0 = alpha[slot, 0]
-    a1 = alpha[slot, 1]
-    m = gstart[glcg.size]
-    _tl_broadcast(z, gstart, glcg, vec[10:15])
+def _tl_normal(pts, m, vec, k, lin, coef, grad, hess):
+    """Kaufman's Jacobian of the projected residual at the point in slot ``k`` (its lobes,
+    block values, basis and residuals) and the normal equations' gradient ``J'r`` and
+    matrix ``J'J`` (as _jacobian and _lm): one pass for the Jacobian's columns before
+    projection and their products with the basis, one for the projected columns and
+    every sum of the normal equations."""
+    o = _SLOT * k
+    a0 = lin[k, 0]
+    a1 = lin[k, 1]
+    f0 = lin[k, 2]
+    f1 = lin[k, 3]
+    t00 = 0.0
+    t01 = 0.0
+    t02 = 0.0
+    t03 = 0.0
+    t04 = 0.0
+    t10 = 0.0
+    t11 = 0.0
+    t12 = 0.0
+    t13 = 0.0
+    t14 = 0.0
     for j in range(m):
-        a = vec[k, j]
-        b = vec[k + 1, j]
-        nd = vec[10, j]
-        ns = vec[11, j]
-        s = vec[12, j]
-        ld = vec[13, j] * a
-        ls = vec[14, j] * b
+        a = vec[o, j]
+        b = vec[o + 1, j]
+        nd = vec[o + 5, j]
+        ns = vec[o + 6, j]
+        s = vec[o + 7, j]
+        ld = vec[o + 8, j] * a
+        ls = vec[o + 9, j] * b
         lcg = pts[4, j]
         dd = nd * (a / TWO_PI + ld * pts[0, j])
         ds = ns * (b / TWO_PI + ls * pts[2, j])
-        diff = ls - ld
         oms = 1.0 - s
         w = pts[5, j]
-        vec[15, j] = (0.0 * a0 + s * diff * lcg * a1) * w
-        vec[16, j] = (dd * a0 + oms * dd * a1) * w
-        vec[17, j] = (dd * lcg * a0 + oms * dd * lcg * a1) * w
-        vec[18, j] = (0.0 * a0 + s * ds * a1) * w
-        vec[19, j] = (0.0 * a0 + s * ds * lcg * a1) * w
-    t[:, :] = 0.0
+        j0 = s * (ls - ld) * lcg * a1 * w
+        j1 = (dd * a0 + oms * dd * a1) * w
+        j2 = j1 * lcg
+        j3 = s * ds * a1 * w
+        j4 = j3 * lcg
+        vec[_JM, j] = j0
+        vec[_JM + 1, j] = j1
+        vec[_JM + 2, j] = j2
+        vec[_JM + 3, j] = j3
+        vec[_JM + 4, j] = j4
+        x0 = vec[o + 2, j] * f0
+        x1 = vec[o + 3, j] * f1
+        t00 += x0 * j0
+        t01 += x0 * j1
+        t02 += x0 * j2
+        t03 += x0 * j3
+        t04 += x0 * j4
+        t10 += x1 * j0
+        t11 += x1 * j1
+        t12 += x1 * j2
+        t13 += x1 * j3
+        t14 += x1 * j4
+    i00 = lin[k, 4]
+    i01 = lin[k, 5]
+    i11 = lin[k, 6]
+    coef[0, 0] = i00 * t00 + i01 * t10
+    coef[0, 1] = i00 * t01 + i01 * t11
+    coef[0, 2] = i00 * t02 + i01 * t12
+    coef[0, 3] = i00 * t03 + i01 * t13
+    coef[0, 4] = i00 * t04 + i01 * t14
+    coef[1, 0] = i01 * t00 + i11 * t10
+    coef[1, 1] = i01 * t01 + i11 * t11
+    coef[1, 2] = i01 * t02 + i11 * t12
+    coef[1, 3] = i01 * t03 + i11 * t13
+    coef[1, 4] = i01 * t04 + i11 * t14
+    c00, c01, c02, c03, c04 = coef[0, 0], coef[0, 1], coef[0, 2], coef[0, 3], coef[0, 4]
+    c10, c11, c12, c13, c14 = coef[1, 0], coef[1, 1], coef[1, 2], coef[1, 3], coef[1, 4]
+    g0 = 0.0
+    g1 = 0.0
+    g2 = 0.0
+    g3 = 0.0
+    g4 = 0.0
+    h00 = 0.0
+    h01 = 0.0
+    h02 = 0.0
+    h03 = 0.0
+    h04 = 0.0
+    h11 = 0.0
+    h12 = 0.0
+    h13 = 0.0
+    h14 = 0.0
+    h22 = 0.0
+    h23 = 0.0
+    h24 = 0.0
+    h33 = 0.0
+    h34 = 0.0
+    h44 = 0.0
+    for j in range(m):
+        x0 = vec[o + 2, j] * f0
+        x1 = vec[o + 3, j] * f1
+        r = vec[o + 4, j]
+        q0 = x0 * c00 + x1 * c10 - vec[_JM, j]
+        q1 = x0 * c01 + x1 * c11 - vec[_JM + 1, j]
+        q2 = x0 * c02 + x1 * c12 - vec[_JM + 2, j]
+        q3 = x0 * c03 + x1 * c13 - vec[_JM + 3, j]
+        q4 = x0 * c04 + x1 * c14 - vec[_JM + 4, j]
+        g0 += q0 * r
+        g1 += q1 * r
+        g2 += q2 * r
+        g3 += q3 * r
+        g4 += q4 * r
+        h00 += q0 * q0
+        h01 += q0 * q1
+        h02 += q0 * q2
+        h03 += q0 * q3
+        h04 += q0 * q4
+        h11 += q1 * q1
+        h12 += q1 * q2
+        h13 += q1 * q3
+        h14 += q1 * q4
+        h22 += q2 * q2
+        h23 += q2 * q3
+        h24 += q2 * q4
+        h33 += q3 * q3
+        h34 += q3 * q4
+        h44 += q4 * q4
+    grad[0] = g0
+    grad[1] = g1
+    grad[2] = g2
+    grad[3] = g3
+    grad[4] = g4
+    hess[0, 0] = h00
+    hess[0, 1] = h01
+    hess[0, 2] = h02
+    hess[0, 3] = h03
+    hess[0, 4] = h04
+    hess[1, 1] = h11
+    hess[1, 2] = h12
+    hess[1, 3] = h13
+    hess[1, 4] = h14
+    hess[2, 2] = h22
+    hess[2, 3] = h23
+    hess[2, 4] = h24
+    hess[3, 3] = h33
+    hess[3, 4] = h34
+    hess[4, 4] = h44
     for q in range(5):
-        t0 = 0.0
-        t1 = 0.0
-        for j in range(m):
-            t0 += vec[k + 2, j] * vec[15 + q, j]
-            t1 += vec[k + 3, j] * vec[15 + q, j]
-        t[0, q] = t0
-        t[1, q] = t1
-    for col in range(2):
-        for q in range(5):
-            coef[col, q] = inv[slot, col, 0] * t[0, q] + inv[slot, col, 1] * t[1, q]
-    for q in range(5):
-        c0 = coef[0, q]
-        c1 = coef[1, q]
-        for j in range(m):
-            jac[q, j] = -vec[15 + q, j] + vec[k + 2, j] * c0 + vec[k + 3, j] * c1
-    for q in range(5):
-        acc = 0.0
-        for j in range(m):
-            acc += jac[q, j] * vec[k + 4, j]
-        grad[q] = acc
-        for r in range(q, 5):
-            acc = 0.0
-            for j in range(m):
-                acc += jac[q, j] * jac[r, j]
-            hess[q, r] = acc
-            hess[r, q] = acc
+        for r in range(q):
+            hess[q, r] = hess[r, q]
 
 
 @njit(cache=True)
 def tl_work(n):
-    """Scratch of the fast path for up to ``n`` points: vectors (20, n) (two slots of
-    lobes, basis and residuals; the per-point block values; the Jacobian's columns before
-    projection), the Jacobian (5, n), linear steps of the two slots (alpha, free,
-    inverse), small scratch."""
-    return (np.empty((20, n)), np.empty((5, n)), np.empty((2, 2)), np.empty((2, 2), np.bool_),
-            np.empty((2, 2, 2)), np.empty(16), np.empty(2, np.bool_), np.empty((2, 5)),
-            np.empty((2, 5)), np.empty(5), np.empty((5, 5)), np.empty((5, 5)), np.empty(5),
-            np.empty(5), np.empty(5), np.empty(5), np.empty(5, np.bool_))
+    """Scratch of the fast path for up to ``n`` points: the per-point rows (_TL_VEC, n; see
+    _SLOT), the linear steps of the two slots (2, 7; see _tl_eval), the projection's
+    coefficients (2, 5), gradient, normal matrix, the damped system and its right-hand
+    side, the step, the current and trial coordinates, the pinned ones, the blocks'
+    exponentials (_tl_broadcast; at most ``n`` blocks)."""
+    return (np.empty((_TL_VEC, n)), np.empty((2, 7)), np.empty((2, 5)), np.empty(5),
+            np.empty((5, 5)), np.empty((5, 5)), np.empty(5), np.empty(5), np.empty(5),
+            np.empty(5), np.empty(5, np.bool_), np.zeros(3 * n + 8))
 
 
 @njit(cache=True)
 def _tl_costs(cands, pts, gstart, glcg, nonneg, residual, ws):
     """:func:`_costs` of the plain two-lobe model."""
-    vec, _, alpha, free, inv, sm, fl, _, _, _, _, _, _, _, _, _, _ = ws
-    m = gstart[glcg.size]
+    vec, lin, gbuf = ws[0], ws[1], ws[11]
     out = np.empty(cands.shape[0])
     for i in range(cands.shape[0]):
-        _tl_fill(cands[i], pts, gstart, glcg, vec, 0)
-        out[i] = _tl_project(vec, 0, pts, m, nonneg, residual, alpha, free, inv, 0, sm, fl)
+        out[i] = _tl_eval(cands[i], pts, gstart, glcg, vec, 0, nonneg, residual, lin, gbuf)
     return out
 
 
@@ -1201,24 +1421,22 @@ def _tl_lm(nonneg, residual, z0, lo, hi, pts, gstart, glcg, max_iter, ftol, xtol
     trial points are evaluated without derivatives, the Jacobian is formed only at
     accepted points, from the lobes kept there."""
     p = 5
-    vec, jac, alpha, free, inv, sm, fl, t, coef, grad, hess, a, rhs, step, z, zt, pinned = ws
+    vec, lin, coef, grad, hess, a, rhs, step, z, zt, pinned, gbuf = ws
     m = gstart[glcg.size]
     for q in range(p):
         z[q] = min(max(z0[q], lo[q]), hi[q])
     cur = 0
-    _tl_fill(z, pts, gstart, glcg, vec, 0)
-    cost = _tl_project(vec, 0, pts, m, nonneg, residual, alpha, free, inv, 0, sm, fl)
+    cost = _tl_eval(z, pts, gstart, glcg, vec, 0, nonneg, residual, lin, gbuf)
     nfev = 1
     lam = 1e-3
     if not math.isfinite(cost):
         z_out[:] = z
-        alpha_out[0] = alpha[cur, 0]
-        alpha_out[1] = alpha[cur, 1]
+        alpha_out[0] = lin[cur, 0]
+        alpha_out[1] = lin[cur, 1]
         return math.inf, STOP_NONFINITE, nfev
     reason = STOP_MAXITER
     for _ in range(max_iter):
-        _tl_normal(z, pts, gstart, glcg, vec, 5 * cur, alpha, inv, cur, jac, t, coef, grad,
-                   hess)
+        _tl_normal(pts, m, vec, cur, lin, coef, grad, hess)
         for q in range(p):
             pinned[q] = (z[q] <= lo[q] + 1e-12 and grad[q] > 0.0) or \
                 (z[q] >= hi[q] - 1e-12 and grad[q] < 0.0)
@@ -1243,9 +1461,7 @@ def _tl_lm(nonneg, residual, z0, lo, hi, pts, gstart, glcg, max_iter, ftol, xtol
                 step[q] = 0.0
             zt[q] = min(max(z[q] + step[q], lo[q]), hi[q])
         tri = 1 - cur
-        _tl_fill(zt, pts, gstart, glcg, vec, 5 * tri)
-        tcost = _tl_project(vec, 5 * tri, pts, m, nonneg, residual, alpha, free, inv, tri, sm,
-                            fl)
+        tcost = _tl_eval(zt, pts, gstart, glcg, vec, tri, nonneg, residual, lin, gbuf)
         better = tcost < cost
         gain = cost - tcost
         lam_new = max(lam / 3.0, 1e-12) if better else lam * 4.0
@@ -1274,53 +1490,148 @@ def _tl_lm(nonneg, residual, z0, lo, hi, pts, gstart, glcg, max_iter, ftol, xtol
             reason = STOP_STUCK
             break
     z_out[:] = z
-    alpha_out[0] = alpha[cur, 0]
-    alpha_out[1] = alpha[cur, 1]
+    alpha_out[0] = lin[cur, 0]
+    alpha_out[1] = lin[cur, 1]
     return cost, reason, nfev
+
+
+@njit(cache=True, error_model="numpy", fastmath=_SUMS, inline="always")
+def _gram_add(ld, ls, vec, pts, j, g00, g01, g11, r0, r1):
+    w = pts[5, j]
+    x0 = ld * w
+    x1 = (ld + vec[7, j] * (ls - ld)) * w
+    y = pts[6, j]
+    return g00 + x0 * x0, g01 + x0 * x1, g11 + x1 * x1, r0 + x0 * y, r1 + x1 * y
+
+
+@njit(cache=True, error_model="numpy", fastmath=_SUMS)
+def _tl_gram(pts, m, vec, q):
+    """The Gram matrix and right-hand side of the linear step (g00, g01, g11, r0, r1) of the
+    basis whose block values are in rows 5..9 of ``vec``, in one pass without stores.
+    ``q``: -1, both lobes from their exponentials; 1 or 2 (3 or 4), the diffuse
+    (specular) lobe from its exponential, the other from row 1 (row 0): the lobes at the
+    centre of a scan, times their block factors (along the diffuse (specular) coordinates
+    only the diffuse (specular) lobe changes). One loop per case: a branch inside the
+    loop would keep it from vectorising."""
+    g00 = 0.0
+    g01 = 0.0
+    g11 = 0.0
+    r0 = 0.0
+    r1 = 0.0
+    if q < 0:
+        for j in range(m):
+            ld = vec[8, j] * (lexp(vec[5, j] * pts[0, j]) * pts[1, j])
+            ls = vec[9, j] * (lexp(vec[6, j] * pts[2, j]) * pts[3, j])
+            g00, g01, g11, r0, r1 = _gram_add(ld, ls, vec, pts, j, g00, g01, g11, r0, r1)
+    elif q <= 2:
+        for j in range(m):
+            ld = vec[8, j] * (lexp(vec[5, j] * pts[0, j]) * pts[1, j])
+            g00, g01, g11, r0, r1 = _gram_add(ld, vec[1, j], vec, pts, j, g00, g01, g11, r0,
+                                              r1)
+    else:
+        for j in range(m):
+            ls = vec[9, j] * (lexp(vec[6, j] * pts[2, j]) * pts[3, j])
+            g00, g01, g11, r0, r1 = _gram_add(vec[0, j], ls, vec, pts, j, g00, g01, g11, r0,
+                                              r1)
+    return g00, g01, g11, r0, r1
+
+
+@njit(cache=True, error_model="numpy", fastmath=_SUMS)
+def _tl_yy(pts, m):
+    """y'y of the weighted power."""
+    yy = 0.0
+    for j in range(m):
+        yy += pts[6, j] * pts[6, j]
+    return yy
+
+
+@njit(cache=True, error_model="numpy")
+def _tl_cost(z, pts, gstart, glcg, nonneg, residual, ws, yy):
+    """The projected cost at ``z`` (as :func:`_tl_eval`) from the Gram matrix, in one pass;
+    from the residuals where that keeps too few digits (GRAM_DIGITS)."""
+    vec = ws[0]
+    gbuf = ws[11]
+    _tl_broadcast(z, gstart, glcg, vec, 5, gbuf)
+    g00, g01, g11, r0, r1 = _tl_gram(pts, gstart[glcg.size], vec, -1)
+    cost, few = _gram_cost(g00, g01, g11, r0, r1, yy, nonneg[0], nonneg[1], residual)
+    if few:
+        cost = _tl_eval(z, pts, gstart, glcg, vec, 0, nonneg, residual, ws[1], gbuf)
+    return cost
+
+
+@njit(cache=True)
+def _tl_screen_costs(cands, pts, gstart, glcg, nonneg, residual, ws):
+    """:func:`_tl_costs` of many candidates (:func:`_tl_cost`)."""
+    yy = _tl_yy(pts, gstart[glcg.size])
+    out = np.empty(cands.shape[0])
+    for i in range(cands.shape[0]):
+        out[i] = _tl_cost(cands[i], pts, gstart, glcg, nonneg, residual, ws, yy)
+    return out
 
 
 @njit(cache=True, error_model="numpy")
 def _tl_scan_costs(z, axes, pts, gstart, glcg, nonneg, residual, ws):
     """Projected costs of the one-coordinate scans through ``z`` (the numbers of
-    :func:`_tl_costs` of :func:`_scan_candidates`): along v_as the lobes do not change,
-    along the diffuse (specular) coordinates only the diffuse (specular) lobe does, so
-    each point costs at most one exponential."""
+    :func:`_tl_costs` of :func:`_scan_candidates`, from the Gram matrices as
+    :func:`_tl_cost`). Along v_as only the blocks' shares cos^v_as change: the Gram
+    matrix is then a sum over blocks of the lobes' products at ``z``, without a pass over
+    the points."""
     p, n_axis = axes.shape
-    vec, _, alpha, free, inv, sm, fl, _, _, _, _, _, _, _, _, _, _ = ws
+    vec = ws[0]
+    lin = ws[1]
+    gbuf = ws[11]
     m = gstart[glcg.size]
-    gv = vec[10:15]
-    _tl_broadcast(z, gstart, glcg, gv)
-    for j in range(m):  # rows 5, 6: the lobes at z
-        vec[5, j] = vec[13, j] * (fexp(vec[10, j] * pts[0, j]) * pts[1, j])
-        vec[6, j] = vec[14, j] * (fexp(vec[11, j] * pts[2, j]) * pts[3, j])
+    n_groups = glcg.size
+    yy = _tl_yy(pts, m)
+    _tl_broadcast(z, gstart, glcg, vec, 5, gbuf)
+    for j in range(m):  # rows 0, 1: the lobes at z
+        vec[0, j] = vec[8, j] * (lexp(vec[5, j] * pts[0, j]) * pts[1, j])
+        vec[1, j] = vec[9, j] * (lexp(vec[6, j] * pts[2, j]) * pts[3, j])
+    # per block: sums of the weighted lobes' products at z
+    blk = np.zeros((n_groups, 5))
+    for g in range(n_groups):
+        for j in range(np.uint64(gstart[g]), np.uint64(gstart[g + 1])):
+            w = pts[5, j]
+            xd = vec[0, j] * w
+            xs = vec[1, j] * w
+            y = pts[6, j]
+            blk[g, 0] += xd * xd
+            blk[g, 1] += xd * xs
+            blk[g, 2] += xs * xs
+            blk[g, 3] += xd * y
+            blk[g, 4] += xs * y
     out = np.empty(p * n_axis)
     zc = z.copy()
     for q in range(p):
         for i in range(n_axis):
             zc[:] = z
             zc[q] = axes[q, i]
-            _tl_broadcast(zc, gstart, glcg, gv)
             if q == 0:
+                g00 = 0.0
+                g01 = 0.0
+                g11 = 0.0
+                r0 = 0.0
+                r1 = 0.0
+                for g in range(n_groups):
+                    sh = fexp(zc[0] * glcg[g])
+                    om = 1.0 - sh
+                    a_, b_, c_, d_, e_ = blk[g, 0], blk[g, 1], blk[g, 2], blk[g, 3], blk[g, 4]
+                    g00 += a_
+                    g01 += om * a_ + sh * b_
+                    g11 += om * om * a_ + 2.0 * sh * om * b_ + sh * sh * c_
+                    r0 += d_
+                    r1 += om * d_ + sh * e_
+            else:  # only the scanned lobe's block values change
+                _tl_broadcast_lobe(zc, gstart, glcg, vec, 5 if q <= 2 else 6, q >= 3)
+                g00, g01, g11, r0, r1 = _tl_gram(pts, m, vec, q)
+            cost, few = _gram_cost(g00, g01, g11, r0, r1, yy, nonneg[0], nonneg[1], residual)
+            if few:
+                cost = _tl_eval(zc, pts, gstart, glcg, vec, 0, nonneg, residual, lin, gbuf)
+                _tl_broadcast(z, gstart, glcg, vec, 5, gbuf)
                 for j in range(m):
-                    ld = vec[5, j]
-                    w = pts[5, j]
-                    vec[7, j] = ld * w
-                    vec[8, j] = (ld + vec[12, j] * (vec[6, j] - ld)) * w
-            elif q <= 2:
-                for j in range(m):
-                    ld = vec[13, j] * (fexp(vec[10, j] * pts[0, j]) * pts[1, j])
-                    w = pts[5, j]
-                    vec[7, j] = ld * w
-                    vec[8, j] = (ld + vec[12, j] * (vec[6, j] - ld)) * w
-            else:
-                for j in range(m):
-                    ld = vec[5, j]
-                    ls = vec[14, j] * (fexp(vec[11, j] * pts[2, j]) * pts[3, j])
-                    w = pts[5, j]
-                    vec[7, j] = ld * w
-                    vec[8, j] = (ld + vec[12, j] * (ls - ld)) * w
-            out[q * n_axis + i] = _tl_project(vec, 5, pts, m, nonneg, residual, alpha, free,
-                                              inv, 0, sm, fl)
+                    vec[0, j] = vec[8, j] * (lexp(vec[5, j] * pts[0, j]) * pts[1, j])
+                    vec[1, j] = vec[9, j] * (lexp(vec[6, j] * pts[2, j]) * pts[3, j])
+            out[q * n_axis + i] = cost
     return out
 
 
@@ -1329,95 +1640,175 @@ def _tl_profile(pts, m, lgroup, n_levels, nd_grid, ns_grid):
     """:func:`_profile` of the points ``pts[:, :m]`` (weights and power from its rows, the
     level of each in ``lgroup``): per level (diffuse index, specular index, diffuse,
     specular) and ok. The products of every diffuse and specular grid lobe are summed
-    point by point along the specular grid (the same sums, in the same order)."""
+    level by level, point by point (the sums of :func:`_profile_add`, in its order)."""
     d_count = nd_grid.size
     s_count = ns_grid.size
-    out = np.full((n_levels, 4), np.nan)
-    ok = np.zeros(n_levels, np.bool_)
+    ldt, lst = _profile_lobes(pts, m, nd_grid, ns_grid)
+    sums = np.zeros((n_levels, _profile_width(d_count, s_count)))
     counts = np.zeros(n_levels, np.int64)
-    for k in range(m):
-        if pts[7, k] > 0.0:
-            counts[lgroup[k]] += 1
-    biggest = 0
-    for gi in range(n_levels):
-        biggest = max(biggest, counts[gi])
-    ld = np.empty((biggest, d_count))
-    ls = np.empty((biggest, s_count))
-    w = np.empty(biggest)
-    y = np.empty(biggest)
     gdd = np.empty(d_count)
     rd = np.empty(d_count)
     gss = np.empty(s_count)
     rs = np.empty(s_count)
     gds = np.empty((d_count, s_count))
-    costs = np.empty(s_count)
-    c1s = np.empty(s_count)
-    c2s = np.empty(s_count)
-    cdd = np.empty(d_count)
-    css = np.empty(s_count)
-    for a in range(d_count):
-        cdd[a] = (nd_grid[a] + 1.0) / TWO_PI
-    for a in range(s_count):
-        css[a] = (ns_grid[a] + 1.0) / TWO_PI
+    o_rd = 1 + d_count
+    o_ss = 1 + 2 * d_count
+    o_rs = o_ss + s_count
+    o_ds = o_rs + s_count
     for gi in range(n_levels):
-        count = counts[gi]
-        if count < 3:
-            continue
-        c = 0
-        for k in range(m):
-            if lgroup[k] == gi and pts[7, k] > 0.0:
-                lt = pts[0, k]
-                lp = pts[2, k]
-                pos_t = pts[1, k]
-                pos_p = pts[3, k]
-                for a in range(d_count):
-                    ld[c, a] = cdd[a] * (fexp(nd_grid[a] * lt) * pos_t)
-                for a in range(s_count):
-                    ls[c, a] = css[a] * (fexp(ns_grid[a] * lp) * pos_p)
-                w[c] = pts[7, k]
-                y[c] = pts[8, k]
-                c += 1
         yy = 0.0
-        for c in range(count):
-            yy += w[c] * y[c] * y[c]
         gdd[:] = 0.0
         rd[:] = 0.0
         gss[:] = 0.0
         rs[:] = 0.0
         gds[:, :] = 0.0
-        for c in range(count):
-            wc = w[c]
-            yc = y[c]
+        count = 0
+        for k in range(m):
+            if lgroup[k] != gi or not pts[7, k] > 0.0:
+                continue
+            count += 1
+            wc = pts[7, k]
+            yc = pts[8, k]
+            yy += wc * yc * yc
             for a in range(d_count):
-                v = wc * ld[c, a]
-                gdd[a] += v * ld[c, a]
+                v = wc * ldt[k, a]
+                gdd[a] += v * ldt[k, a]
                 rd[a] += v * yc
             for a in range(s_count):
-                v = wc * ls[c, a]
-                gss[a] += v * ls[c, a]
+                v = wc * lst[k, a]
+                gss[a] += v * lst[k, a]
                 rs[a] += v * yc
             for a in range(d_count):
-                v = wc * ld[c, a]
-                for s in range(s_count):
-                    gds[a, s] += v * ls[c, s]
+                v = wc * ldt[k, a]
+                for b in range(s_count):
+                    gds[a, b] += v * lst[k, b]
+        counts[gi] = count
+        sums[gi, 0] = yy
+        for a in range(d_count):
+            sums[gi, 1 + a] = gdd[a]
+            sums[gi, o_rd + a] = rd[a]
+            for b in range(s_count):
+                sums[gi, o_ds + a * s_count + b] = gds[a, b]
+        for a in range(s_count):
+            sums[gi, o_ss + a] = gss[a]
+            sums[gi, o_rs + a] = rs[a]
+    return _profile_pick(sums, counts, nd_grid, ns_grid)
+
+
+@njit(cache=True)
+def _profile_width(d_count, s_count):
+    """Products per point of the per-angle decomposition: y'y, then per diffuse grid index
+    l_d'l_d and l_d'y, per specular one l_s'l_s and l_s'y, then every l_d'l_s."""
+    return 1 + 2 * d_count + 2 * s_count + d_count * s_count
+
+
+@njit(cache=True, error_model="numpy")
+def _profile_lobes(pts, m, nd_grid, ns_grid):
+    """The grid lobes of the per-angle decomposition at the points ``pts[:, :m]``: (m, D)
+    diffuse and (m, S) specular (the exponentials in loops over points, which vectorise;
+    stored point by point for the sums)."""
+    d_count = nd_grid.size
+    s_count = ns_grid.size
+    ld = np.empty((d_count, m))
+    ls = np.empty((s_count, m))
+    for a in range(d_count):
+        n = nd_grid[a]
+        c = (n + 1.0) / TWO_PI
+        for k in range(m):
+            ld[a, k] = c * (lexp(n * pts[0, k]) * pts[1, k])
+    for a in range(s_count):
+        n = ns_grid[a]
+        c = (n + 1.0) / TWO_PI
+        for k in range(m):
+            ls[a, k] = c * (lexp(n * pts[2, k]) * pts[3, k])
+    return ld.T.copy(), ls.T.copy()
+
+
+@njit(cache=True, error_model="numpy", inline="always")
+def _profile_add(ldt, lst, k, wc, yc, sums, gi):
+    """Add point ``k``'s products (weight ``wc``, power ``yc``; layout: _profile_width) to
+    ``sums[gi]``."""
+    d_count = ldt.shape[1]
+    s_count = lst.shape[1]
+    o_rd = 1 + d_count
+    o_ss = 1 + 2 * d_count
+    o_rs = o_ss + s_count
+    o_ds = o_rs + s_count
+    sums[gi, 0] += wc * yc * yc
+    for a in range(d_count):
+        v = wc * ldt[k, a]
+        sums[gi, 1 + a] += v * ldt[k, a]
+        sums[gi, o_rd + a] += v * yc
+    for a in range(s_count):
+        v = wc * lst[k, a]
+        sums[gi, o_ss + a] += v * lst[k, a]
+        sums[gi, o_rs + a] += v * yc
+    for a in range(d_count):
+        v = wc * ldt[k, a]
+        o = o_ds + a * s_count
+        for s in range(s_count):
+            sums[gi, o + s] += v * lst[k, s]
+
+
+@njit(cache=True, error_model="numpy")
+def _profile_pick(sums, counts, nd_grid, ns_grid):
+    """The per-angle decomposition from each level's summed products (_profile_width):
+    per level the grid node of least cost (_two_columns' numbers: the one-column fits
+    once per row and column of the grid, the coefficients kept for the best node only),
+    levels of fewer than 3 points not ok. Returns (prof (levels, 4), ok)."""
+    n_levels = counts.size
+    d_count = nd_grid.size
+    s_count = ns_grid.size
+    o_rd = 1 + d_count
+    o_ss = 1 + 2 * d_count
+    o_rs = o_ss + s_count
+    o_ds = o_rs + s_count
+    out = np.full((n_levels, 4), np.nan)
+    ok = np.zeros(n_levels, np.bool_)
+    cost_s = np.empty(s_count)
+    costs = np.empty(s_count)
+    for gi in range(n_levels):
+        if counts[gi] < 3:
+            continue
+        yy = sums[gi, 0]
+        for s in range(s_count):
+            gss = sums[gi, o_ss + s]
+            rs = sums[gi, o_rs + s]
+            so = max(rs, 0.0) / gss if gss > 0.0 else 0.0
+            cost_s[s] = yy - so * rs
         best = math.inf
         bi = 0
         bk = 0
-        bcd = 0.0
-        bcs = 0.0
         for a in range(d_count):
+            gdd = sums[gi, 1 + a]
+            rd = sums[gi, o_rd + a]
+            d_only = max(rd, 0.0) / gdd if gdd > 0.0 else 0.0
+            cost_d = yy - d_only * rd
+            o = o_ds + a * s_count
             for s in range(s_count):
-                cost, cd, cs = _two_columns(gdd[a], gss[s], gds[a, s], rd[a], rs[s], yy)
-                costs[s] = cost
-                c1s[s] = cd
-                c2s[s] = cs
+                gss = sums[gi, o_ss + s]
+                gds = sums[gi, o + s]
+                rs = sums[gi, o_rs + s]
+                det = gdd * gss - gds * gds
+                good = det > 1e-12 * gdd * gss
+                cd = (gss * rd - gds * rs) / det if good else -1.0
+                cs = (gdd * rs - gds * rd) / det if good else -1.0
+                both = cd >= 0.0 and cs >= 0.0
+                cost_both = yy - cd * rd - cs * rs if both else math.inf
+                cost_single = min(cost_d, cost_s[s])
+                cost = cost_both if cost_both < cost_single else cost_single
+                costs[s] = cost if math.isfinite(cost) else math.inf
             for s in range(s_count):
                 if costs[s] < best:
                     best = costs[s]
                     bi = a
                     bk = s
-                    bcd = c1s[s]
-                    bcs = c2s[s]
+        bcd = 0.0
+        bcs = 0.0
+        if best < math.inf:  # the best node's coefficients (_two_columns)
+            cost, bcd, bcs = _two_columns(sums[gi, 1 + bi], sums[gi, o_ss + bk],
+                                          sums[gi, o_ds + bi * s_count + bk],
+                                          sums[gi, o_rd + bi], sums[gi, o_rs + bk], yy)
         ok[gi] = True
         out[gi, 0] = nd_grid[bi]
         out[gi, 1] = ns_grid[bk]
@@ -1457,7 +1848,7 @@ def global_search(codes, nonneg, residual, geo, glcg, power, weights, levels, gr
         for q in range(p):
             cands[n_own + i, q] = min(max(screen[i, q], zlo[q]), zhi[q])
     if fast:
-        costs = _tl_costs(cands, pts, gstart, glcg, nonneg, residual, ws)
+        costs = _tl_screen_costs(cands, pts, gstart, glcg, nonneg, residual, ws)
     else:
         costs = _costs(codes, nonneg, residual, cands, geo, glcg, sw, yw)
     n_evals = m
@@ -1594,6 +1985,87 @@ def _take(geo, idx):
             geo[6][idx], geo[7][idx])
 
 
+@njit(cache=True, error_model="numpy")
+def _profile_table(geo, weights, power, nd_grid, ns_grid):
+    """Every point's products of the per-angle decomposition (:func:`_profile_add`; table
+    order, weight and power of the table): a subset's per-level sums are then sums of
+    its points' rows, without an exponential."""
+    n = power.size
+    pts = np.empty((9, n))
+    for j in range(n):
+        pts[0, j] = geo[3][j]
+        pts[1, j] = 1.0 if geo[4][j] else 0.0
+        pts[2, j] = geo[5][j]
+        pts[3, j] = 1.0 if geo[6][j] else 0.0
+    ldt, lst = _profile_lobes(pts, n, nd_grid, ns_grid)
+    out = np.zeros((n, _profile_width(nd_grid.size, ns_grid.size)))
+    for j in range(n):
+        _profile_add(ldt, lst, j, weights[j], power[j], out, j)
+    return out
+
+
+@njit(cache=True, error_model="numpy", fastmath=_SUMS)
+def _shared_products(cands, geo, glcg, sw, yw):
+    """For every point (table order) and candidate row of the plain two-lobe model, the
+    products whose sums over a subset's points are its Gram matrix and right-hand side:
+    x0 x0, x0 x1, x1 x1, x0 y, x1 y (x: the weighted basis, y: the weighted power), as
+    (n, 5 * candidates). Shared candidates are then scored on any subset without an
+    exponential."""
+    n = sw.size
+    c_count = cands.shape[0]
+    out = np.empty((n, 5 * c_count))
+    gval = np.empty((glcg.size, 5))
+    lct_all, pt_all, lcp_all, pp_all, group = geo[3], geo[4], geo[5], geo[6], geo[7]
+    for c in range(c_count):
+        z = cands[c]
+        for g in range(glcg.size):
+            s, nd, ns = _tl_values(z, glcg[g])
+            gval[g, 0] = s
+            gval[g, 1] = nd
+            gval[g, 2] = ns
+            gval[g, 3] = (nd + 1.0) / TWO_PI
+            gval[g, 4] = (ns + 1.0) / TWO_PI
+        for j in range(n):
+            g = group[j]
+            a = lexp(gval[g, 1] * lct_all[j]) * (1.0 if pt_all[j] else 0.0)
+            b = lexp(gval[g, 2] * lcp_all[j]) * (1.0 if pp_all[j] else 0.0)
+            ld = gval[g, 3] * a
+            ls = gval[g, 4] * b
+            w = sw[j]
+            x0 = ld * w
+            x1 = (ld + gval[g, 0] * (ls - ld)) * w
+            y = yw[j]
+            out[j, 5 * c] = x0 * x0
+            out[j, 5 * c + 1] = x0 * x1
+            out[j, 5 * c + 2] = x1 * x1
+            out[j, 5 * c + 3] = x0 * y
+            out[j, 5 * c + 4] = x1 * y
+    return out
+
+
+@njit(cache=True, error_model="numpy")
+def _subset_sums(mask, weights, yw, pgroup, qtab, shared, sums, gsums):
+    """A subset's sums of its points' rows: the per-angle decomposition's products per
+    level (points of positive weight, ``sums``) and the shared candidates' (``gsums``);
+    returns the subset's y'y (weighted)."""
+    sums[:, :] = 0.0
+    gsums[:] = 0.0
+    width = sums.shape[1]
+    n_shared = gsums.size
+    yy = 0.0
+    for j in range(mask.size):
+        if mask[j]:
+            y = yw[j]
+            yy += y * y
+            for i in range(n_shared):
+                gsums[i] += shared[j, i]
+            if weights[j] > 0.0:
+                gi = pgroup[j]
+                for i in range(width):
+                    sums[gi, i] += qtab[j, i]
+    return yy
+
+
 @njit(cache=True)
 def subset_search(codes, nonneg, residual, geo, glcg, power, weights, masks, levels, group,
                   nd_grid, ns_grid, ext_first, screen, zlo, zhi, n_keep, n_data_starts,
@@ -1625,11 +2097,21 @@ def subset_search(codes, nonneg, residual, geo, glcg, power, weights, masks, lev
     gstart = np.empty(glcg.size + 1, np.int64)
     lgroup = np.empty(n, np.int64)
     ws = tl_work(n)
+    if codes.size == 0:
+        # the plain two-lobe model: every point's products of the per-angle decomposition
+        # and of the shared candidates, once for the whole batch
+        qtab = _profile_table(geo, weights, power, nd_grid, ns_grid)
+        shared = _shared_products(clipped, geo, glcg, sw, yw)
+    else:
+        qtab = np.zeros((0, 0))
+        shared = np.zeros((0, 0))
+    sums = np.empty((levels.size, _profile_width(nd_grid.size, ns_grid.size)))
+    gsums = np.empty(5 * n_screen)
     for bi in range(b_count):
         _one_subset(codes, nonneg, residual, geo, glcg, power, weights, sw, yw, masks[bi],
                     levels, group, nd_grid, ns_grid, ext_first, clipped, zlo, zhi, n_keep,
                     n_data_starts, max_iter, ftol, z_out[bi], a_out[bi], c_out, conv,
-                    nfev_each, bi, pts, gstart, lgroup, ws)
+                    nfev_each, bi, pts, gstart, lgroup, ws, qtab, shared, sums, gsums)
     return z_out, a_out, c_out, conv, nfev_each.sum()
 
 
@@ -1637,13 +2119,22 @@ def subset_search(codes, nonneg, residual, geo, glcg, power, weights, masks, lev
 def _one_subset(codes, nonneg, residual, geo, glcg, power, weights, sw_all, yw_all, mask,
                 levels, group, nd_grid, ns_grid, ext_first, clipped, zlo, zhi, n_keep,
                 n_data_starts, max_iter, ftol, z_row, a_row, c_out, conv, nfev_each, bi, pts,
-                gstart, lgroup, ws):
+                gstart, lgroup, ws, qtab, shared, sums, gsums):
     p = zlo.size
     pp, ll = _sizes(codes, codes.size)
     fast = codes.size == 0
     count = tl_points(geo, glcg.size, sw_all, yw_all, weights, power, mask, pts, gstart,
                       lgroup, group)
-    prof, ok = _tl_profile(pts, count, lgroup, levels.size, nd_grid, ns_grid)
+    yy = 0.0
+    if fast:  # sums of the subset's rows of the batch's tables
+        yy = _subset_sums(mask, weights, yw_all, group, qtab, shared, sums, gsums)
+        counts = np.zeros(levels.size, np.int64)
+        for j in range(mask.size):
+            if mask[j] and weights[j] > 0.0:
+                counts[group[j]] += 1
+        prof, ok = _profile_pick(sums, counts, nd_grid, ns_grid)
+    else:
+        prof, ok = _tl_profile(pts, count, lgroup, levels.size, nd_grid, ns_grid)
     data = _profile_starts(levels, prof, ok)
     n_data = data.shape[0]
     n_screen = clipped.shape[0]
@@ -1654,7 +2145,15 @@ def _one_subset(codes, nonneg, residual, geo, glcg, power, weights, sw_all, yw_a
             cands[i, q] = min(max(v, zlo[q]), zhi[q])
     cands[n_data:] = clipped
     if fast:
-        costs = _tl_costs(cands, pts, gstart, glcg, nonneg, residual, ws)
+        costs = np.empty(cands.shape[0])
+        costs[:n_data] = _tl_costs(cands[:n_data], pts, gstart, glcg, nonneg, residual, ws)
+        for i in range(n_screen):
+            o = 5 * i
+            c, few = _gram_cost(gsums[o], gsums[o + 1], gsums[o + 2], gsums[o + 3],
+                                gsums[o + 4], yy, nonneg[0], nonneg[1], residual)
+            if few:  # a near-perfect candidate: its residuals themselves
+                c = _tl_costs(clipped[i:i + 1], pts, gstart, glcg, nonneg, residual, ws)[0]
+            costs[n_data + i] = c
         sub = geo
         sw = sw_all
         yw = yw_all
@@ -1897,6 +2396,57 @@ def tl_finish(z, alpha, geo, glcg, weights, power, absolute_sigma, cost, n_param
     return values, ok, fitted, r2, math.sqrt(mse), mse, cov, singular
 
 
+@njit(cache=True)
+def tl_fit(gamma, theta, power, weights, scale, absolute_sigma, n_params, nonneg, residual,
+           nd_grid, ns_grid, jitter, ext_start, extra, screen, lo, hi, zlo, zhi, axes, hops,
+           n_data_starts, n_keep, max_iter, max_rounds):
+    """fit() of the plain two-lobe model in one call: the table's geometry
+    (kernel_geometry), the global search on the power divided by ``scale`` (global_search)
+    and, unless the search ended where fit() polishes or checks the gradient (the
+    iteration limit, no step lowering the cost: then fit() finishes in Python), the finish
+    in the units of power (tl_finish, the linear coefficients and the cost scaled back).
+    Returns (z, alpha, cost (search units), reason, n_starts, n_evals, the exact angles of
+    incidence, finished, values, round_trip_ok, fitted, r2, rmse, mse, covariance,
+    singular, standard errors, residuals, all values finite, the largest specular share
+    at the angles of incidence)."""
+    geo, glcg, levels, pgroup, exact = kernel_geometry(gamma, theta)
+    pn = power / scale
+    z, alpha, cost, reason, n_starts, n_evals = global_search(
+        np.zeros(0, np.int64), nonneg, residual, geo, glcg, pn, weights, levels, pgroup,
+        nd_grid, ns_grid, jitter, ext_start, extra, screen, lo, hi, zlo, zhi, axes, hops,
+        n_data_starts, n_keep, max_iter, max_rounds)
+    finished = math.isfinite(cost) and reason != STOP_STUCK and reason != STOP_MAXITER
+    k = z.size + alpha.size
+    if finished:
+        values, ok, fitted, r2, rmse, mse, cov, singular = tl_finish(
+            z, alpha * scale, geo, glcg, weights, power, absolute_sigma,
+            cost * scale * scale, n_params)
+    else:
+        values = np.full(k, np.nan)
+        ok = False
+        fitted = np.full(power.size, np.nan)
+        r2 = math.nan
+        rmse = math.nan
+        mse = math.nan
+        cov = np.full((k, k), np.nan)
+        singular = np.zeros(k, np.bool_)
+    # what fit() reports besides: standard errors, residuals, whether every value is
+    # finite, the largest specular share u_as cos^v_as(gamma) at the angles of incidence
+    stderr = np.empty(k)
+    finite = True
+    for q in range(k):
+        v = cov[q, q]
+        stderr[q] = math.sqrt(v) if v > 0.0 else (0.0 if v <= 0.0 else v)
+        finite = finite and math.isfinite(values[q])
+    resid = power - fitted
+    share = -math.inf
+    for g in range(exact.size):
+        v = values[0] * math.cos(abs(exact[g])) ** values[1]
+        share = max(share, v) if v == v else math.inf
+    return (z, alpha, cost, reason, n_starts, n_evals, exact, finished, values, ok, fitted,
+            r2, rmse, mse, cov, singular, stderr, resid, finite, share)
+
+
 def warm() -> None:
     """Compile (or load from the on-disk cache) every entry point once: a fit, a batch of
     subset fits and an extended model's fit of a small generated table. ``make`` runs it
@@ -1923,26 +2473,17 @@ def warm() -> None:
         fit_subsets(g, t, p, masks, engine="compiled")
 
 
-@njit(cache=True, error_model="numpy")
-def _tl_predict(z, alpha, geo, glcg, gval, out):
-    """The plain two-lobe model (unweighted) at every point of ``geo`` (as predict)."""
-    for g in range(glcg.size):
-        s, nd, ns = _tl_values(z, glcg[g])
-        gval[g, 0] = s
-        gval[g, 1] = nd
-        gval[g, 2] = ns
-        gval[g, 3] = (nd + 1.0) / TWO_PI
-        gval[g, 4] = (ns + 1.0) / TWO_PI
-    lct_all, pt_all, lcp_all, pp_all, group = geo[3], geo[4], geo[5], geo[6], geo[7]
-    a0 = alpha[0]
-    a1 = alpha[1]
-    for j in range(out.size):
-        g = group[j]
-        a = fexp(gval[g, 1] * lct_all[j]) if pt_all[j] else 0.0
-        b = fexp(gval[g, 2] * lcp_all[j]) if pp_all[j] else 0.0
-        ld = gval[g, 3] * a
-        ls = gval[g, 4] * b
-        out[j] = ld * a0 + (ld + gval[g, 0] * (ls - ld)) * a1
+@njit(cache=True, error_model="numpy", fastmath=_SUMS)
+def _tl_ss(pts, m, vec, a0, a1):
+    """Sum of squared differences between the power (row 8 of ``pts``) and the plain
+    two-lobe model whose block values are in rows 5..9 of ``vec``."""
+    ss = 0.0
+    for j in range(m):
+        ld = vec[8, j] * (lexp(vec[5, j] * pts[0, j]) * pts[1, j])
+        ls = vec[9, j] * (lexp(vec[6, j] * pts[2, j]) * pts[3, j])
+        r = pts[8, j] - (ld * a0 + (ld + vec[7, j] * (ls - ld)) * a1)
+        ss += r * r
+    return ss
 
 
 @njit(cache=True)
@@ -1958,8 +2499,17 @@ def r2_rows(codes, zs, alphas, geo, glcg, power):
     for j in range(n):
         ss_tot += (power[j] - mean) ** 2
     out = np.full(b, np.nan)
-    gval = np.empty((glcg.size, 5))
     pred = np.empty(n)
+    fast = codes.size == 0
+    if fast:  # the points by blocks, as the search stores them
+        pts = np.empty((_TL_ROWS, n))
+        gstart = np.empty(glcg.size + 1, np.int64)
+        lgroup = np.empty(n, np.int64)
+        ones = np.ones(n)
+        tl_points(geo, glcg.size, ones, ones, ones, power, np.ones(n, np.bool_), pts, gstart,
+                  lgroup, geo[7])
+        vec = np.empty((10, n))
+        gbuf = np.zeros(3 * glcg.size + 8)
     for i in range(b):
         ok = True
         for q in range(zs.shape[1]):
@@ -1968,12 +2518,13 @@ def r2_rows(codes, zs, alphas, geo, glcg, power):
             ok = ok and math.isfinite(alphas[i, q])
         if not ok:
             continue
-        if codes.size == 0:
-            _tl_predict(zs[i], alphas[i], geo, glcg, gval, pred)
+        if fast:
+            _tl_broadcast(zs[i], gstart, glcg, vec, 5, gbuf)
+            ss = _tl_ss(pts, n, vec, alphas[i, 0], alphas[i, 1])
         else:
             pred = predict(codes, zs[i], alphas[i], geo, glcg)
-        ss = 0.0
-        for j in range(n):
-            ss += (power[j] - pred[j]) ** 2
+            ss = 0.0
+            for j in range(n):
+                ss += (power[j] - pred[j]) ** 2
         out[i] = 1.0 - ss / ss_tot if ss_tot > 0.0 else math.nan
     return out

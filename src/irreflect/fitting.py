@@ -35,6 +35,7 @@ from .models import (
     parse_spec,
 )
 from .models.extensions import Extension, _start_rows
+from .models.paper import _two_lobe_validity
 from .validation import check_angles_deg, check_seed, check_subset_inputs, short_list
 
 # ----------------------------------------------------------------------------- core solver
@@ -503,8 +504,7 @@ def screen_samples(model, n: int, seed: int) -> np.ndarray:
     Conover 1979). Plain numpy on purpose: ``scipy.stats.qmc`` would cost every command
     a second of import time for the same coverage of the box.
     """
-    box = _screen_box_key(model)
-    key = (model.name, model.n_nonlinear, n, seed, box)
+    key = _screen_key(model, n, seed)
     if key not in _SCREEN_CACHE:
         lo, hi = model.screen_box()
         p = lo.size
@@ -517,14 +517,35 @@ def screen_samples(model, n: int, seed: int) -> np.ndarray:
             a, b = np.meshgrid(np.linspace(lo[0], hi[0], k), np.linspace(lo[1], hi[1], k))
             out = np.column_stack([a.ravel(), b.ravel()])
         else:
-            rng = np.random.default_rng(seed)
-            strata = rng.permuted(np.tile(np.arange(n), (p, 1)), axis=1).T
-            unit = (strata + rng.random((n, p))) / n
-            out = lo + unit * (hi - lo)
-        if len(_SCREEN_CACHE) >= 256:  # bounded: one entry per seed a process has used
-            _SCREEN_CACHE.pop(next(iter(_SCREEN_CACHE)))
-        _SCREEN_CACHE[key] = out
+            out = _latin_hypercube(np.random.default_rng(seed), n, lo, hi)
+        _remember_screen(key, out)
     return _SCREEN_CACHE[key]
+
+
+def _screen_key(model, n: int, seed) -> tuple:
+    return (model.name, model.n_nonlinear, n, seed, _screen_box_key(model))
+
+
+def _remember_screen(key, out) -> None:
+    if len(_SCREEN_CACHE) >= 256:  # bounded: one entry per seed a process has used
+        _SCREEN_CACHE.pop(next(iter(_SCREEN_CACHE)))
+    _SCREEN_CACHE[key] = out
+
+
+_STRATA: dict = {}
+
+
+def _latin_hypercube(rng, n: int, lo, hi) -> np.ndarray:
+    """``n`` points of a Latin hypercube in the box (lo, hi) from the generator ``rng``
+    (screen_samples' draws: the strata of every coordinate permuted, then uniform
+    offsets within them)."""
+    p = lo.size
+    tiles = _STRATA.get((n, p))
+    if tiles is None:
+        tiles = _STRATA[(n, p)] = np.tile(np.arange(n), (p, 1))
+    strata = rng.permuted(tiles, axis=1).T
+    unit = (strata + rng.random((n, p))) / n
+    return lo + unit * (hi - lo)
 
 
 def _screen_box_key(model) -> tuple:
@@ -674,8 +695,10 @@ def _fmt_bound(b):
     return f"{b:g}"
 
 
-def judge(model, values, stderr, singular, gamma_rad, converged, message) -> tuple:
-    """(at_bound, ill_determined, warnings) of a fit: the checks every command prints."""
+def judge(model, values, stderr, singular, gamma_rad, converged, message,
+          validity: bool = True) -> tuple:
+    """(at_bound, ill_determined, warnings) of a fit: the checks every command prints
+    (``validity``: run the model's own check, ``options["validity"]``, too)."""
     at_bound, detail = [], []
     values_f = np.asarray(values, float).tolist()  # Python floats: scalar tests in µs, not 10s
     for p, v in zip(model.params, values_f, strict=True):
@@ -704,7 +727,7 @@ def judge(model, values, stderr, singular, gamma_rad, converged, message) -> tup
     if ill:
         warnings.append("ill-determined by these data: " + ", ".join(ill_detail)
                         + ": measure more angles or fix these coefficients")
-    check = model.options.get("validity")
+    check = model.options.get("validity") if validity else None
     if check is not None:
         warnings += list(check(values, gamma_rad))
     return tuple(at_bound), tuple(ill), tuple(warnings)
@@ -827,6 +850,60 @@ def _search_compiled(model_obj, codes, gamma, theta, power, weights, geom, sw1, 
     return zb, ab, float(cb), int(rb), int(n_starts), int(n_evals)
 
 
+def _search_plain_compiled(model_obj, gamma, theta, power, weights, absolute_sigma, *, seed,
+                           n_random_starts=2, n_screen=None, n_keep=None, n_data_starts=None,
+                           max_iter=200, max_rounds=3, polish=True, extra_starts=None):
+    """:func:`_global_search` of the plain two-lobe model with the compiled kernel, and
+    fit()'s finish, in one compiled call (:func:`irreflect._kernel.tl_fit`; the same
+    search, the same numbers). Returns ``(found, finish, exact)``: ``found`` as
+    :func:`_global_search` returns it (None: no finite start), ``finish`` the values of
+    ``tl_finish`` (None when fit() has to compute them: after a polish) and the exact
+    angles of incidence."""
+    from . import _kernel
+
+    power = np.asarray(power, float)
+    scale = float(np.sqrt(np.mean(weights * power * power)))
+    if not (np.isfinite(scale) and scale > 0):
+        scale = 1.0
+    n_screen = default_screen(model_obj) if n_screen is None else int(n_screen)
+    n_keep = default_keep(model_obj) if n_keep is None else int(n_keep)
+    if n_data_starts is None:
+        n_data_starts = int(model_obj.options.get("n_data_starts", 2))
+    p = model_obj.n_nonlinear
+    st = _kernel_static(model_obj)
+    n_hops = _default_hops(model_obj, n_keep)
+    key = _screen_key(model_obj, n_screen, seed) if n_screen and p >= 3 else None
+    if key is not None and key not in _SCREEN_CACHE and n_random_starts and not n_hops:
+        # a new seed: the Latin hypercube and the random starts' jitter are both drawn
+        # from default_rng(seed) as it starts; one generator, its state restored between
+        bits = np.random.PCG64(seed)
+        rng = np.random.Generator(bits)
+        start = bits.state
+        lo, hi = model_obj.screen_box()
+        _remember_screen(key, _latin_hypercube(rng, n_screen, lo, hi))
+        bits.state = start
+        jitter = rng.normal(0.0, 0.15, (n_random_starts, p))
+        hops = np.zeros((max_rounds, 0, p))
+    else:
+        jitter, hops = _draws(seed, n_random_starts, n_hops, max_rounds, p)
+    screen = (screen_samples(model_obj, n_screen, seed) if n_screen and p
+              else np.zeros((0, p)))
+    extra = (st["no_extra"] if extra_starts is None else
+             np.clip(np.asarray(extra_starts, float).reshape(-1, p), st["zlo"], st["zhi"]))
+    (z, alpha, cost, reason, n_starts, n_evals, exact, finished, *finish) = _kernel.tl_fit(
+        _w(gamma), _w(theta), _w(power), _w(weights), scale, bool(absolute_sigma),
+        model_obj.n_params, st["nonneg"], st["residual"], _PROFILE_GRIDS[0],
+        _PROFILE_GRIDS[1], _w(jitter * st["jitter_width"]), st["ext_rows"], _w(extra),
+        _w(screen), st["lo"], st["hi"], st["zlo"], st["zhi"], st["axes"], _w(hops),
+        int(n_data_starts), int(n_keep), int(max_iter), int(max_rounds))
+    if not math.isfinite(cost):
+        return None, None, exact
+    found = (z, alpha, float(cost), int(reason), int(n_starts), int(n_evals))
+    zb, ab, cb, *rest = _conclude(model_obj, gamma, theta, power / scale, weights, found,
+                                  polish, max_iter)
+    return (zb, ab * scale, cb * scale * scale, *rest), (finish if finished else None), exact
+
+
 def _kernel_static(model_obj) -> dict:
     """What the kernel needs of a model that does not change between fits (cached on the
     model object)."""
@@ -871,6 +948,10 @@ def _w(a, dtype=float) -> np.ndarray:
     numba compiles a kernel once per argument type, and a read-only array (a
     Measurements column, a cached draw) is another type, so every argument is passed
     writeable and the cache that ``make`` warms is the one every caller uses."""
+    if type(a) is np.ndarray and a.dtype == dtype:
+        flags = a.flags
+        if flags.c_contiguous and flags.writeable:
+            return a
     return np.require(a, dtype, ("C", "W"))
 
 
@@ -921,23 +1002,33 @@ def _kernel_codes(model_obj, engine=None):
     if engine != "compiled" or model_obj.options.get("canonical_starts") is not \
             model_obj.starts:
         return None
+    cached = model_obj.options.get("_kernel_code")
+    if cached is not None and cached[0] is model_obj:
+        return cached[1]
     from . import _kernel  # deferred: numba costs ~1 s to import, the numpy path none
 
-    return _kernel.model_code(model_obj)
+    code = _kernel.model_code(model_obj)
+    try:
+        model_obj.options["_kernel_code"] = (model_obj, code)
+    except TypeError:
+        pass
+    return code
 
 
 def _global_search_unit(model_obj, gamma, theta, power, weights, *, seed, n_random_starts=2,
                         n_screen=None, n_keep=None, n_data_starts=None, max_iter=200,
                         max_rounds=3, polish=True, engine=None, extra_starts=None,
                         kgeo=None):
-    geom = Geometry.of(gamma[None], theta[None])
-    sw1 = np.sqrt(weights)[None]
-    yw1 = sw1 * power
+    codes = _kernel_codes(model_obj, engine)
+    geom = sw1 = yw1 = None
+    if codes is None:
+        geom = Geometry.of(gamma[None], theta[None])
+        sw1 = np.sqrt(weights)[None]
+        yw1 = sw1 * power
     n_screen = default_screen(model_obj) if n_screen is None else int(n_screen)
     n_keep = default_keep(model_obj) if n_keep is None else int(n_keep)
     if n_data_starts is None:
         n_data_starts = int(model_obj.options.get("n_data_starts", 2))
-    codes = _kernel_codes(model_obj, engine)
     search = _search_numpy if codes is None else _search_compiled
     found = search(model_obj, codes, gamma, theta, power, weights, geom, sw1, yw1, seed=seed,
                    n_random_starts=n_random_starts, n_screen=n_screen, n_keep=n_keep,
@@ -945,7 +1036,21 @@ def _global_search_unit(model_obj, gamma, theta, power, weights, *, seed, n_rand
                    extra_starts=extra_starts, kgeo=kgeo)
     if found is None:
         return None
+    return _conclude(model_obj, gamma, theta, power, weights, found, polish, max_iter, geom)
+
+
+def _conclude(model_obj, gamma, theta, power, weights, found, polish, max_iter, geom=None):
+    """A search's end as fit() reports it: a crawling Levenberg-Marquardt polished
+    (:func:`_polish`), convergence judged by the Gauss-Newton decrease where the iteration
+    limit or a stuck step ended it, the message. ``found``: (z, alpha, cost, reason,
+    n_starts, n_evals) of the power ``power``. Returns (z, alpha, cost, converged,
+    message, n_starts, n_evals)."""
     zb, ab, cb, rb, n_starts, n_evals = found
+    if rb in (STOP_STUCK, STOP_MAXITER) and geom is None:
+        geom = Geometry.of(gamma[None], theta[None])
+    if geom is not None:
+        sw1 = np.sqrt(weights)[None]
+        yw1 = sw1 * power
     if polish and rb in (STOP_STUCK, STOP_MAXITER) and model_obj.n_nonlinear:
         polished = _polish(model_obj, geom, zb, sw1, yw1)
         n_evals += polished[3]
@@ -1072,27 +1177,48 @@ def fit(measurements, model="two-lobe", *, seed: int = 0, n_random_starts: int =
         )
     weights = np.ones_like(power) if sigma is None else 1.0 / sigma**2
     codes = _kernel_codes(model_obj, engine)
-    kgeo = _kernel_geometry(gamma, theta) if codes is not None else None
-    out = _global_search(model_obj, gamma, theta, power, weights, seed=seed,
-                         n_random_starts=n_random_starts, n_screen=n_screen, n_keep=n_keep,
-                         n_data_starts=n_data_starts, max_iter=max_iter, max_rounds=max_rounds,
-                         polish=polish, engine=engine, extra_starts=extra_starts, kgeo=kgeo)
+    plain = codes is not None and codes.size == 0
+    finish = None
+    if plain:  # the plain two-lobe model: search and finish in one compiled call
+        kgeo = None
+        out, finish, angles = _search_plain_compiled(
+            model_obj, gamma, theta, power, weights, sigma is not None, seed=seed,
+            n_random_starts=n_random_starts, n_screen=n_screen, n_keep=n_keep,
+            n_data_starts=n_data_starts, max_iter=max_iter, max_rounds=max_rounds,
+            polish=polish, extra_starts=extra_starts)
+    else:
+        kgeo = _kernel_geometry(gamma, theta) if codes is not None else None
+        angles = gamma if kgeo is None else kgeo[4]
+        out = _global_search(model_obj, gamma, theta, power, weights, seed=seed,
+                             n_random_starts=n_random_starts, n_screen=n_screen,
+                             n_keep=n_keep, n_data_starts=n_data_starts, max_iter=max_iter,
+                             max_rounds=max_rounds, polish=polish, engine=engine,
+                             extra_starts=extra_starts, kgeo=kgeo)
     if out is None:
         raise FitError(
             f"fit of '{model_obj.name}' to {source} failed: no start reached a finite cost; "
             "check the data for extreme values"
         )
     zb, ab, cb, converged, message, n_starts, n_evals = out
-    if codes is not None and codes.size == 0:  # the plain two-lobe model: one compiled call
-        from . import _kernel
+    stderr = resid = finite = None
+    validity = True  # whether judge() runs the model's own validity check
+    if plain:  # the plain two-lobe model: one compiled call
+        if finish is None:  # a polished search: its finish here
+            from . import _kernel
 
-        values, round_trip, fitted, r2, rmse, mse, cov, singular = _kernel.tl_finish(
-            _w(zb), _w(ab), kgeo[0], kgeo[1], _w(weights), _w(power), sigma is not None, cb,
-            model_obj.n_params)
+            kgeo = _kernel_geometry(gamma, theta)
+            finish = (*_kernel.tl_finish(_w(zb), _w(ab), kgeo[0], kgeo[1], _w(weights),
+                                         _w(power), sigma is not None, cb, model_obj.n_params),
+                      None, None, None, math.inf)
+        (values, round_trip, fitted, r2, rmse, mse, cov, singular, stderr, resid, finite,
+         share) = finish
+        # the two-lobe model's check (a specular share above 1) cannot warn below 1
+        validity = not (share <= 1.0 and model_obj.options.get("validity") is
+                        _two_lobe_validity)
     else:
         values = model_obj.to_natural(zb[None], ab[None])[0]
         round_trip = None
-    if not np.all(np.isfinite(values)):
+    if not (np.all(np.isfinite(values)) if finite is None else finite):
         raise FitError(
             f"fit of '{model_obj.name}' to {source} ended at non-finite parameters "
             f"{np.array2string(values, precision=4)}: check the data for extreme values"
@@ -1113,7 +1239,8 @@ def fit(measurements, model="two-lobe", *, seed: int = 0, n_random_starts: int =
             "floating point (a share within 1e-16 of its bound): check the data for extreme "
             "values"
         )
-    resid = power - fitted
+    if resid is None:
+        resid = power - fitted
     r2 = float(r2)
     if not np.isfinite(r2) or r2 <= 0:
         raise FitError(
@@ -1124,10 +1251,11 @@ def fit(measurements, model="two-lobe", *, seed: int = 0, n_random_starts: int =
     if cov is None:
         cov, singular = _covariance(model_obj, zb, ab, jfull, sigma is not None, cb,
                                     meas.n_points)
-    stderr = np.sqrt(np.clip(np.diag(cov), 0, None))
+    if stderr is None:
+        stderr = np.sqrt(np.clip(np.diag(cov), 0, None))
     # the distinct angles of incidence stand for all (judge's checks look at each once)
-    at_bound, ill, warnings = judge(model_obj, values, stderr, singular,
-                                    gamma if kgeo is None else kgeo[4], converged, message)
+    at_bound, ill, warnings = judge(model_obj, values, stderr, singular, angles, converged,
+                                    message, validity=validity)
     for text in warnings:
         warn(FitWarning(f"{source}, {model_obj.name}: {text}"), stacklevel=2)
     dof = meas.n_points - model_obj.n_params

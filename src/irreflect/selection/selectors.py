@@ -24,7 +24,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
-from pymoo.algorithms.moo.nsga2 import NSGA2
+from pymoo.operators.selection.tournament import TournamentSelection
 from pymoo.termination.max_gen import MaximumGenerationTermination
 
 from ..errors import IrreflectError, unknown_name
@@ -33,12 +33,15 @@ from .checkpoint import load_checkpoint, restore, save_checkpoint
 from .problem import (
     FeasibleRankAndCrowding,
     MaskDuplicateElimination,
+    MaskEvaluator,
     SizeRepair,
     SizeVariedSampling,
     SubsetCrossover,
     SubsetEvaluator,
     SubsetMutation,
+    SubsetNSGA2,
     SubsetProblem,
+    binary_tournament,
 )
 
 
@@ -93,14 +96,16 @@ def nsga2(spec: SearchSpec) -> None:
 
     generation, previous_seconds = 0, 0.0
     problem = SubsetProblem(spec.evaluator, spec.n_min, spec.n_max, spec.candidates)
-    algorithm = NSGA2(
+    algorithm = SubsetNSGA2(
         pop_size=spec.pop_size,
         sampling=SizeVariedSampling(spec.initial),
+        selection=TournamentSelection(func_comp=binary_tournament),
         crossover=SubsetCrossover(),
         mutation=SubsetMutation(),
         repair=SizeRepair(),
         eliminate_duplicates=MaskDuplicateElimination(),
         survival=FeasibleRankAndCrowding(),
+        evaluator=MaskEvaluator(),
     )
     algorithm.setup(problem, termination=("n_gen", spec.generations), seed=spec.seed,
                     verbose=False)
