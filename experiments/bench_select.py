@@ -88,7 +88,7 @@ class ElementwiseSubsetProblem(ElementwiseProblem):
 
 
 def run_baseline(meas, pop, gens, seed):
-    problem = ElementwiseSubsetProblem(meas, 7, meas.n_points)
+    problem = ElementwiseSubsetProblem(meas, get_model("two-lobe").n_params + 1, meas.n_points)
     algorithm = NSGA2(pop_size=pop, sampling=SizeVariedSampling(np.ones((1, meas.n_points), bool)),
                       crossover=SubsetCrossover(), mutation=SubsetMutation(), repair=SizeRepair(),
                       eliminate_duplicates=MaskDuplicateElimination())
