@@ -171,3 +171,22 @@ def test_a_closed_pipe_ends_quietly(monkeypatch, capsys):
     monkeypatch.setattr("sys.stdout", ClosedPipe())
     assert main(["models"]) == 141
     assert capsys.readouterr().err == ""
+
+
+def test_compare_leaves_out_a_model_that_cannot_be_fitted_and_says_so(tmp_path, capsys):
+    """A model that cannot be fitted (here more parameters than points) is left out with a
+    warning on stderr and listed as skipped; the others are compared (exit 0). When none
+    fits, the command fails with one line."""
+    table = tmp_path / "six.csv"  # 6 points: phong (3 parameters) fits, two-lobe (7) cannot
+    table.write_text("gamma_deg,theta_deg,power\n" + "".join(
+        f"-20,{t},{0.2 + 0.5 * max(0.0, 1 - abs(t - 20) / 30):.4f}\n"
+        for t in range(-30, 30, 10)))
+    assert main(["compare", str(table), "--models", "phong,two-lobe", "--json"]) == 0
+    captured = capsys.readouterr()
+    out = json.loads(captured.out)
+    assert list(out["models"]) == ["phong"]
+    assert "two-lobe" in out["skipped"]
+    assert "warning: six: two-lobe left out of the comparison" in captured.err
+    assert main(["compare", str(table), "--models", "two-lobe"]) != 0
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "no model could be fitted" in err[0]

@@ -232,6 +232,90 @@ def test_caller_side_chunks_bound_each_subset_batch(monkeypatch):
     np.testing.assert_allclose(split, whole, rtol=1e-5)
 
 
+def test_pieces_are_also_bounded_by_the_table_size(monkeypatch):
+    """A batch's masks span the whole table: on a large table a piece holds at most
+    MAX_BATCH_VALUES mask values (subsets x table points), whatever the subset sizes."""
+    from irreflect.selection import SubsetEvaluator, problem
+
+    meas = synthetic(noise=0.004, seed=3)
+    rng = np.random.default_rng(2)
+    masks = np.zeros((20, meas.n_points), bool)
+    for row in masks:
+        row[rng.choice(meas.n_points, 10, replace=False)] = True
+    sizes = []
+    real = problem.fit_subsets
+
+    @functools.wraps(real)
+    def spy(*args, **kwargs):
+        sizes.append(args[3].shape)
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(problem, "fit_subsets", spy)
+    monkeypatch.setattr(problem, "MAX_BATCH_VALUES", meas.n_points * 8 * 6)
+    # the numpy path holds about 8 values per table point and subset (weighted masks,
+    # predictions on all points): 6 subsets per piece here, whatever their size
+    settings = problem.FitSettings.of(**problem.SEARCH_FIT.kwargs(), engine="numpy")
+    SubsetEvaluator(meas.gamma_deg, meas.theta_deg, meas.power,
+                    settings=settings).fit_masks(masks)
+    assert sum(s[0] for s in sizes) == 20
+    assert max(s[0] for s in sizes) == 6 and all(s[1] == meas.n_points for s in sizes)
+
+
+def test_point_masks_are_the_explicit_neighbours_in_unique_order():
+    """PointMasks (a subset plus or minus each of some points, built piece by piece) gives
+    the rows np.unique would give for the explicit array, and the same scores."""
+    from irreflect.selection import SubsetEvaluator
+    from irreflect.selection.problem import PointMasks
+
+    meas = synthetic(noise=0.004, seed=5)
+    rng = np.random.default_rng(4)
+    base = np.zeros(meas.n_points, bool)
+    base[rng.choice(meas.n_points, 12, replace=False)] = True
+    for add, points in ((True, np.flatnonzero(~base)[::3]), (False, np.flatnonzero(base))):
+        lazy = PointMasks(base, points[::-1].copy(), add=add)  # any order in
+        explicit = np.repeat(base[None], points.size, axis=0)
+        explicit[np.arange(points.size), points] = add
+        explicit = np.unique(explicit, axis=0)
+        np.testing.assert_array_equal(lazy.rows(np.arange(len(lazy))), explicit)
+        np.testing.assert_array_equal(lazy.counts(), explicit.sum(axis=1))
+        a, fa = SubsetEvaluator(meas.gamma_deg, meas.theta_deg, meas.power).fit_masks(lazy)
+        b, fb = SubsetEvaluator(meas.gamma_deg, meas.theta_deg, meas.power).fit_masks(explicit)
+        np.testing.assert_array_equal(a, b)
+        np.testing.assert_array_equal(fa, fb)
+
+
+def test_difference_weights_are_sparse_and_equal_the_dense_definition():
+    """The noise estimate's difference weights: a sparse (windows x n) matrix (a dense one
+    is 3.2 GB at 20,000 points) equal to the textbook construction, window by window."""
+    from irreflect.diagnose.workflow import difference_weights
+
+    rng = np.random.default_rng(7)
+    gamma = np.repeat([-10.0, -35.0, -60.0], 9)
+    theta = np.concatenate([np.sort(rng.uniform(-80, 80, 9)) for _ in range(3)])
+    theta[4] = theta[3]  # a repeated receiver angle: its windows are skipped
+    order = rng.permutation(gamma.size)
+    gamma, theta = gamma[order], theta[order]
+    w = difference_weights(gamma, theta)
+    assert hasattr(w, "tocsr") and w.nnz == 3 * w.shape[0]
+    dense = []
+    t = np.radians(theta)
+    for g in np.unique(gamma):
+        idx = np.flatnonzero(gamma == g)
+        idx = idx[np.argsort(t[idx], kind="stable")]
+        for s in range(idx.size - 2):
+            win = idx[s:s + 3]
+            x = t[win]
+            if len(set(x.tolist())) < 3:
+                continue
+            v = np.array([1 / ((x[0] - x[1]) * (x[0] - x[2])), 1 / ((x[1] - x[0]) * (x[1] - x[2])),
+                          1 / ((x[2] - x[0]) * (x[2] - x[1]))])
+            row = np.zeros(gamma.size)
+            row[win] = v / np.linalg.norm(v)
+            dense.append(row)
+    assert w.shape == (len(dense), gamma.size) == (7 + 5 + 7, 27)
+    np.testing.assert_allclose(w.toarray(), np.array(dense), rtol=1e-12, atol=1e-15)
+
+
 def _must_not_run(*args, **kwargs):
     raise AssertionError("the computation started before the check")
 

@@ -30,7 +30,7 @@ from tqdm.auto import tqdm
 
 from . import metrics
 from .data import as_measurements
-from .errors import FitError, IrreflectError
+from .errors import DataError, FitError, IrreflectError
 from .fitting import GAMMA_TOL_DEG as _GAMMA_TOL_DEG
 from .fitting import fit
 from .models import get_model, parse_spec
@@ -286,8 +286,10 @@ def compare_models(measurements, models=None, *, phong_at_deg: float | None = No
     progress : bool or None
         tqdm progress bar on stderr (None: only on a terminal).
     skip_failures : bool
-        Leave out (and list in ``Comparison.skipped``) a model that cannot be fitted, e.g.
-        more parameters than points, instead of raising.
+        Leave out (and list in ``Comparison.skipped``) a model the data cannot support (a
+        FitError, e.g. no better than a constant, or a DataError, e.g. more parameters than
+        points) instead of raising; a request that cannot be met (``MODEL@G`` at an angle
+        that was not measured) still raises.
     """
     seed = check_seed(seed)
     meas = as_measurements(measurements)
@@ -315,7 +317,9 @@ def compare_models(measurements, models=None, *, phong_at_deg: float | None = No
                     result = fit(meas, label, seed=seed)
                 scores[label] = score(meas, result, label)
         except (IrreflectError, FitError) as exc:
-            if not skip_failures:
+            # the data cannot support this model (no usable optimum, too few points): left
+            # out when asked; a request that cannot be met (an angle not measured) raises
+            if not skip_failures or not isinstance(exc, FitError | DataError):
                 raise
             skipped[label] = str(exc)
     if not scores:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import contextlib
+import sys
 
 from .options import FINITE, SEED, add_data_argument, load_data, print_json
 
@@ -24,8 +25,11 @@ def _cmd_compare(args) -> int:
         meas = load_data(args)
         comparison = compare_models(meas, args.models,
                                     phong_at_deg=None if at is None else abs(at),
-                                    seed=args.seed, progress=None)
+                                    seed=args.seed, progress=None, skip_failures=True)
         written = write_outputs(comparison, args.out) if args.out else []
+    for label, why in comparison.skipped.items():  # said on stderr too, whatever the format
+        print(f"irreflect: warning: {comparison.data_name}: {label} left out of the comparison: "
+              f"{why}", file=sys.stderr)
     if args.json:
         print_json(comparison.to_dict() | {"written": [str(p) for p in written]})
     else:

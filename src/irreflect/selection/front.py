@@ -50,12 +50,16 @@ from ..diagnose.workflow import estimate_noise
 from ..errors import IrreflectError
 from ..fitting import fit, fit_subsets
 from ..models import get_model
+from .problem import PointMasks
 
 #: Candidates screened per added point by :func:`complete_front` (a seeded sample of the
 #: allowed points when there are more): keeps the completion cheap on 1000-point scans.
 FILL_CANDIDATES = 64
 #: Screened candidates per size that are checked with the full fitter.
 FILL_VERIFY = 2
+#: At most this many further points screened where no sampled point helps (all of them
+#: on tables of up to this many points).
+FILL_REST = 2_000
 #: Probability mass of the noise estimate's interval used for "enough points" (1 sigma).
 ENOUGH_INTERVAL = 0.68
 
@@ -152,27 +156,22 @@ def complete_front(evaluator, verified: dict, *, n_min: int, n_hi: int, candidat
     rng = np.random.default_rng([int(seed), 14])
     fits = 0
 
-    def consider(size: int, masks: np.ndarray, verify: int = n_verify) -> float:
+    def consider(size: int, masks: PointMasks, verify: int = n_verify) -> float:
         """Screen ``masks``, check the best ``verify``; keep the best if it beats the
         current subset of ``size`` points. Returns the best checked score."""
         nonlocal fits
         if not len(masks):
             return np.inf
-        masks = np.unique(masks, axis=0)
         screened, _ = evaluator.fit_masks(masks)
         fits += len(masks)
         top = np.argsort(screened, kind="stable")[:verify]
-        scores, _ = evaluator.fit_masks(masks[top], verify_fit)
+        checked = masks.rows(top)
+        scores, _ = evaluator.fit_masks(checked, verify_fit)
         fits += len(top)
         j = int(np.argmin(scores))
         if np.isfinite(scores[j]) and (size not in verified or scores[j] < verified[size][0]):
-            verified[size] = (float(scores[j]), masks[top][j].copy())
+            verified[size] = (float(scores[j]), checked[j].copy())
         return float(scores[j])
-
-    def with_point(base: np.ndarray, points: np.ndarray) -> np.ndarray:
-        masks = np.repeat(base[None], points.size, axis=0)
-        masks[np.arange(points.size), points] = True
-        return masks
 
     def grow(size: int) -> None:
         base_score, base = verified[size - 1]
@@ -180,20 +179,20 @@ def complete_front(evaluator, verified: dict, *, n_min: int, n_hi: int, candidat
         sample = free
         if free.size > max_candidates:
             sample = np.sort(rng.choice(free, max_candidates, replace=False))
-        best = consider(size, with_point(base, sample))
+        best = consider(size, PointMasks(base, sample))
         if verified[size][0] >= base_score and sample.size < free.size:
-            # no sampled point helps: screen the others too and check more of them
+            # no sampled point helps: screen the others too (at most FILL_REST more, a
+            # seeded sample, on large tables) and check more of them
             rest = np.setdiff1d(free, sample)
-            consider(size, with_point(base, rest), verify=n_verify + 1)
+            if rest.size > FILL_REST:
+                rest = np.sort(rng.choice(rest, FILL_REST, replace=False))
+            consider(size, PointMasks(base, rest), verify=n_verify + 1)
         elif verified[size][0] >= base_score and best >= base_score:
-            consider(size, with_point(base, free), verify=3 * n_verify)
+            consider(size, PointMasks(base, free), verify=3 * n_verify)
 
     def shrink(size: int) -> None:
         base = verified[size + 1][1]
-        on = np.flatnonzero(base)
-        masks = np.repeat(base[None], on.size, axis=0)
-        masks[np.arange(on.size), on] = False
-        consider(size, masks)
+        consider(size, PointMasks(base, np.flatnonzero(base), add=False))
 
     start = min((k for k in verified if n_min <= k <= n_hi), default=None)
     if start is None:

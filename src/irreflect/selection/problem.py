@@ -152,12 +152,41 @@ def values_per_point(options: dict) -> int:
     return int(options.get("n_screen", 32)) + 5 + 16 * starts + 8
 
 
-def _bounded(rows: np.ndarray, counts: np.ndarray, per_point: int) -> list[np.ndarray]:
+def _bounded(rows: np.ndarray, counts: np.ndarray, per_point: int,
+             per_row: int = 0) -> list[np.ndarray]:
     """Split ``rows`` (sorted by subset size) into pieces whose (rows x largest subset x
-    per_point) stays within :data:`MAX_BATCH_VALUES`."""
+    per_point) and (rows x per_row: what each row holds over the whole table, its mask and
+    the prediction for R^2 on all points) both stay within :data:`MAX_BATCH_VALUES`."""
     largest = int(counts[rows].max()) if rows.size else 1
-    step = max(1, MAX_BATCH_VALUES // max(1, largest * per_point))
+    step = max(1, MAX_BATCH_VALUES // max(1, largest * per_point, int(per_row)))
     return [rows[i:i + step] for i in range(0, rows.size, step)]
+
+
+class PointMasks:
+    """The masks ``base`` plus one point each (``add``) or minus one point each, one row per
+    entry of ``points``, built piece by piece when fitted: a table of 20,000 points has
+    20,000 such neighbours, whose full (rows x points) array alone would be 400 MB.
+
+    Rows come in the order ``np.unique(masks, axis=0)`` gives (added points descending,
+    dropped points ascending), so that ties are broken as for an explicit array."""
+
+    def __init__(self, base: np.ndarray, points: np.ndarray, add: bool = True):
+        self.base = np.asarray(base, bool)
+        points = np.unique(np.asarray(points, np.int64))
+        self.points = points[::-1] if add else points
+        self.add = bool(add)
+
+    def __len__(self) -> int:
+        return int(self.points.size)
+
+    def counts(self) -> np.ndarray:
+        return np.full(len(self), int(self.base.sum()) + (1 if self.add else -1), np.int64)
+
+    def rows(self, idx) -> np.ndarray:
+        idx = np.atleast_1d(np.asarray(idx, np.int64))
+        out = np.repeat(self.base[None], idx.size, axis=0)
+        out[np.arange(idx.size), self.points[idx]] = self.add
+        return out
 
 
 class SubsetEvaluator:
@@ -211,13 +240,20 @@ class SubsetEvaluator:
         self.__dict__.update(state)
 
     # -- fitting
-    def fit_masks(self, masks: np.ndarray, settings: FitSettings | None = None):
-        """Fit every mask (no cache, no counting); returns (scores (B,), failed (B,))."""
+    def fit_masks(self, masks: np.ndarray | PointMasks, settings: FitSettings | None = None):
+        """Fit every mask (no cache, no counting); returns (scores (B,), failed (B,)).
+        ``masks``: a (B, n) array or :class:`PointMasks` (built piece by piece)."""
         settings = settings or self.settings
-        masks = np.atleast_2d(np.asarray(masks, bool))
+        if isinstance(masks, PointMasks):
+            counts, take = masks.counts(), masks.rows
+        else:
+            masks = np.atleast_2d(np.asarray(masks, bool))
+            counts = masks.sum(axis=1)
+
+            def take(idx):
+                return masks[idx]
         scores = np.full(len(masks), FAILED_SCORE)
         failed = np.ones(len(masks), bool)
-        counts = masks.sum(axis=1)
         fittable = np.nonzero(counts > self.model.n_params)[0]  # a degree of freedom, as fit
         if fittable.size == 0:
             return scores, failed
@@ -234,8 +270,11 @@ class SubsetEvaluator:
             _kernel_codes(self.model, options.get("engine")) is not None
         chunks = [np.arange(fittable.size)] if compiled else _chunks(counts[fittable])
         for idx in chunks:
-            for piece in _bounded(fittable[idx], counts, per_point):
-                res = fit_subsets(self.gamma_deg, self.theta_deg, self.power, masks[piece],
+            # per row over the whole table: its mask (compiled: the R^2 is summed point by
+            # point), or the numpy path's weighted mask and predictions (about 8 values)
+            per_row = self.n if compiled else 8 * self.n
+            for piece in _bounded(fittable[idx], counts, per_point, per_row):
+                res = fit_subsets(self.gamma_deg, self.theta_deg, self.power, take(piece),
                                   self.model, sigma=self.sigma, **options, **extra)
                 ok = ~res.failed & np.isfinite(res.r2_all)
                 scores[piece] = np.where(ok, 1.0 - res.r2_all, FAILED_SCORE)
