@@ -479,3 +479,32 @@ def test_parquet_messages_name_rows_not_csv_lines(tmp_path):
     with pytest.raises(DataError, match="in data row 5: fix") as info:
         read_measurements(path)
     assert "line" not in str(info.value)
+
+
+def test_numpy_screening_is_scored_in_pieces_with_the_same_costs(monkeypatch):
+    """The numpy path scores screening candidates in pieces of at most
+    SCREEN_PIECE_VALUES basis values (a 200,000-point table with hundreds of candidates
+    would otherwise hold gigabytes); the costs equal those of one batch."""
+    from irreflect import fitting
+    from irreflect.models import Geometry, get_model
+
+    meas = synthetic(noise=0.004, seed=8)
+    model = get_model("lafortune")
+    geom = Geometry.of(np.radians(meas.gamma_deg)[None], np.radians(meas.theta_deg)[None])
+    sw = np.ones((1, meas.n_points))
+    z = fitting.screen_samples(model, 40, 3)
+    yw = np.broadcast_to(meas.power[None], (len(z), meas.n_points))
+    whole = fitting._screen_costs(model, geom, z, sw, yw)
+    pieces = []
+    real = fitting._screen_piece
+
+    def spy(model_, geom_, z_, sw_, yw_):
+        pieces.append(len(z_))
+        return real(model_, geom_, z_, sw_, yw_)
+
+    monkeypatch.setattr(fitting, "_screen_piece", spy)
+    monkeypatch.setattr(fitting, "SCREEN_PIECE_VALUES", meas.n_points * model.n_linear * 7)
+    split = fitting._screen_costs(model, geom, z, sw, yw)
+    assert pieces == [7] * 5 + [5]
+    np.testing.assert_allclose(split, whole, rtol=1e-12)
+    assert np.isfinite(whole).sum() > 20

@@ -562,8 +562,32 @@ def _screen_box_key(model) -> tuple:
     return key
 
 
+#: Values (candidates x points x basis columns) of one screening piece of the numpy path:
+#: about 30 MB per array, so that screening many candidates on a 200,000-point table stays
+#: within a bounded memory (the pieces give the same costs as one batch).
+SCREEN_PIECE_VALUES = 4_000_000
+
+
 def _screen_costs(model, geom, z, sw, yw):
-    """Variable-projection cost of every candidate ``z`` (no derivatives): a cheap global look."""
+    """Variable-projection cost of every candidate ``z`` (no derivatives): a cheap global look.
+    Scored in pieces of at most :data:`SCREEN_PIECE_VALUES` basis values."""
+    z = np.asarray(z, float)
+    m = z.shape[0]
+    n = yw.shape[-1]
+    step = max(1, SCREEN_PIECE_VALUES // max(1, n * max(model.n_linear, 1)))
+    if m <= step:
+        return _screen_piece(model, geom, z, sw, yw)
+
+    def rows(a, lo, hi):
+        return a[lo:hi] if a.shape[0] == m else a
+
+    return np.concatenate([
+        _screen_piece(model, geom.take(slice(lo, lo + step)), z[lo:lo + step],
+                      rows(sw, lo, lo + step), rows(yw, lo, lo + step))
+        for lo in range(0, m, step)])
+
+
+def _screen_piece(model, geom, z, sw, yw):
     with np.errstate(over="ignore", under="ignore", invalid="ignore", divide="ignore"):
         basis, _ = model.basis(geom, z, False)
     return _projected_cost(model, basis, sw, yw)
