@@ -169,8 +169,8 @@ MAX_FILE_BYTES = 256 * 2**20
 MAX_TABLE_ROWS = 2_000_000
 #: Measured points per command, chosen so that each stays under about 2 GB of memory
 #: (``experiments/bench_memory.py`` measures them; README, "Bad input"). ``diagnose``
-#: grows faster than linearly (1.6 GB at 10,000 points, 5.9 GB at 20,000); ``reproduce``
-#: diagnoses every table; ``protocol --design-from`` searches subsets of every size.
+#: (0.42 GB at 10,000 points) and ``reproduce`` (which diagnoses every table) take seconds
+#: per thousand points; ``protocol --design-from`` searches subsets of every size.
 POINT_BUDGET = {
     "fit": 200_000,
     "plot": 200_000,
