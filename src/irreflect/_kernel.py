@@ -379,6 +379,39 @@ def _inverse(g, free, scale, out):
                 out[i, j] = 0.0
 
 
+@njit(cache=True, error_model="numpy")
+def _lm_step(z, lo, hi, lam, grad, hess, pinned, a, rhs, step, zt):
+    """One bounded Levenberg-Marquardt trial point ``zt`` from ``z``: coordinates at a bound
+    whose gradient points outwards are pinned (their row and column of ``hess`` and their
+    gradient cleared), the diagonal damped by ``lam`` (relative to itself, floored), the
+    step solved and the trial point clipped into ``[lo, hi]``. ``grad`` and ``hess`` are
+    modified; ``pinned``, ``a``, ``rhs``, ``step`` are scratch."""
+    p = z.size
+    for q in range(p):
+        pinned[q] = (z[q] <= lo[q] + 1e-12 and grad[q] > 0.0) or \
+            (z[q] >= hi[q] - 1e-12 and grad[q] < 0.0)
+    for q in range(p):
+        if pinned[q]:
+            for r in range(p):
+                hess[q, r] = 0.0
+                hess[r, q] = 0.0
+            hess[q, q] = 1.0
+            grad[q] = 0.0
+    dmax = 0.0
+    for q in range(p):
+        dmax = max(dmax, hess[q, q])
+    a[:, :] = hess
+    for q in range(p):
+        d = max(hess[q, q], 1e-12 * dmax + 1e-300)
+        a[q, q] += lam * d
+        rhs[q] = -grad[q]
+    _solve_small(a, rhs, step)
+    for q in range(p):
+        if not math.isfinite(step[q]):
+            step[q] = 0.0
+        zt[q] = min(max(z[q] + step[q], lo[q]), hi[q])
+
+
 @njit(cache=True)
 def _solve_small(a, b, x):
     """Solve the small system ``a x = b`` by Gaussian elimination with partial pivoting
@@ -656,29 +689,7 @@ def _lm(codes, nonneg, residual, z0, lo, hi, geo, glcg, sw, yw, max_iter, ftol, 
                     acc += jac[j, q] * jac[j, r]
                 hess[q, r] = acc
                 hess[r, q] = acc
-        for q in range(p):
-            pinned[q] = (z[q] <= lo[q] + 1e-12 and grad[q] > 0.0) or \
-                (z[q] >= hi[q] - 1e-12 and grad[q] < 0.0)
-        for q in range(p):
-            if pinned[q]:
-                for r in range(p):
-                    hess[q, r] = 0.0
-                    hess[r, q] = 0.0
-                hess[q, q] = 1.0
-                grad[q] = 0.0
-        dmax = 0.0
-        for q in range(p):
-            dmax = max(dmax, hess[q, q])
-        a[:, :] = hess
-        for q in range(p):
-            d = max(hess[q, q], 1e-12 * dmax + 1e-300)
-            a[q, q] += lam * d
-            rhs[q] = -grad[q]
-        _solve_small(a, rhs, step)
-        for q in range(p):
-            if not math.isfinite(step[q]):
-                step[q] = 0.0
-            zt[q] = min(max(z[q] + step[q], lo[q]), hi[q])
+        _lm_step(z, lo, hi, lam, grad, hess, pinned, a, rhs, step, zt)
         tcost = _evaluate(codes, nonneg, residual, zt, geo, sw, yw, True, tbw, tdbw, talpha,
                           tfree, tinv, tresid, b, db, bp, dbp, gval)
         better = tcost < cost
@@ -1437,29 +1448,7 @@ def _tl_lm(nonneg, residual, z0, lo, hi, pts, gstart, glcg, max_iter, ftol, xtol
     reason = STOP_MAXITER
     for _ in range(max_iter):
         _tl_normal(pts, m, vec, cur, lin, coef, grad, hess)
-        for q in range(p):
-            pinned[q] = (z[q] <= lo[q] + 1e-12 and grad[q] > 0.0) or \
-                (z[q] >= hi[q] - 1e-12 and grad[q] < 0.0)
-        for q in range(p):
-            if pinned[q]:
-                for r in range(p):
-                    hess[q, r] = 0.0
-                    hess[r, q] = 0.0
-                hess[q, q] = 1.0
-                grad[q] = 0.0
-        dmax = 0.0
-        for q in range(p):
-            dmax = max(dmax, hess[q, q])
-        a[:, :] = hess
-        for q in range(p):
-            d = max(hess[q, q], 1e-12 * dmax + 1e-300)
-            a[q, q] += lam * d
-            rhs[q] = -grad[q]
-        _solve_small(a, rhs, step)
-        for q in range(p):
-            if not math.isfinite(step[q]):
-                step[q] = 0.0
-            zt[q] = min(max(z[q] + step[q], lo[q]), hi[q])
+        _lm_step(z, lo, hi, lam, grad, hess, pinned, a, rhs, step, zt)
         tri = 1 - cur
         tcost = _tl_eval(zt, pts, gstart, glcg, vec, tri, nonneg, residual, lin, gbuf)
         better = tcost < cost
