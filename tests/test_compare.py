@@ -260,3 +260,22 @@ def test_compare_with_defaults_works_on_every_real_table(real_dir, capsys):
     out = capsys.readouterr().out
     assert "note: rgl_paper_white has no measurements at |gamma| = 10 deg" in out
     assert "phong@27.668" in out
+
+
+@pytest.mark.real
+def test_compare_cli_defaults_on_a_matte_paint_where_two_models_cannot_fit(real_dir, capsys):
+    """RGL's matte wall paint with every default model: blinn-phong and oren-nayar cannot
+    beat a constant there; the command still compares the others (exit 0), lists the two as
+    skipped with the reason, and warns on stderr once per model left out."""
+    from irreflect.compare import DEFAULT_MODELS
+
+    rgl = real_dir / "rgl_epfl" / "rgl_colodur_napoli_4f.csv"
+    assert main(["compare", str(rgl), "--json"]) == 0
+    captured = capsys.readouterr()
+    out = json.loads(captured.out)
+    assert len(out["models"]) + len(out["skipped"]) == len(DEFAULT_MODELS)
+    assert "two-lobe" in out["models"] and out["best_by_bic"] == "two-lobe"
+    for label, why in out["skipped"].items():
+        assert "cannot beat a constant" in why
+        assert f"{label} left out of the comparison" in captured.err
+    assert captured.err.count("left out of the comparison") == len(out["skipped"]) >= 1
