@@ -12,7 +12,7 @@ from conftest import synthetic
 
 from irreflect import fitting
 from irreflect.cli import main
-from irreflect.data import load_bundled, write_measurements
+from irreflect.data import bundled_dir, load_bundled, write_measurements
 from irreflect.errors import IrreflectError
 from irreflect.selection import (
     SubsetEvaluator,
@@ -321,3 +321,22 @@ def test_default_workers_and_one_library_thread_each(monkeypatch):
     with parallel.one_thread_per_worker():  # what the workers inherit
         assert os.environ["OPENBLAS_NUM_THREADS"] == "1" and os.environ["OMP_NUM_THREADS"] == "3"
     assert "OPENBLAS_NUM_THREADS" not in os.environ and os.environ["OMP_NUM_THREADS"] == "3"
+
+
+@pytest.mark.real
+def test_select_warns_when_the_papers_protocol_fails_on_a_glossy_material(real_dir, tmp_path,
+                                                                          capsys):
+    """Cornell's high-gloss Cayman paint: the paper's 12 points give R^2 < 0 against all
+    points; select says so on stderr (with what to do), and stays quiet on a matte set."""
+    cayman = real_dir / "cornell" / "cornell_cayman.csv"
+    assert main(["select", str(cayman), "--generations", "5", "--pop-size", "20", "--quiet",
+                 "--out", str(tmp_path / "c")]) == 0
+    captured = capsys.readouterr()
+    summary = json.loads((tmp_path / "c" / "summary.json").read_text())
+    r2_12 = summary["methods"]["12"]["r2"]
+    assert r2_12 < 0
+    line = next(x for x in captured.err.splitlines() if "protocol fails" in x)
+    assert f"R^2 = {r2_12:.4g} against all points" in line and "--lobe-from" in line
+    assert main(["select", str(bundled_dir() / "terrazzo.csv"), "--generations", "5", "--pop-size", "20", "--quiet",
+                 "--out", str(tmp_path / "t")]) == 0
+    assert "protocol fails" not in capsys.readouterr().err

@@ -18,6 +18,7 @@ with ``--scheduler``) and write one such folder per run, ``DIR/<name>/seed<S>/``
 from __future__ import annotations
 
 import contextlib
+import sys
 from pathlib import Path
 
 from .options import (
@@ -74,6 +75,14 @@ def _print_run(result, methods: dict | None) -> None:
         print("  methods: " + "; ".join(parts) + f"  [{methods['note']}]")
         if methods["12"].get("how"):
             print(f"  method 12: {methods['12']['how']}")
+        r2_12, r2_b = methods["12"]["r2"], methods["B"]["r2"]
+        if r2_12 is not None and r2_12 < 0:
+            print(f"irreflect: warning: {m.name}: the paper's 12-point protocol fails on this "
+                  f"material: R^2 = {r2_12:.4g} against all points, worse than a constant "
+                  f"(the best 12 points give {r2_b:.4g}); its receiver angles miss the "
+                  "specular lobe: measure the points in optimal_points.csv or design a "
+                  "glossy-aware protocol with 'irreflect protocol --lobe-from PILOT.csv'",
+                  file=sys.stderr)
 
 
 def _cmd_select(args) -> int:
