@@ -413,6 +413,28 @@ def _lm_step(z, lo, hi, lam, grad, hess, pinned, a, rhs, step, zt):
 
 
 @njit(cache=True)
+def _lm_verdict(z, zt, cost, tcost, lam, xtol, ftol):
+    """Judge the trial point ``zt`` of a Levenberg-Marquardt step from ``z``: returns
+    (better, the new damping, stop), ``stop`` 0 to go on, else why to stop, in this order:
+    STOP_FTOL (an accepted step gained at most ``ftol`` of the cost), STOP_XTOL (a step of
+    at most ``xtol`` relative to |z|), STOP_STUCK (the damping grew past 1e10)."""
+    better = tcost < cost
+    lam_new = max(lam / 3.0, 1e-12) if better else lam * 4.0
+    dz = 0.0
+    zn = 0.0
+    for q in range(z.size):
+        dz += (zt[q] - z[q]) ** 2
+        zn += z[q] * z[q]
+    if better and cost - tcost <= ftol * max(cost, 1e-300):
+        return better, lam_new, STOP_FTOL
+    if math.sqrt(dz) <= xtol * (math.sqrt(zn) + xtol):
+        return better, lam_new, STOP_XTOL
+    if lam_new > 1e10:
+        return better, lam_new, STOP_STUCK
+    return better, lam_new, 0
+
+
+@njit(cache=True)
 def _solve_small(a, b, x):
     """Solve the small system ``a x = b`` by Gaussian elimination with partial pivoting
     (``a`` and ``b`` are overwritten); a singular pivot leaves that component 0."""
@@ -692,20 +714,8 @@ def _lm(codes, nonneg, residual, z0, lo, hi, geo, glcg, sw, yw, max_iter, ftol, 
         _lm_step(z, lo, hi, lam, grad, hess, pinned, a, rhs, step, zt)
         tcost = _evaluate(codes, nonneg, residual, zt, geo, sw, yw, True, tbw, tdbw, talpha,
                           tfree, tinv, tresid, b, db, bp, dbp, gval)
-        better = tcost < cost
-        gain = cost - tcost
-        lam_new = max(lam / 3.0, 1e-12) if better else lam * 4.0
-        dz = 0.0
-        zn = 0.0
-        for q in range(p):
-            dz += (zt[q] - z[q]) ** 2
-            zn += z[q] * z[q]
-        dz = math.sqrt(dz)
-        small_step = dz <= xtol * (math.sqrt(zn) + xtol)
-        small_gain = better and gain <= ftol * max(cost, 1e-300)
-        stuck = lam_new > 1e10
+        better, lam, stop = _lm_verdict(z, zt, cost, tcost, lam, xtol, ftol)
         nfev += 1
-        lam = lam_new
         if better:
             z[:] = zt
             cost = tcost
@@ -715,14 +725,8 @@ def _lm(codes, nonneg, residual, z0, lo, hi, geo, glcg, sw, yw, max_iter, ftol, 
             free, tfree = tfree, free
             inv, tinv = tinv, inv
             resid, tresid = tresid, resid
-        if small_gain:
-            reason = STOP_FTOL
-            break
-        if small_step:
-            reason = STOP_XTOL
-            break
-        if stuck:
-            reason = STOP_STUCK
+        if stop:
+            reason = stop
             break
     z_out[:] = z
     alpha_out[:] = alpha
@@ -1451,32 +1455,14 @@ def _tl_lm(nonneg, residual, z0, lo, hi, pts, gstart, glcg, max_iter, ftol, xtol
         _lm_step(z, lo, hi, lam, grad, hess, pinned, a, rhs, step, zt)
         tri = 1 - cur
         tcost = _tl_eval(zt, pts, gstart, glcg, vec, tri, nonneg, residual, lin, gbuf)
-        better = tcost < cost
-        gain = cost - tcost
-        lam_new = max(lam / 3.0, 1e-12) if better else lam * 4.0
-        dz = 0.0
-        zn = 0.0
-        for q in range(p):
-            dz += (zt[q] - z[q]) ** 2
-            zn += z[q] * z[q]
-        dz = math.sqrt(dz)
-        small_step = dz <= xtol * (math.sqrt(zn) + xtol)
-        small_gain = better and gain <= ftol * max(cost, 1e-300)
-        stuck = lam_new > 1e10
+        better, lam, stop = _lm_verdict(z, zt, cost, tcost, lam, xtol, ftol)
         nfev += 1
-        lam = lam_new
         if better:
             z[:] = zt
             cost = tcost
             cur = tri
-        if small_gain:
-            reason = STOP_FTOL
-            break
-        if small_step:
-            reason = STOP_XTOL
-            break
-        if stuck:
-            reason = STOP_STUCK
+        if stop:
+            reason = stop
             break
     z_out[:] = z
     alpha_out[0] = lin[cur, 0]
