@@ -155,3 +155,95 @@ def test_compiled_finish_equals_the_numpy_covariance(kind):
         assert rmse == pytest.approx(metrics.rmse(meas.power, ref_fitted), rel=1e-10)
         np.testing.assert_allclose(np.sqrt(np.diag(cov)), np.sqrt(np.diag(ref_cov)), rtol=1e-6)
         np.testing.assert_array_equal(singular, ref_singular)
+
+
+# ----------------------------------------------------------------------------- draws
+@pytest.mark.parametrize("seed", [0, 1, 7, 2**40 + 3, 2**63 - 1, 2**64 + 5, 10**40])
+def test_kernel_draws_are_the_numpy_draws(seed):
+    """The counter-based generator: the kernel draws inside tl_fit exactly what the numpy
+    reference draws (uniforms and the Latin hypercube to the bit, normals to an ulp)."""
+    from irreflect import _draws, _kernel
+
+    key = _draws.seed_key(seed)
+    assert 0 <= key < 2**63
+    for stream in range(4):
+        np.testing.assert_array_equal(_draws.uniforms(key, stream, 97),
+                                      _kernel.draw_uniforms(key, stream, 97))
+    np.testing.assert_allclose(_draws.normals(key, _draws.STREAM_HOPS, 60),
+                               _kernel.draw_normals(key, _draws.STREAM_HOPS, 60),
+                               rtol=1e-15, atol=1e-15)
+    lo, hi = np.array([-6.0, -1.2, -3.0, 0.0, -3.0]), np.array([2.0, 3.0, 6.0, 11.5, 3.0])
+    lhs = _draws.latin_hypercube(key, 96, lo, hi)
+    np.testing.assert_array_equal(lhs, _kernel.draw_latin_hypercube(key, 96, lo, hi))
+    # a Latin hypercube: every coordinate has exactly one point in each of the 96 strata
+    strata = np.floor((lhs - lo) / (hi - lo) * 96).astype(int)
+    for q in range(lo.size):
+        assert sorted(strata[:, q]) == list(range(96))
+
+
+def test_draws_are_uniform_normal_and_differ_between_seeds():
+    from irreflect import _draws
+
+    u = _draws.uniforms(_draws.seed_key(3), 0, 200_000)
+    assert 0.0 < u.min() and u.max() < 1.0
+    assert abs(u.mean() - 0.5) < 0.003 and abs(u.var() - 1 / 12) < 0.001
+    z = _draws.normals(_draws.seed_key(3), 2, 100_000)
+    assert abs(z.mean()) < 0.01 and abs(z.std() - 1.0) < 0.01
+    assert abs(np.mean(z**4) - 3.0) < 0.1  # the normal's kurtosis, not a uniform's
+    keys = {_draws.seed_key(s) for s in range(1000)} | {_draws.seed_key(2**64 + s)
+                                                        for s in range(1000)}
+    assert len(keys) == 2000
+    a, b = (_draws.uniforms(_draws.seed_key(s), 0, 8) for s in (0, 1))
+    assert not np.any(a == b)
+
+
+def test_kernel_pairwise_sum_is_numpys_to_the_bit():
+    """The kernel's scale of the power (np.sqrt(np.mean(w p p))) must be the numpy path's
+    to the bit, or the two searches part in the last digits."""
+    from irreflect import _kernel
+
+    rng = np.random.default_rng(5)
+    for n in [1, 7, 8, 9, 15, 16, 127, 128, 129, 255, 256, 257, 1000, 1261, 20_003]:
+        a = rng.standard_normal(n) * 10.0 ** rng.uniform(-6, 6, n)
+        assert _kernel.pairwise_sum(a, 0, n) == np.sum(a)
+        assert _kernel.pairwise_sum(a * a, 0, n) / n == np.mean(a * a)
+
+
+def test_compiled_fit_refuses_bad_tables_as_the_numpy_path_does():
+    """tl_fit checks the data itself; fit() raises the numpy path's one-line errors."""
+    from irreflect.data import Measurements
+    from irreflect.errors import DataError, IrreflectError
+
+    meas = load_bundled("terrazzo")
+    flat = Measurements(meas.gamma_deg, meas.theta_deg, np.full(meas.n_points, 2.5))
+    sig = Measurements(meas.gamma_deg, meas.theta_deg, meas.power,
+                       sigma=np.where(np.arange(meas.n_points) == 4, 0.0, 0.01))
+    for table, error, text in [(flat, DataError, "power is constant"),
+                               (sig, IrreflectError, "1 zero or negative")]:
+        for engine in ("compiled", "numpy"):
+            with pytest.raises(error, match=text):
+                fit(table, engine=engine)
+
+
+def test_compiled_fit_warns_as_judge_does():
+    """fit() skips judge() when the kernel finds nothing to flag: on a table whose fit is
+    at a bound and ill-determined the warnings are still there, and equal the numpy
+    path's."""
+    import warnings
+
+    from irreflect.errors import FitWarning
+    from irreflect.models import two_lobe_power
+
+    g = np.full(25, -30.0)
+    t = np.linspace(-80, 80, 25)
+    power = two_lobe_power(np.radians(g), np.radians(t), 0.1, -1.0, 1.2, 0.5, 60.0, 0.3, 2.0)
+    from irreflect.data import Measurements
+
+    meas = Measurements(g, t, power * (1 + 0.01 * np.random.default_rng(0).normal(size=25)))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", FitWarning)
+        a, b = fit(meas, engine="compiled"), fit(meas, engine="numpy")
+        clean = fit(load_bundled("terrazzo"), engine="compiled")
+    assert a.ill_determined and a.ill_determined == b.ill_determined
+    assert a.at_bound == b.at_bound and len(a.warnings) == len(b.warnings) >= 1
+    assert clean.warnings == () and clean.converged

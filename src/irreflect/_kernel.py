@@ -1792,6 +1792,57 @@ def _profile_pick(sums, counts, nd_grid, ns_grid):
     return out, ok
 
 
+# ----------------------------------------------------------------------------- draws
+# The counter-based generator of irreflect._draws, compiled: the same numbers from the
+# same (key, stream, index), so that a fit draws its candidates inside its one call.
+_U_GOLDEN = np.uint64(0x9E3779B97F4A7C15)
+_U_M1 = np.uint64(0xBF58476D1CE4E5B9)
+_U_M2 = np.uint64(0x94D049BB133111EB)
+STREAM_STRATA, STREAM_OFFSETS, STREAM_JITTER, STREAM_HOPS = 0, 1, 2, 3
+
+
+@njit(cache=True, inline="always")
+def _mix64(x):
+    x = (x ^ (x >> np.uint64(30))) * _U_M1
+    x = (x ^ (x >> np.uint64(27))) * _U_M2
+    return x ^ (x >> np.uint64(31))
+
+
+@njit(cache=True)
+def draw_uniforms(key, stream, count):
+    """_draws.uniforms: ``count`` uniforms in (0, 1) of ``stream``."""
+    base = _mix64(np.uint64(key) + _U_GOLDEN * np.uint64(stream + 1))
+    out = np.empty(count)
+    for i in range(count):
+        h = _mix64(base + np.uint64(i + 1) * _U_GOLDEN)
+        out[i] = (np.float64(h >> np.uint64(11)) + 0.5) * 2.0 ** -53
+    return out
+
+
+@njit(cache=True)
+def draw_normals(key, stream, count):
+    """_draws.normals: ``count`` standard normals of ``stream`` (Box-Muller)."""
+    u = draw_uniforms(key, stream, 2 * count)
+    out = np.empty(count)
+    for i in range(count):
+        out[i] = math.sqrt(-2.0 * math.log(u[2 * i])) * math.cos(TWO_PI * u[2 * i + 1])
+    return out
+
+
+@njit(cache=True)
+def draw_latin_hypercube(key, n, lo, hi):
+    """_draws.latin_hypercube: ``n`` points of a Latin hypercube in the box (lo, hi)."""
+    p = lo.size
+    keys = draw_uniforms(key, STREAM_STRATA, n * p)
+    offsets = draw_uniforms(key, STREAM_OFFSETS, n * p)
+    out = np.empty((n, p))
+    for q in range(p):
+        strata = np.argsort(keys[q * n:(q + 1) * n], kind="mergesort")
+        for i in range(n):
+            out[i, q] = lo[q] + (strata[i] + offsets[q * n + i]) / n * (hi[q] - lo[q])
+    return out
+
+
 # ----------------------------------------------------------------------------- the search
 @njit(cache=True)
 def global_search(codes, nonneg, residual, geo, glcg, power, weights, levels, group, nd_grid,
@@ -2371,31 +2422,163 @@ def tl_finish(z, alpha, geo, glcg, weights, power, absolute_sigma, cost, n_param
     return values, ok, fitted, r2, math.sqrt(mse), mse, cov, singular
 
 
+DEG = math.pi / 180.0  # numpy.radians multiplies by this (the same rounding)
+
+
 @njit(cache=True)
-def tl_fit(gamma, theta, power, weights, scale, absolute_sigma, n_params, nonneg, residual,
-           nd_grid, ns_grid, jitter, ext_start, extra, screen, lo, hi, zlo, zhi, axes, hops,
-           n_data_starts, n_keep, max_iter, max_rounds):
-    """fit() of the plain two-lobe model in one call: the table's geometry
-    (kernel_geometry), the global search on the power divided by ``scale`` (global_search)
-    and, unless the search ended where fit() polishes or checks the gradient (the
-    iteration limit, no step lowering the cost: then fit() finishes in Python), the finish
-    in the units of power (tl_finish, the linear coefficients and the cost scaled back).
-    Returns (z, alpha, cost (search units), reason, n_starts, n_evals, the exact angles of
-    incidence, finished, values, round_trip_ok, fitted, r2, rmse, mse, covariance,
-    singular, standard errors, residuals, all values finite, the largest specular share
-    at the angles of incidence)."""
+def _pairwise_block(a, lo, n):
+    """numpy's pairwise sum of ``a[lo:lo + n]`` for ``n <= 128``: sequential below 8,
+    else eight running sums combined as numpy combines them, then the remainder."""
+    if n < 8:
+        acc = -0.0
+        for i in range(n):
+            acc += a[lo + i]
+        return acc
+    r0 = a[lo]
+    r1 = a[lo + 1]
+    r2 = a[lo + 2]
+    r3 = a[lo + 3]
+    r4 = a[lo + 4]
+    r5 = a[lo + 5]
+    r6 = a[lo + 6]
+    r7 = a[lo + 7]
+    i = 8
+    while i < n - n % 8:
+        r0 += a[lo + i]
+        r1 += a[lo + i + 1]
+        r2 += a[lo + i + 2]
+        r3 += a[lo + i + 3]
+        r4 += a[lo + i + 4]
+        r5 += a[lo + i + 5]
+        r6 += a[lo + i + 6]
+        r7 += a[lo + i + 7]
+        i += 8
+    acc = ((r0 + r1) + (r2 + r3)) + ((r4 + r5) + (r6 + r7))
+    while i < n:
+        acc += a[lo + i]
+        i += 1
+    return acc
+
+
+@njit(cache=True)
+def pairwise_sum(a, lo, n):
+    """``numpy.sum`` of ``a[lo:lo + n]`` (float64, contiguous) to the bit: numpy's pairwise
+    summation (blocks of up to 128, :func:`_pairwise_block`; above, the two halves, the
+    first a multiple of 8 long, summed and added), so that a value the numpy path computes
+    with ``numpy.mean`` comes out the same here. The halving is walked with an explicit
+    stack: numba's on-disk cache does not keep recursive functions reliably."""
+    if n <= 128:
+        return _pairwise_block(a, lo, n)
+    s_lo = np.empty(64, np.int64)
+    s_n = np.empty(64, np.int64)
+    s_state = np.zeros(64, np.int64)
+    vals = np.empty(64)
+    nv = 0
+    top = 0
+    s_lo[0] = lo
+    s_n[0] = n
+    while top >= 0:
+        m = s_n[top]
+        if m <= 128:
+            vals[nv] = _pairwise_block(a, s_lo[top], m)
+            nv += 1
+            top -= 1
+            continue
+        half = m // 2
+        half -= half % 8
+        state = s_state[top]
+        if state == 2:  # both halves summed: combine
+            vals[nv - 2] = vals[nv - 2] + vals[nv - 1]
+            nv -= 1
+            top -= 1
+            continue
+        s_state[top] = state + 1
+        child_lo = s_lo[top] if state == 0 else s_lo[top] + half
+        child_n = half if state == 0 else m - half
+        top += 1
+        s_lo[top] = child_lo
+        s_n[top] = child_n
+        s_state[top] = 0
+    return vals[0]
+
+
+@njit(cache=True)
+def tl_fit(gamma_deg, theta_deg, power, sigma, use_sigma, n_params, nonneg, residual,
+           nd_grid, ns_grid, key, n_random, n_screen, n_hops, jitter_width, ext_start, extra,
+           lo, hi, zlo, zhi, axes, plo, phi, n_data_starts, n_keep, max_iter, max_rounds):
+    """fit() of the plain two-lobe model in one call, from the table as it is stored:
+    the checks of the data (a status: 0 fit, 1 non-finite power, 2 constant power,
+    3 sigma <= 0; fit() raises its one-line error for any other than 0, and nothing is
+    searched), angles to radians, weights ``1 / sigma^2`` (``use_sigma``) or 1, the
+    table's geometry (kernel_geometry), the random draws of the search from the
+    generator's ``key`` (irreflect._draws: the jitter of ``n_random`` starts, the Latin
+    hypercube of ``n_screen`` candidates, ``n_hops`` basin hops per round), the global
+    search on the power divided by its weighted root mean square (global_search) and,
+    unless the search ended where fit() polishes or checks the gradient (the iteration
+    limit, no step lowering the cost: then fit() finishes in Python), the finish in the
+    units of power (tl_finish). Returns (status, z, alpha and cost (search units), the
+    scale, reason, n_starts, n_evals, the exact angles of incidence, finished, values, round_trip_ok,
+    fitted, r2, rmse, mse, covariance, singular, standard errors, residuals, all values
+    finite, the largest specular share at the angles of incidence, whether judge() would
+    flag anything: a value at a bound ``plo``/``phi`` or ill-determined)."""
+    n = power.size
+    p = zlo.size
+    status = 0
+    pmin = math.inf
+    pmax = -math.inf
+    for j in range(n):
+        v = power[j]
+        if not math.isfinite(v):
+            status = 1
+            break
+        pmin = min(pmin, v)
+        pmax = max(pmax, v)
+    if status == 0 and pmax - pmin == 0.0:
+        status = 2
+    weights = np.ones(n)
+    if use_sigma:
+        for j in range(n):
+            if sigma[j] > 0.0:
+                weights[j] = 1.0 / sigma[j] ** 2
+            else:
+                status = 3 if status == 0 else status
+    gamma = gamma_deg * DEG
+    theta = theta_deg * DEG
     geo, glcg, levels, pgroup, exact = kernel_geometry(gamma, theta)
-    pn = power / scale
-    z, alpha, cost, reason, n_starts, n_evals = global_search(
-        np.zeros(0, np.int64), nonneg, residual, geo, glcg, pn, weights, levels, pgroup,
-        nd_grid, ns_grid, jitter, ext_start, extra, screen, lo, hi, zlo, zhi, axes, hops,
-        n_data_starts, n_keep, max_iter, max_rounds)
+    if status == 0:
+        # fitting._global_search's scale, to the bit (np.sqrt(np.mean(w * p * p)))
+        scale = math.sqrt(pairwise_sum(weights * power * power, 0, n) / n)
+        if not (math.isfinite(scale) and scale > 0.0):
+            scale = 1.0
+        jitter = draw_normals(key, STREAM_JITTER, n_random * p).reshape((n_random, p))
+        for i in range(n_random):
+            for q in range(p):
+                jitter[i, q] = 0.15 * jitter[i, q] * jitter_width[q]
+        hops = draw_normals(key, STREAM_HOPS, max_rounds * n_hops * p).reshape(
+            (max_rounds, n_hops, p))
+        for r in range(max_rounds):
+            for i in range(n_hops):
+                for q in range(p):
+                    hops[r, i, q] = 0.15 * hops[r, i, q]
+        screen = draw_latin_hypercube(key, n_screen, lo, hi)
+        z, alpha, cost, reason, n_starts, n_evals = global_search(
+            np.zeros(0, np.int64), nonneg, residual, geo, glcg, power / scale, weights,
+            levels, pgroup, nd_grid, ns_grid, jitter, ext_start, extra, screen, lo, hi, zlo,
+            zhi, axes, hops, n_data_starts, n_keep, max_iter, max_rounds)
+    else:
+        scale = 1.0
+        z = np.zeros(p)
+        alpha = np.zeros(2)
+        cost = math.inf
+        reason = STOP_NONFINITE
+        n_starts = 0
+        n_evals = 0
     finished = math.isfinite(cost) and reason != STOP_STUCK and reason != STOP_MAXITER
     k = z.size + alpha.size
     if finished:
         values, ok, fitted, r2, rmse, mse, cov, singular = tl_finish(
-            z, alpha * scale, geo, glcg, weights, power, absolute_sigma,
-            cost * scale * scale, n_params)
+            z, alpha * scale, geo, glcg, weights, power, use_sigma, cost * scale * scale,
+            n_params)
     else:
         values = np.full(k, np.nan)
         ok = False
@@ -2406,20 +2589,33 @@ def tl_fit(gamma, theta, power, weights, scale, absolute_sigma, n_params, nonneg
         cov = np.full((k, k), np.nan)
         singular = np.zeros(k, np.bool_)
     # what fit() reports besides: standard errors, residuals, whether every value is
-    # finite, the largest specular share u_as cos^v_as(gamma) at the angles of incidence
+    # finite, the largest specular share u_as cos^v_as(gamma) at the angles of incidence,
+    # and whether judge() has anything to say of the values (its tests, on the same
+    # numbers)
     stderr = np.empty(k)
     finite = True
+    flagged = False
     for q in range(k):
         v = cov[q, q]
         stderr[q] = math.sqrt(v) if v > 0.0 else (0.0 if v <= 0.0 else v)
         finite = finite and math.isfinite(values[q])
+        x = values[q]
+        b = plo[q]
+        if math.isfinite(b) and x <= b + (1e-6 * abs(b) if b != 0.0 else 1e-12):
+            flagged = True
+        b = phi[q]
+        if math.isfinite(b) and x >= b - (1e-6 * abs(b) if b != 0.0 else 1e-12):
+            flagged = True
+        e = stderr[q]
+        if not math.isfinite(e) or e > abs(x) or singular[q]:
+            flagged = True
     resid = power - fitted
     share = -math.inf
     for g in range(exact.size):
         v = values[0] * math.cos(abs(exact[g])) ** values[1]
         share = max(share, v) if v == v else math.inf
-    return (z, alpha, cost, reason, n_starts, n_evals, exact, finished, values, ok, fitted,
-            r2, rmse, mse, cov, singular, stderr, resid, finite, share)
+    return (status, z, alpha, cost, scale, reason, n_starts, n_evals, exact, finished, values,
+            ok, fitted, r2, rmse, mse, cov, singular, stderr, resid, finite, share, flagged)
 
 
 def warm() -> None:

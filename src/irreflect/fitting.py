@@ -23,6 +23,7 @@ from warnings import warn
 
 import numpy as np
 
+from . import _draws as _draws_mod
 from . import metrics
 from .data import as_measurements, check_enough_points
 from .errors import DataError, FitError, FitWarning, IrreflectError, unknown_name
@@ -501,8 +502,9 @@ def screen_samples(model, n: int, seed: int) -> np.ndarray:
     One or two nonlinear coordinates: a regular grid (``n`` points, or ``ceil(sqrt(n))``
     per axis), which no narrow optimum can slip through. More: a Latin hypercube, every
     coordinate's range cut into ``n`` strata each sampled once (McKay, Beckman and
-    Conover 1979). Plain numpy on purpose: ``scipy.stats.qmc`` would cost every command
-    a second of import time for the same coverage of the box.
+    Conover 1979), drawn from the counter-based generator of :mod:`irreflect._draws` (the
+    compiled kernel draws the same points). Plain numpy on purpose: ``scipy.stats.qmc``
+    would cost every command a second of import time for the same coverage of the box.
     """
     key = _screen_key(model, n, seed)
     if key not in _SCREEN_CACHE:
@@ -517,7 +519,7 @@ def screen_samples(model, n: int, seed: int) -> np.ndarray:
             a, b = np.meshgrid(np.linspace(lo[0], hi[0], k), np.linspace(lo[1], hi[1], k))
             out = np.column_stack([a.ravel(), b.ravel()])
         else:
-            out = _latin_hypercube(np.random.default_rng(seed), n, lo, hi)
+            out = _draws_mod.latin_hypercube(_draws_mod.seed_key(seed), n, lo, hi)
         _remember_screen(key, out)
     return _SCREEN_CACHE[key]
 
@@ -530,22 +532,6 @@ def _remember_screen(key, out) -> None:
     if len(_SCREEN_CACHE) >= 256:  # bounded: one entry per seed a process has used
         _SCREEN_CACHE.pop(next(iter(_SCREEN_CACHE)))
     _SCREEN_CACHE[key] = out
-
-
-_STRATA: dict = {}
-
-
-def _latin_hypercube(rng, n: int, lo, hi) -> np.ndarray:
-    """``n`` points of a Latin hypercube in the box (lo, hi) from the generator ``rng``
-    (screen_samples' draws: the strata of every coordinate permuted, then uniform
-    offsets within them)."""
-    p = lo.size
-    tiles = _STRATA.get((n, p))
-    if tiles is None:
-        tiles = _STRATA[(n, p)] = np.tile(np.arange(n), (p, 1))
-    strata = rng.permuted(tiles, axis=1).T
-    unit = (strata + rng.random((n, p))) / n
-    return lo + unit * (hi - lo)
 
 
 def _screen_box_key(model) -> tuple:
@@ -691,10 +677,9 @@ def _candidates(model, gamma_rad, theta_rad, power, seed, n_random, extra=None):
         starts = np.vstack([np.asarray(extra, float).reshape(-1, model.n_nonlinear), starts])
     parts = [starts]
     if n_random and len(starts):
-        rng = np.random.default_rng(seed)
         width = model.z_upper - model.z_lower
-        jitter = rng.normal(0.0, 0.15, (n_random, starts.shape[1])) * np.minimum(width, 10.0)
-        parts.append(starts[0] + jitter)
+        jitter, _ = _draws(seed, n_random, 0, 0, starts.shape[1])
+        parts.append(starts[0] + jitter * np.minimum(width, 10.0))
     out = np.clip(np.vstack(parts), model.z_lower, model.z_upper)
     return np.unique(out, axis=0) if len(out) else out
 
@@ -825,13 +810,14 @@ def _search_numpy(model_obj, codes, gamma, theta, power, weights, geom, sw1, yw1
     # refinement rounds: global line searches along every coordinate and, for models
     # with many coordinates, seeded jumps around the best point (basin hopping, Wales and
     # Doye 1997); Levenberg-Marquardt from all of them; stop when nothing improves
-    rng = np.random.default_rng([seed, 1])
     n_hops = _default_hops(model_obj, n_keep)
+    rounds = max_rounds if model_obj.n_nonlinear else 0
+    _, jumps = _draws(seed, 0, n_hops, rounds, zb.size)
     width = np.where(hi > lo, hi - lo, 1.0)
-    for _ in range(max_rounds if model_obj.n_nonlinear else 0):
+    for rnd in range(rounds):
         extra, scanned = _coordinate_scan(model_obj, geom, zb, cb, sw1, yw1)
         n_evals += scanned
-        hops = zb + rng.normal(0.0, 0.15, (n_hops, zb.size)) * width
+        hops = zb + jumps[rnd] * width
         extra = np.clip(np.vstack([extra, hops]), model_obj.z_lower, model_obj.z_upper)
         if not len(extra):
             break
@@ -849,8 +835,8 @@ def _search_compiled(model_obj, codes, gamma, theta, power, weights, geom, sw1, 
                      n_random_starts, n_screen, n_keep, n_data_starts, max_iter, max_rounds,
                      extra_starts, kgeo=None):
     """The same search in the compiled kernel (:mod:`irreflect._kernel`): the same
-    candidates (the random draws are made here, with the same generators), the same order
-    and stopping rules."""
+    candidates (the random draws of :mod:`irreflect._draws`, the same numbers), the same
+    order and stopping rules."""
     from . import _kernel
 
     p = model_obj.n_nonlinear
@@ -874,58 +860,65 @@ def _search_compiled(model_obj, codes, gamma, theta, power, weights, geom, sw1, 
     return zb, ab, float(cb), int(rb), int(n_starts), int(n_evals)
 
 
-def _search_plain_compiled(model_obj, gamma, theta, power, weights, absolute_sigma, *, seed,
-                           n_random_starts=2, n_screen=None, n_keep=None, n_data_starts=None,
-                           max_iter=200, max_rounds=3, polish=True, extra_starts=None):
-    """:func:`_global_search` of the plain two-lobe model with the compiled kernel, and
-    fit()'s finish, in one compiled call (:func:`irreflect._kernel.tl_fit`; the same
-    search, the same numbers). Returns ``(found, finish, exact)``: ``found`` as
-    :func:`_global_search` returns it (None: no finite start), ``finish`` the values of
-    ``tl_finish`` (None when fit() has to compute them: after a polish) and the exact
-    angles of incidence."""
+def _fit_plain_compiled(model_obj, meas, sigma, source, *, seed, n_random_starts=2,
+                        n_screen=None, n_keep=None, n_data_starts=None, max_iter=200,
+                        max_rounds=3, polish=True, extra_starts=None):
+    """:func:`fit` of the plain two-lobe model with the compiled kernel: the checks of the
+    data, the draws, the global search and fit()'s finish in one compiled call
+    (:func:`irreflect._kernel.tl_fit`; the same search as :func:`_global_search`, the same
+    numbers), so that a fit pays almost nothing in Python. Returns ``(found, finish,
+    angles, flagged)``: ``found`` as :func:`_global_search` returns it (None: no finite
+    start), ``finish`` the values of ``tl_finish`` (None when fit() has to compute them:
+    after a polish), the exact angles of incidence and whether :func:`judge` would find
+    anything to say (when not, fit() need not ask it)."""
     from . import _kernel
 
-    power = np.asarray(power, float)
-    scale = float(np.sqrt(np.mean(weights * power * power)))
-    if not (np.isfinite(scale) and scale > 0):
-        scale = 1.0
+    p = model_obj.n_nonlinear
+    st = _kernel_static(model_obj)
     n_screen = default_screen(model_obj) if n_screen is None else int(n_screen)
     n_keep = default_keep(model_obj) if n_keep is None else int(n_keep)
     if n_data_starts is None:
         n_data_starts = int(model_obj.options.get("n_data_starts", 2))
-    p = model_obj.n_nonlinear
-    st = _kernel_static(model_obj)
-    n_hops = _default_hops(model_obj, n_keep)
-    key = _screen_key(model_obj, n_screen, seed) if n_screen and p >= 3 else None
-    if key is not None and key not in _SCREEN_CACHE and n_random_starts and not n_hops:
-        # a new seed: the Latin hypercube and the random starts' jitter are both drawn
-        # from default_rng(seed) as it starts; one generator, its state restored between
-        bits = np.random.PCG64(seed)
-        rng = np.random.Generator(bits)
-        start = bits.state
-        lo, hi = model_obj.screen_box()
-        _remember_screen(key, _latin_hypercube(rng, n_screen, lo, hi))
-        bits.state = start
-        jitter = rng.normal(0.0, 0.15, (n_random_starts, p))
-        hops = np.zeros((max_rounds, 0, p))
-    else:
-        jitter, hops = _draws(seed, n_random_starts, n_hops, max_rounds, p)
-    screen = (screen_samples(model_obj, n_screen, seed) if n_screen and p
-              else np.zeros((0, p)))
     extra = (st["no_extra"] if extra_starts is None else
              np.clip(np.asarray(extra_starts, float).reshape(-1, p), st["zlo"], st["zhi"]))
-    (z, alpha, cost, reason, n_starts, n_evals, exact, finished, *finish) = _kernel.tl_fit(
-        _w(gamma), _w(theta), _w(power), _w(weights), scale, bool(absolute_sigma),
-        model_obj.n_params, st["nonneg"], st["residual"], _PROFILE_GRIDS[0],
-        _PROFILE_GRIDS[1], _w(jitter * st["jitter_width"]), st["ext_rows"], _w(extra),
-        _w(screen), st["lo"], st["hi"], st["zlo"], st["zhi"], st["axes"], _w(hops),
-        int(n_data_starts), int(n_keep), int(max_iter), int(max_rounds))
+    weighted = sigma is not None
+    (status, z, alpha, cost, scale, reason, n_starts, n_evals, exact, finished,
+     *finish, flagged) = _kernel.tl_fit(
+        _w(meas.gamma_deg), _w(meas.theta_deg), _w(meas.power),
+        _w(sigma) if weighted else st["no_sigma"], weighted, model_obj.n_params,
+        st["nonneg"], st["residual"], _PROFILE_GRIDS[0], _PROFILE_GRIDS[1],
+        _draws_mod.seed_key(seed), int(n_random_starts), n_screen,
+        _default_hops(model_obj, n_keep), st["jitter_width"], st["ext_rows"], _w(extra),
+        st["lo"], st["hi"], st["zlo"], st["zhi"], st["axes"], st["plo"], st["phi"],
+        int(n_data_starts), n_keep, int(max_iter), int(max_rounds))
+    if status:  # the same one-line errors as the numpy path
+        check_fit_data(meas.power, model_obj, source)
+        if weighted:
+            _check_sigma(sigma, source)
+        raise FitError(f"fit of '{model_obj.name}' to {source}: the data were refused "
+                       f"(status {status}) without a reason: please report this")
     if not math.isfinite(cost):
-        return None, None, exact
+        return None, None, exact, flagged
     found = (z, alpha, float(cost), int(reason), int(n_starts), int(n_evals))
-    zb, ab, cb, *rest = _conclude(model_obj, gamma, theta, power / scale, weights, found,
+    if finished:  # _conclude's verdict on a search that met its tolerance
+        message = _STOP_MESSAGES[reason].format(ftol=1e-10, xtol=1e-9, max_iter=max_iter)
+        return ((z, alpha * scale, cost * scale * scale, reason in (STOP_FTOL, STOP_XTOL), message,
+                 int(n_starts), int(n_evals)), finish, exact, flagged)
+    gamma = np.radians(meas.gamma_deg)
+    theta = np.radians(meas.theta_deg)
+    weights = np.ones_like(meas.power) if sigma is None else 1.0 / sigma**2
+    zb, ab, cb, *rest = _conclude(model_obj, gamma, theta, meas.power / scale, weights, found,
                                   polish, max_iter)
-    return (zb, ab * scale, cb * scale * scale, *rest), (finish if finished else None), exact
+    return (zb, ab * scale, cb * scale * scale, *rest), None, exact, True
+
+
+def _check_sigma(sigma, source) -> None:
+    if np.any(sigma <= 0):
+        raise IrreflectError(
+            f"{source}: sigma must be > 0 to weight a fit by 1/sigma^2, found "
+            f"{int(np.sum(sigma <= 0))} zero or negative value(s): fix them or drop the "
+            "sigma column to fit unweighted"
+        )
 
 
 def _kernel_static(model_obj) -> dict:
@@ -944,8 +937,11 @@ def _kernel_static(model_obj) -> dict:
         "zhi": _w(model_obj.z_upper.copy()),
         "axes": _w(np.array(_scan_axes(model_obj, 33)).reshape(p, 33)),
         "ext_rows": _w(_extension_start_rows(model_obj)),
-        "jitter_width": np.minimum(model_obj.z_upper - model_obj.z_lower, 10.0),
+        "jitter_width": _w(np.minimum(model_obj.z_upper - model_obj.z_lower, 10.0)),
         "no_extra": np.zeros((0, p)),
+        "no_sigma": np.zeros(0),
+        "plo": _w([q.lower for q in model_obj.params]),
+        "phi": _w([q.upper for q in model_obj.params]),
     }
     try:
         model_obj.options["_kernel_static"] = (model_obj, st)
@@ -956,12 +952,14 @@ def _kernel_static(model_obj) -> dict:
 
 @functools.lru_cache(maxsize=64)
 def _draws(seed, n_random: int, n_hops: int, rounds: int, p: int):
-    """The random draws of one search (as the numpy path draws them): normal jitter of the
-    first start (times 0.15; the caller scales it) and the basin hops of every round."""
-    jitter = (np.random.default_rng(seed).normal(0.0, 0.15, (n_random, p)) if n_random
-              else np.zeros((0, p)))
-    hops = (np.random.default_rng([seed, 1]).normal(0.0, 0.15, (rounds, n_hops, p)) if n_hops
-            else np.zeros((rounds, 0, p)))
+    """The random draws of one search (:mod:`irreflect._draws`; the kernel's tl_fit draws
+    the same inside): normal jitter of the first start (times 0.15; the caller scales it)
+    and the basin hops of every round (times 0.15; the caller scales them)."""
+    key = _draws_mod.seed_key(seed)
+    jitter = (0.15 * _draws_mod.normals(key, _draws_mod.STREAM_JITTER, n_random * p)
+              ).reshape(n_random, p)
+    hops = (0.15 * _draws_mod.normals(key, _draws_mod.STREAM_HOPS, rounds * n_hops * p)
+            ).reshape(rounds, n_hops, p)
     jitter.flags.writeable = False
     hops.flags.writeable = False
     return jitter, hops
@@ -1188,36 +1186,33 @@ def fit(measurements, model="two-lobe", *, seed: int = 0, n_random_starts: int =
     meas = as_measurements(measurements)
     model_obj = get_model(model)
     source = getattr(meas, "name", None) or "table"
-    check_fit_data(meas.power, model_obj, source)
-    gamma = np.radians(meas.gamma_deg)
-    theta = np.radians(meas.theta_deg)
-    power = meas.power
     sigma = meas.sigma if (use_sigma and meas.sigma is not None) else None
-    if sigma is not None and np.any(sigma <= 0):
-        raise IrreflectError(
-            f"{source}: sigma must be > 0 to weight a fit by 1/sigma^2, found "
-            f"{int(np.sum(sigma <= 0))} zero or negative value(s): fix them or drop the "
-            "sigma column to fit unweighted"
-        )
-    weights = np.ones_like(power) if sigma is None else 1.0 / sigma**2
     codes = _kernel_codes(model_obj, engine)
     plain = codes is not None and codes.size == 0
     finish = None
-    if plain:  # the plain two-lobe model: search and finish in one compiled call
-        kgeo = None
-        out, finish, angles = _search_plain_compiled(
-            model_obj, gamma, theta, power, weights, sigma is not None, seed=seed,
-            n_random_starts=n_random_starts, n_screen=n_screen, n_keep=n_keep,
-            n_data_starts=n_data_starts, max_iter=max_iter, max_rounds=max_rounds,
-            polish=polish, extra_starts=extra_starts)
+    flagged = True  # whether judge() may have anything to say
+    if plain:  # the plain two-lobe model: checks, search and finish in one compiled call
+        check_enough_points(meas.n_points, model_obj, source)
+        out, finish, angles, flagged = _fit_plain_compiled(
+            model_obj, meas, sigma, source, seed=seed, n_random_starts=n_random_starts,
+            n_screen=n_screen, n_keep=n_keep, n_data_starts=n_data_starts,
+            max_iter=max_iter, max_rounds=max_rounds, polish=polish,
+            extra_starts=extra_starts)
     else:
+        check_fit_data(meas.power, model_obj, source)
+        if sigma is not None:
+            _check_sigma(sigma, source)
+        gamma = np.radians(meas.gamma_deg)
+        theta = np.radians(meas.theta_deg)
+        weights = np.ones_like(meas.power) if sigma is None else 1.0 / sigma**2
         kgeo = _kernel_geometry(gamma, theta) if codes is not None else None
         angles = gamma if kgeo is None else kgeo[4]
-        out = _global_search(model_obj, gamma, theta, power, weights, seed=seed,
+        out = _global_search(model_obj, gamma, theta, meas.power, weights, seed=seed,
                              n_random_starts=n_random_starts, n_screen=n_screen,
                              n_keep=n_keep, n_data_starts=n_data_starts, max_iter=max_iter,
                              max_rounds=max_rounds, polish=polish, engine=engine,
                              extra_starts=extra_starts, kgeo=kgeo)
+    power = meas.power
     if out is None:
         raise FitError(
             f"fit of '{model_obj.name}' to {source} failed: no start reached a finite cost; "
@@ -1230,6 +1225,9 @@ def fit(measurements, model="two-lobe", *, seed: int = 0, n_random_starts: int =
         if finish is None:  # a polished search: its finish here
             from . import _kernel
 
+            gamma = np.radians(meas.gamma_deg)
+            theta = np.radians(meas.theta_deg)
+            weights = np.ones_like(power) if sigma is None else 1.0 / sigma**2
             kgeo = _kernel_geometry(gamma, theta)
             finish = (*_kernel.tl_finish(_w(zb), _w(ab), kgeo[0], kgeo[1], _w(weights),
                                          _w(power), sigma is not None, cb, model_obj.n_params),
@@ -1278,8 +1276,11 @@ def fit(measurements, model="two-lobe", *, seed: int = 0, n_random_starts: int =
     if stderr is None:
         stderr = np.sqrt(np.clip(np.diag(cov), 0, None))
     # the distinct angles of incidence stand for all (judge's checks look at each once)
-    at_bound, ill, warnings = judge(model_obj, values, stderr, singular, angles, converged,
-                                    message, validity=validity)
+    if flagged or not converged or validity:
+        at_bound, ill, warnings = judge(model_obj, values, stderr, singular, angles,
+                                        converged, message, validity=validity)
+    else:  # the kernel ran judge()'s tests on these numbers: nothing to say
+        at_bound = ill = warnings = ()
     for text in warnings:
         warn(FitWarning(f"{source}, {model_obj.name}: {text}"), stacklevel=2)
     dof = meas.n_points - model_obj.n_params

@@ -34,6 +34,8 @@ PAPER_N = 12  # the paper's protocol size (irreflect.selection.run.PAPER_N)
 
 
 def _print_run(result, methods: dict | None) -> None:
+    from ..protocol.evaluate import protocol_fails
+
     m = result.measurements
     state = " (interrupted: results so far)" if result.interrupted else ""
     print(f"{m.name}: {m.n_points} points, selector {result.selector}, seed {result.seed}{state}")
@@ -75,11 +77,13 @@ def _print_run(result, methods: dict | None) -> None:
         print("  methods: " + "; ".join(parts) + f"  [{methods['note']}]")
         if methods["12"].get("how"):
             print(f"  method 12: {methods['12']['how']}")
-        r2_12, r2_b = methods["12"]["r2"], methods["B"]["r2"]
-        if r2_12 is not None and r2_12 < 0:
+        r2_12, r2_b, r2_a = methods["12"]["r2"], methods["B"]["r2"], methods["A"]["r2"]
+        if r2_12 is not None and r2_a is not None and protocol_fails(r2_12, r2_a):
+            worse = ", worse than a constant" if r2_12 < 0 else ""
+            best = "" if r2_b is None else f"; the best 12 points give {r2_b:.4g}"
             print(f"irreflect: warning: {m.name}: the paper's 12-point protocol fails on this "
-                  f"material: R^2 = {r2_12:.4g} against all points, worse than a constant "
-                  f"(the best 12 points give {r2_b:.4g}); its receiver angles miss the "
+                  f"material: R^2 = {r2_12:.4g} against all points{worse} (the all-points "
+                  f"fit's {r2_a:.4g}{best}); its receiver angles miss the "
                   "specular lobe: measure the points in optimal_points.csv or design a "
                   "glossy-aware protocol with 'irreflect protocol --lobe-from PILOT.csv'",
                   file=sys.stderr)

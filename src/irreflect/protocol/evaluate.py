@@ -302,6 +302,14 @@ def evaluate_protocol(protocol, dense, model="two-lobe", *, tolerance_deg: float
 FAILURE_MARGIN = 0.02
 
 
+def protocol_fails(r2: float, reference_r2: float) -> bool:
+    """Whether a protocol whose fit has ``r2`` on all points fails the material whose
+    all-points fit has ``reference_r2``: more than :data:`FAILURE_MARGIN` below it (or
+    more than 5 times the all-points fit's own 1 - R^2)."""
+    margin = max(FAILURE_MARGIN, 5.0 * (1.0 - reference_r2))
+    return bool(np.isfinite(r2) and r2 < reference_r2 - margin)
+
+
 def specular_half_widths(dense, reference: FitResult | None = None) -> dict[float, float]:
     """Half width at half maximum (deg) of the specular lobe per angle of incidence of a
     dense scan: from the reference's ``n_s(gamma) = u_ns cos^v_ns(gamma)`` when it is a
@@ -333,9 +341,9 @@ def protocol_failure(protocol, dense, frame, r2, reference_r2, r2_within, refere
     * the fit extrapolates beyond the protocol's angles of incidence;
     * the protocol leaves coefficients ill-determined.
     """
-    margin = max(FAILURE_MARGIN, 5.0 * (1.0 - reference_r2))
-    if not (np.isfinite(r2) and r2 < reference_r2 - margin):
+    if not protocol_fails(r2, reference_r2):
         return ""
+    margin = max(FAILURE_MARGIN, 5.0 * (1.0 - reference_r2))
     head = (f"its fit's R^2 on all points is {r2:.4g}, the all-points fit's {reference_r2:.4g}")
     widths = specular_half_widths(dense, reference)
     causes = []
