@@ -267,7 +267,9 @@ def test_evaluation_on_bundled_data(bundled):
     own = fit(bundled.subset(mask))
     pred = own.predict(bundled.gamma_deg, bundled.theta_deg)
     assert ev.r2 == pytest.approx(metrics.r2(bundled.power, pred), abs=1e-9)
-    assert ev.rmse == pytest.approx(metrics.rmse(bundled.power, pred), rel=1e-9)
+    # the RMSE on all points of a fit on 12: the two fits reach the same 12-point cost but
+    # may stop a hair apart along its flat directions, which move the other 120 points
+    assert ev.rmse == pytest.approx(metrics.rmse(bundled.power, pred), rel=1e-6)
     # the all-points fit is optimal on all points (the paper's Method A >= its 12 points)
     assert ev.r2 <= ev.reference_r2 + 1e-12
     assert 0.95 < ev.r2
