@@ -861,7 +861,8 @@ def _search_compiled(model_obj, codes, gamma, theta, power, weights, geom, sw1, 
     return zb, ab, float(cb), int(rb), int(n_starts), int(n_evals)
 
 
-def _fit_plain_compiled(model_obj, meas, sigma, source, *, seed, n_random_starts=2,
+def _fit_plain_compiled(model_obj, meas, sigma, source, *, columns=None, seed,
+                        n_random_starts=2,
                         n_screen=None, n_keep=None, n_data_starts=None, max_iter=200,
                         max_rounds=3, polish=True, extra_starts=None, n_hops=None):
     """:func:`fit` of the plain two-lobe model with the compiled kernel: the checks of the
@@ -871,7 +872,9 @@ def _fit_plain_compiled(model_obj, meas, sigma, source, *, seed, n_random_starts
     angles, flagged)``: ``found`` as :func:`_global_search` returns it (None: no finite
     start), ``finish`` the values of ``tl_finish`` (None when fit() has to compute them:
     after a polish), the exact angles of incidence and whether :func:`judge` would find
-    anything to say (when not, fit() need not ask it)."""
+    anything to say (when not, fit() need not ask it). ``columns``: the table's gamma,
+    theta and power as writeable copies (fit() keeps them in its result), else the
+    table's own."""
     from . import _kernel
 
     p = model_obj.n_nonlinear
@@ -883,9 +886,11 @@ def _fit_plain_compiled(model_obj, meas, sigma, source, *, seed, n_random_starts
     extra = (st["no_extra"] if extra_starts is None else
              np.clip(np.asarray(extra_starts, float).reshape(-1, p), st["zlo"], st["zhi"]))
     weighted = sigma is not None
+    if columns is None:
+        columns = (meas.gamma_deg, meas.theta_deg, meas.power)
     (status, z, alpha, cost, scale, reason, n_starts, n_evals, exact, finished,
      *finish, flagged) = _kernel.tl_fit(
-        _w(meas.gamma_deg), _w(meas.theta_deg), _w(meas.power),
+        _w(columns[0]), _w(columns[1]), _w(columns[2]),
         _w(sigma) if weighted else st["no_sigma"], weighted, model_obj.n_params,
         st["nonneg"], st["residual"], _PROFILE_GRIDS[0], _PROFILE_GRIDS[1],
         _draws_mod.seed_key(seed), int(n_random_starts), n_screen,
@@ -1205,7 +1210,7 @@ def fit(measurements, model="two-lobe", *, seed: int = 0, n_random_starts: int =
         beat a constant (R^2 <= 0).
     """
 
-    spec = parse_spec(model) if isinstance(model, str) else None
+    spec = parse_spec(model) if isinstance(model, str) and "@" in model else None
     if spec is not None and spec.at_gamma_deg is not None:  # 'phong@10': one incidence
         sub = points_at_incidence(as_measurements(measurements), spec.at_gamma_deg, str(spec))
         result = fit(sub, spec.model_text, seed=seed, n_random_starts=n_random_starts,
@@ -1226,10 +1231,12 @@ def fit(measurements, model="two-lobe", *, seed: int = 0, n_random_starts: int =
     plain = codes is not None and codes.size == 0
     finish = None
     flagged = True  # whether judge() may have anything to say
+    columns = None  # the result's own copies of the table's columns
     if plain:  # the plain two-lobe model: checks, search and finish in one compiled call
         check_enough_points(meas.n_points, model_obj, source)
+        columns = (meas.gamma_deg.copy(), meas.theta_deg.copy(), meas.power.copy())
         out, finish, angles, flagged = _fit_plain_compiled(
-            model_obj, meas, sigma, source, seed=seed, n_random_starts=n_random_starts,
+            model_obj, meas, sigma, source, columns=columns, seed=seed, n_random_starts=n_random_starts,
             n_screen=n_screen, n_keep=n_keep, n_data_starts=n_data_starts,
             max_iter=max_iter, max_rounds=max_rounds, polish=polish,
             extra_starts=extra_starts, n_hops=n_hops)
@@ -1332,9 +1339,9 @@ def fit(measurements, model="two-lobe", *, seed: int = 0, n_random_starts: int =
         mse=float(mse),
         chi2_reduced=chi2,
         residuals=resid,
-        gamma_deg=meas.gamma_deg.copy(),
-        theta_deg=meas.theta_deg.copy(),
-        power=power.copy(),
+        gamma_deg=meas.gamma_deg.copy() if columns is None else columns[0],
+        theta_deg=meas.theta_deg.copy() if columns is None else columns[1],
+        power=power.copy() if columns is None else columns[2],
         sigma=None if sigma is None else sigma.copy(),
         n_points=meas.n_points,
         n_params=model_obj.n_params,
