@@ -1043,6 +1043,19 @@ def _tl_values(z, lc):
     return fexp(z[0] * lc), fexp(z[1] + z[2] * lc), fexp(z[3] + z[4] * lc)
 
 
+@njit(cache=True, inline="always")
+def _tl_group_values(z, glcg, gval):
+    """Per angle of incidence (``glcg``: log cos of each): cos^v_as, n_d, n_s and the
+    lobes' normalisations (n_d + 1)/2pi, (n_s + 1)/2pi into the rows of ``gval``."""
+    for g in range(glcg.size):
+        s, nd, ns = _tl_values(z, glcg[g])
+        gval[g, 0] = s
+        gval[g, 1] = nd
+        gval[g, 2] = ns
+        gval[g, 3] = (nd + 1.0) / TWO_PI
+        gval[g, 4] = (ns + 1.0) / TWO_PI
+
+
 # Rows of the fast path's per-point scratch ``vec`` (see tl_work): two slots (the current
 # point of a Levenberg-Marquardt run and its trial), slot k at rows _SLOT * k:
 #   +0, +1  the lobes' powers cos^n_d theta, cos^n_s phi
@@ -2044,13 +2057,7 @@ def _shared_products(cands, geo, glcg, sw, yw):
     lct_all, pt_all, lcp_all, pp_all, group = geo[3], geo[4], geo[5], geo[6], geo[7]
     for c in range(c_count):
         z = cands[c]
-        for g in range(glcg.size):
-            s, nd, ns = _tl_values(z, glcg[g])
-            gval[g, 0] = s
-            gval[g, 1] = nd
-            gval[g, 2] = ns
-            gval[g, 3] = (nd + 1.0) / TWO_PI
-            gval[g, 4] = (ns + 1.0) / TWO_PI
+        _tl_group_values(z, glcg, gval)
         for j in range(n):
             g = group[j]
             a = lexp(gval[g, 1] * lct_all[j]) * (1.0 if pt_all[j] else 0.0)
@@ -2316,13 +2323,7 @@ def tl_finish(z, alpha, geo, glcg, weights, power, absolute_sigma, cost, n_param
     a0 = alpha[0]
     a1 = alpha[1]
     gval = np.empty((glcg.size, 5))
-    for g in range(glcg.size):
-        s, nd, ns = _tl_values(z, glcg[g])
-        gval[g, 0] = s
-        gval[g, 1] = nd
-        gval[g, 2] = ns
-        gval[g, 3] = (nd + 1.0) / TWO_PI
-        gval[g, 4] = (ns + 1.0) / TWO_PI
+    _tl_group_values(z, glcg, gval)
     lcg_all, lct_all, pt_all, lcp_all, pp_all, group = geo[2], geo[3], geo[4], geo[5], \
         geo[6], geo[7]
     for j in range(n):
