@@ -506,7 +506,7 @@ def screen_samples(model, n: int, seed: int) -> np.ndarray:
     compiled kernel draws the same points). Plain numpy on purpose: ``scipy.stats.qmc``
     would cost every command a second of import time for the same coverage of the box.
     """
-    key = _screen_key(model, n, seed)
+    key = (model.name, model.n_nonlinear, n, seed, _screen_box_key(model))
     if key not in _SCREEN_CACHE:
         lo, hi = model.screen_box()
         p = lo.size
@@ -520,18 +520,10 @@ def screen_samples(model, n: int, seed: int) -> np.ndarray:
             out = np.column_stack([a.ravel(), b.ravel()])
         else:
             out = _draws_mod.latin_hypercube(_draws_mod.seed_key(seed), n, lo, hi)
-        _remember_screen(key, out)
+        if len(_SCREEN_CACHE) >= 256:  # bounded: one entry per seed a process has used
+            _SCREEN_CACHE.pop(next(iter(_SCREEN_CACHE)))
+        _SCREEN_CACHE[key] = out
     return _SCREEN_CACHE[key]
-
-
-def _screen_key(model, n: int, seed) -> tuple:
-    return (model.name, model.n_nonlinear, n, seed, _screen_box_key(model))
-
-
-def _remember_screen(key, out) -> None:
-    if len(_SCREEN_CACHE) >= 256:  # bounded: one entry per seed a process has used
-        _SCREEN_CACHE.pop(next(iter(_SCREEN_CACHE)))
-    _SCREEN_CACHE[key] = out
 
 
 def _screen_box_key(model) -> tuple:
@@ -862,9 +854,9 @@ def _search_compiled(model_obj, codes, gamma, theta, power, weights, geom, sw1, 
 
 
 def _fit_plain_compiled(model_obj, meas, sigma, source, *, columns=None, seed,
-                        n_random_starts=2,
-                        n_screen=None, n_keep=None, n_data_starts=None, max_iter=200,
-                        max_rounds=3, polish=True, extra_starts=None, n_hops=None):
+                        n_random_starts=2, n_screen=None, n_keep=None,
+                        n_data_starts=None, max_iter=200, max_rounds=3, polish=True,
+                        extra_starts=None, n_hops=None):
     """:func:`fit` of the plain two-lobe model with the compiled kernel: the checks of the
     data, the draws, the global search and fit()'s finish in one compiled call
     (:func:`irreflect._kernel.tl_fit`; the same search as :func:`_global_search`, the same
@@ -879,10 +871,8 @@ def _fit_plain_compiled(model_obj, meas, sigma, source, *, columns=None, seed,
 
     p = model_obj.n_nonlinear
     st = _kernel_static(model_obj)
-    n_screen = default_screen(model_obj) if n_screen is None else int(n_screen)
-    n_keep = default_keep(model_obj) if n_keep is None else int(n_keep)
-    if n_data_starts is None:
-        n_data_starts = int(model_obj.options.get("n_data_starts", 2))
+    n_screen, n_keep, n_data_starts = _search_defaults(model_obj, n_screen, n_keep,
+                                                       n_data_starts)
     extra = (st["no_extra"] if extra_starts is None else
              np.clip(np.asarray(extra_starts, float).reshape(-1, p), st["zlo"], st["zhi"]))
     weighted = sigma is not None
@@ -909,14 +899,19 @@ def _fit_plain_compiled(model_obj, meas, sigma, source, *, columns=None, seed,
     found = (z, alpha, float(cost), int(reason), int(n_starts), int(n_evals))
     if finished:  # _conclude's verdict on a search that met its tolerance
         message = _STOP_MESSAGES[reason].format(ftol=1e-10, xtol=1e-9, max_iter=max_iter)
-        return ((z, alpha * scale, cost * scale * scale, reason in (STOP_FTOL, STOP_XTOL), message,
-                 int(n_starts), int(n_evals)), finish, exact, flagged)
-    gamma = np.radians(meas.gamma_deg)
-    theta = np.radians(meas.theta_deg)
-    weights = np.ones_like(meas.power) if sigma is None else 1.0 / sigma**2
+        converged = reason in (STOP_FTOL, STOP_XTOL)
+        return ((z, alpha * scale, cost * scale * scale, converged, message, int(n_starts),
+                 int(n_evals)), finish, exact, flagged)
+    gamma, theta, weights = _radians_and_weights(meas, sigma)
     zb, ab, cb, *rest = _conclude(model_obj, gamma, theta, meas.power / scale, weights, found,
                                   polish, max_iter)
     return (zb, ab * scale, cb * scale * scale, *rest), None, exact, True
+
+
+def _radians_and_weights(meas, sigma) -> tuple:
+    """A table's angles in radians and its weights ``1 / sigma^2`` (1 without sigma)."""
+    weights = np.ones_like(meas.power) if sigma is None else 1.0 / sigma**2
+    return np.radians(meas.gamma_deg), np.radians(meas.theta_deg), weights
 
 
 def _check_sigma(sigma, source) -> None:
@@ -1044,6 +1039,15 @@ def _kernel_codes(model_obj, engine=None):
     return code
 
 
+def _search_defaults(model_obj, n_screen, n_keep, n_data_starts) -> tuple[int, int, int]:
+    """The screening candidates, the screened starts kept and the data-driven starts of a
+    search: the caller's, else the model's defaults."""
+    return (default_screen(model_obj) if n_screen is None else int(n_screen),
+            default_keep(model_obj) if n_keep is None else int(n_keep),
+            int(model_obj.options.get("n_data_starts", 2)) if n_data_starts is None
+            else int(n_data_starts))
+
+
 def _global_search_unit(model_obj, gamma, theta, power, weights, *, seed, n_random_starts=2,
                         n_screen=None, n_keep=None, n_data_starts=None, max_iter=200,
                         max_rounds=3, polish=True, engine=None, extra_starts=None,
@@ -1054,10 +1058,8 @@ def _global_search_unit(model_obj, gamma, theta, power, weights, *, seed, n_rand
         geom = Geometry.of(gamma[None], theta[None])
         sw1 = np.sqrt(weights)[None]
         yw1 = sw1 * power
-    n_screen = default_screen(model_obj) if n_screen is None else int(n_screen)
-    n_keep = default_keep(model_obj) if n_keep is None else int(n_keep)
-    if n_data_starts is None:
-        n_data_starts = int(model_obj.options.get("n_data_starts", 2))
+    n_screen, n_keep, n_data_starts = _search_defaults(model_obj, n_screen, n_keep,
+                                                       n_data_starts)
     search = _search_numpy if codes is None else _search_compiled
     found = search(model_obj, codes, gamma, theta, power, weights, geom, sw1, yw1, seed=seed,
                    n_random_starts=n_random_starts, n_screen=n_screen, n_keep=n_keep,
@@ -1236,17 +1238,15 @@ def fit(measurements, model="two-lobe", *, seed: int = 0, n_random_starts: int =
         check_enough_points(meas.n_points, model_obj, source)
         columns = (meas.gamma_deg.copy(), meas.theta_deg.copy(), meas.power.copy())
         out, finish, angles, flagged = _fit_plain_compiled(
-            model_obj, meas, sigma, source, columns=columns, seed=seed, n_random_starts=n_random_starts,
-            n_screen=n_screen, n_keep=n_keep, n_data_starts=n_data_starts,
-            max_iter=max_iter, max_rounds=max_rounds, polish=polish,
-            extra_starts=extra_starts, n_hops=n_hops)
+            model_obj, meas, sigma, source, columns=columns, seed=seed,
+            n_random_starts=n_random_starts, n_screen=n_screen, n_keep=n_keep,
+            n_data_starts=n_data_starts, max_iter=max_iter, max_rounds=max_rounds,
+            polish=polish, extra_starts=extra_starts, n_hops=n_hops)
     else:
         check_fit_data(meas.power, model_obj, source)
         if sigma is not None:
             _check_sigma(sigma, source)
-        gamma = np.radians(meas.gamma_deg)
-        theta = np.radians(meas.theta_deg)
-        weights = np.ones_like(meas.power) if sigma is None else 1.0 / sigma**2
+        gamma, theta, weights = _radians_and_weights(meas, sigma)
         kgeo = _kernel_geometry(gamma, theta) if codes is not None else None
         angles = gamma if kgeo is None else kgeo[4]
         out = _global_search(model_obj, gamma, theta, meas.power, weights, seed=seed,
@@ -1267,9 +1267,7 @@ def fit(measurements, model="two-lobe", *, seed: int = 0, n_random_starts: int =
         if finish is None:  # a polished search: its finish here
             from . import _kernel
 
-            gamma = np.radians(meas.gamma_deg)
-            theta = np.radians(meas.theta_deg)
-            weights = np.ones_like(power) if sigma is None else 1.0 / sigma**2
+            gamma, theta, weights = _radians_and_weights(meas, sigma)
             kgeo = _kernel_geometry(gamma, theta)
             finish = (*_kernel.tl_finish(_w(zb), _w(ab), kgeo[0], kgeo[1], _w(weights),
                                          _w(power), sigma is not None, cb, model_obj.n_params),

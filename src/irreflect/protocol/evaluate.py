@@ -306,8 +306,13 @@ def protocol_fails(r2: float, reference_r2: float) -> bool:
     """Whether a protocol whose fit has ``r2`` on all points fails the material whose
     all-points fit has ``reference_r2``: more than :data:`FAILURE_MARGIN` below it (or
     more than 5 times the all-points fit's own 1 - R^2)."""
-    margin = max(FAILURE_MARGIN, 5.0 * (1.0 - reference_r2))
-    return bool(np.isfinite(r2) and r2 < reference_r2 - margin)
+    return bool(np.isfinite(r2) and r2 < reference_r2 - failure_margin(reference_r2))
+
+
+def failure_margin(reference_r2: float) -> float:
+    """How far below the all-points fit's R^2 a protocol's may fall before it fails:
+    :data:`FAILURE_MARGIN`, or 5 times the all-points fit's own 1 - R^2 if larger."""
+    return max(FAILURE_MARGIN, 5.0 * (1.0 - reference_r2))
 
 
 def specular_half_widths(dense, reference: FitResult | None = None) -> dict[float, float]:
@@ -343,7 +348,7 @@ def protocol_failure(protocol, dense, frame, r2, reference_r2, r2_within, refere
     """
     if not protocol_fails(r2, reference_r2):
         return ""
-    margin = max(FAILURE_MARGIN, 5.0 * (1.0 - reference_r2))
+    margin = failure_margin(reference_r2)
     head = (f"its fit's R^2 on all points is {r2:.4g}, the all-points fit's {reference_r2:.4g}")
     widths = specular_half_widths(dense, reference)
     causes = []
