@@ -73,6 +73,14 @@ class SyntheticTable:
         """R^2 of the generating curve against the noisy table: what a global fit beats."""
         return float(metrics.r2(self.measurements.power, self.clean))
 
+    @property
+    def cost_truth(self) -> float:
+        """The fit's cost (half the sum of squared residuals, weighted by 1/sigma^2 when
+        the table has sigma) of the generating curve: what a global fit does not exceed."""
+        meas = self.measurements
+        w = 1.0 if meas.sigma is None else 1.0 / meas.sigma**2
+        return 0.5 * float(np.sum(w * (meas.power - self.clean) ** 2))
+
 
 def random_grid(rng: np.random.Generator, style: str) -> tuple[np.ndarray, np.ndarray]:
     """(gamma_deg, theta_deg) of one goniometer grid of the given style (see module doc)."""
@@ -178,3 +186,62 @@ def synthetic_for_model(model, seed: int, grid: str | None = None,
     meas = Measurements(gamma_deg=g, theta_deg=t, power=_noisy(clean, rng, noise),
                         name=f"{model_obj.name}-{style}-{seed}")
     return SyntheticTable(meas, model_obj.name, params, clean, "model", style, int(seed))
+
+
+#: Material kinds of :func:`wild_material`.
+WILD_KINDS = ("glossy", "mirror-like", "matte", "diffuse")
+
+
+def wild_material(seed: int) -> SyntheticTable:
+    """A generated two-lobe table from distributions independent of
+    :func:`synthetic_material`'s, for checks of the fitter on tables unlike the ones it
+    was tuned on (experiments/check_retry.py). Per seed: a material of one of
+    :data:`WILD_KINDS` (glossy: ``u_ns`` 10^1.5 to 10^5; mirror-like: ``u_ns`` 10^3.5 to
+    10^5.5 and a large specular share; matte; diffuse: ``u_as`` 10^-4 to 10^-2), ``K``
+    from 10^-6 to 10^6, specular share kept at or below 0.95; 1 to 8 angles of incidence
+    of 3 to 79 deg; receivers every 1 to 20 deg with a random offset (half the tables
+    with a point within 2 deg of the mirror); proportional, additive or mixed noise of
+    0.03 % to 5 %, and a ``sigma`` column (that noise's 1-sigma) on 30 % of the tables,
+    whose fits are then weighted over up to 10 decades."""
+    rng = np.random.default_rng(10_000 + int(seed))
+    n_gamma = int(rng.integers(1, 9))
+    gammas = -np.sort(rng.choice(np.arange(3.0, 80.0, 1.0), n_gamma, replace=False))
+    step = float(rng.choice([1.0, 2.0, 3.0, 5.0, 7.5, 10.0, 15.0, 20.0]))
+    g_all, t_all = [], []
+    for gamma in gammas:
+        theta = np.arange(-89.0, 89.1, step) + rng.uniform(0, step)
+        theta = theta[np.abs(theta) < 89.5]
+        if rng.random() < 0.5:
+            theta = np.r_[theta, -gamma + rng.uniform(-2, 2)]
+        theta = np.unique(np.round(theta, 2))
+        g_all.append(np.full(theta.size, gamma))
+        t_all.append(theta)
+    g, t = np.concatenate(g_all), np.concatenate(t_all)
+    kind = WILD_KINDS[int(rng.integers(len(WILD_KINDS)))]
+    if kind == "glossy":
+        u_as, u_ns = 10 ** rng.uniform(-2.5, -0.1), 10 ** rng.uniform(1.5, 5.0)
+    elif kind == "mirror-like":
+        u_as, u_ns = 10 ** rng.uniform(-1, -0.05), 10 ** rng.uniform(3.5, 5.5)
+    elif kind == "diffuse":
+        u_as, u_ns = 10 ** rng.uniform(-4, -2), 10 ** rng.uniform(0, 1.5)
+    else:
+        u_as, u_ns = 10 ** rng.uniform(-2.5, -1.0), 10 ** rng.uniform(0.5, 2.3)
+    v_as, u_nd, v_nd = rng.uniform(-4, 2), 10 ** rng.uniform(-1, 1), rng.uniform(-2, 2)
+    v_ns, k = rng.uniform(-2, 2), 10 ** rng.uniform(-6, 6)
+    share = u_as * np.cos(np.radians(np.abs(g))) ** v_as
+    u_as *= min(1.0, 0.95 / share.max())
+    params = np.array([u_as, v_as, u_nd, v_nd, u_ns, v_ns, k])
+    clean = two_lobe_power(np.radians(g), np.radians(t), *params)
+    noise = int(rng.integers(3))  # proportional, additive, both
+    level = 10 ** rng.uniform(-3.5, -1.3)
+    with_sigma = rng.random() < 0.3
+    if noise == 0:
+        s = level * np.abs(clean) + 1e-12 * clean.max()
+    elif noise == 1:
+        s = np.full(clean.size, level * clean.max())
+    else:
+        s = np.sqrt((level * clean) ** 2 + (0.2 * level * clean.max()) ** 2)
+    power = clean + s * rng.standard_normal(clean.size)
+    meas = Measurements(gamma_deg=g, theta_deg=t, power=power,
+                        sigma=s if with_sigma else None, name=f"wild-{kind}-{seed}")
+    return SyntheticTable(meas, "two-lobe", params, clean, kind, "wild", int(seed))
