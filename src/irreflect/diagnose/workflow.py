@@ -521,11 +521,16 @@ def assess(result: FitResult, noise: NoiseEstimate) -> Assessment:
 # ----------------------------------------------------------------------------- the loop
 def _fit_candidate(meas, model, current: FitResult, seed: int) -> FitResult:
     """Fit ``model`` (an extension of the current model), started at the current optimum as
-    well as from the model's own data-driven starts."""
+    well as from the model's own data-driven starts. No second search (``retry=False``):
+    an absent effect leaves its coefficient at a bound or ill-determined, which would
+    send nearly every candidate to fit()'s second search (2.3 times the time of a
+    diagnosis) while the warm starts already hold the current optimum (the rates of
+    experiments/diagnose_rates.py were measured so); the current model's own fit is
+    searched again when it looks local."""
     z_cur, _ = current.model_object.from_natural(current.values[None])
     gamma, theta = np.radians(meas.gamma_deg), np.radians(meas.theta_deg)
     warm = warm_starts(model, z_cur[0], gamma, theta, meas.power)
-    return fit(meas, model, seed=seed, extra_starts=warm)
+    return fit(meas, model, seed=seed, extra_starts=warm, retry=False)
 
 
 def _share(before: Assessment, after: Assessment) -> float:
