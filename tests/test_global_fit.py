@@ -16,8 +16,8 @@ from irreflect import fit, fit_subsets
 from irreflect.cli import main
 from irreflect.data import Measurements, read_measurements
 from irreflect.errors import DataError, FitError, FitWarning
-from irreflect.models import get_model, model_names, two_lobe_power
 from irreflect.fitting import retry_reasons
+from irreflect.models import get_model, model_names, two_lobe_power
 from irreflect.synthetic import GRIDS, KINDS, synthetic_material, wild_material
 from tests.helpers import least_squares_reference
 
