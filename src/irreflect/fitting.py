@@ -337,7 +337,6 @@ class FitResult:
     warnings: tuple[str, ...] = ()
     model_object: ReflectionModel | None = field(default=None, compare=False)
     retried: str = ""  # why fit() searched a second time, and what it found (empty: no)
-    source: str = field(default="table", compare=False)  # the table's name
 
     def __repr__(self) -> str:
         flags = "" if not self.warnings else f", {len(self.warnings)} warning(s)"
@@ -1250,12 +1249,13 @@ def fit(measurements, model="two-lobe", *, seed: int = 0, n_random_starts: int =
                      n_hops=n_hops, retry=retry)
         return dataclasses.replace(result, model=str(spec))
     t0 = time.perf_counter()
+    meas = as_measurements(measurements)  # a path is read once, for both searches
     options = dict(seed=seed, n_random_starts=n_random_starts, n_screen=n_screen,
                    n_keep=n_keep, n_data_starts=n_data_starts, use_sigma=use_sigma,
                    max_iter=max_iter, max_rounds=max_rounds, polish=polish, engine=engine,
                    extra_starts=extra_starts, n_hops=n_hops)
     try:
-        result = _fit_search(measurements, model, t0, **options)
+        result = _fit_search(meas, model, t0, **options)
         failure = None
     except FitError as exc:
         if not retry:
@@ -1263,8 +1263,8 @@ def fit(measurements, model="two-lobe", *, seed: int = 0, n_random_starts: int =
         result, failure = None, exc
     reasons = retry_reasons(result) if retry else ()
     if reasons:
-        result = _search_again(measurements, model, t0, result, failure, reasons, options)
-    source = result.source
+        result = _search_again(meas, model, t0, result, failure, reasons, options)
+    source = getattr(meas, "name", None) or "table"
     for text in result.warnings:
         warn(FitWarning(f"{source}, {result.model}: {text}"), stacklevel=2)
     return result
@@ -1292,11 +1292,10 @@ def retry_reasons(result) -> tuple[str, ...]:
     return tuple(reasons)
 
 
-def _search_again(measurements, model, t0, first, failure, reasons, options):
+def _search_again(meas, model, t0, first, failure, reasons, options):
     """:func:`fit`'s second search (:data:`RETRY_SEARCH`), from the first result too;
     the second result when its cost is lower by more than :data:`RETRY_GAIN`, else the
     first, marked ``retried``, with both searches' starts, evaluations and time."""
-    meas = as_measurements(measurements)
     effort = (RETRY_SMALL_TABLE_SEARCH if meas.n_points <= SMALL_TABLE_POINTS
               else RETRY_SEARCH)
     again = dict(options)
@@ -1309,7 +1308,7 @@ def _search_again(measurements, model, t0, first, failure, reasons, options):
         again["extra_starts"] = (z_first if extra is None else np.vstack(
             [z_first, np.asarray(extra, float).reshape(-1, model_obj.n_nonlinear)]))
     try:
-        second = _fit_search(measurements, model, t0, **again)
+        second = _fit_search(meas, model, t0, **again)
     except FitError:
         if first is None:
             raise failure from None
@@ -1327,13 +1326,12 @@ def _search_again(measurements, model, t0, first, failure, reasons, options):
         n_starts=sum(r.n_starts for r in spent), nfev=sum(r.nfev for r in spent))
 
 
-def _fit_search(measurements, model, t0, *, seed, n_random_starts, n_screen, n_keep,
+def _fit_search(meas, model, t0, *, seed, n_random_starts, n_screen, n_keep,
                 n_data_starts, use_sigma, max_iter, max_rounds, polish, engine,
                 extra_starts, n_hops) -> FitResult:
-    """One global search of :func:`fit` (its arguments; ``t0`` when the fit began); the
-    result's warnings are not issued here."""
+    """One global search of :func:`fit` (its arguments, the table as Measurements; ``t0``
+    when the fit began); the result's warnings are not issued here."""
     seed = check_seed(seed)
-    meas = as_measurements(measurements)
     model_obj = get_model(model)
     source = getattr(meas, "name", None) or "table"
     sigma = meas.sigma if (use_sigma and meas.sigma is not None) else None
@@ -1462,7 +1460,6 @@ def _fit_search(measurements, model, t0, *, seed, n_random_starts, n_screen, n_k
         ill_determined=ill,
         warnings=warnings,
         model_object=model_obj,
-        source=source,
     )
 
 
