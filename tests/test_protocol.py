@@ -493,3 +493,25 @@ def test_plot_protocol_draws_every_point():
     drawn = sum(len(line.get_xdata()) for line in ax.get_lines()
                 if line.get_label() in {"mirror", "lobe width", "diffuse", "central"})
     assert drawn == 12
+
+
+def test_a_scan_at_two_angles_of_incidence_is_refused_with_what_it_has(tmp_path, capsys):
+    """A protocol stands at three angles of incidence: a pilot scan at two gets a one-line
+    error naming the two it has, from the library and from the CLI (exit 2, no file)."""
+    from irreflect.synthetic import wild_material
+
+    meas = wild_material(0).measurements  # two angles of incidence: -33 and -42 deg
+    assert np.unique(meas.gamma_deg).size == 2
+    with pytest.raises(IrreflectError, match=r"a paper protocol needs three angles of "
+                       r"incidence; found 2 \(\|gamma\| = 33, 42 deg\)"):
+        paper_protocol_for(meas)
+    path = tmp_path / "pilot.csv"
+    pd.DataFrame({"gamma_deg": meas.gamma_deg, "theta_deg": meas.theta_deg,
+                  "power": meas.power}).to_csv(path, index=False)
+    out = tmp_path / "glossy.csv"
+    assert main(["protocol", "--lobe-from", str(path), "--out", str(out)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err[-1].startswith("irreflect: error: pilot: a glossy protocol needs three angles "
+                              "of incidence; found 2 within the receiver range")
+    assert "|gamma| = 33, 42 deg" in err[-1]
+    assert not out.exists()

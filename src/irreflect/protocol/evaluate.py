@@ -26,6 +26,7 @@ from ..data import Measurements, as_measurements
 from ..errors import FitError, FitWarning, IrreflectError, unknown_name
 from ..fitting import FitResult, fit
 from ..models import get_model, lobe_profile
+from ..validation import short_list
 from .core import Protocol, glossy_protocol, lobe_half_width_deg, paper_protocol
 from .export import as_protocol
 
@@ -413,6 +414,7 @@ def glossy_protocol_for(dense, reference: FitResult | None = None, *,
     hi = min(float(np.max(dense.theta_deg)), 70.0) if theta_max is None else float(theta_max)
     available = {float(g): dense.theta_deg[dense.gamma_deg == g] for g in dense.gammas}
     levels = sorted({float(abs(g)) for g in dense.gammas if abs(g) <= hi})
+    _check_three_levels(dense, levels, "glossy protocol", hi)
     triples = sorted(itertools.combinations(levels, 3),
                      key=lambda t: (-(t[2] - t[0]), abs(t[1] - (t[0] + t[2]) / 2), t))
     pref = tuple(sorted(abs(float(g)) for g in preferred)) if preferred is not None else None
@@ -488,6 +490,7 @@ def paper_protocol_for(dense, *, preferred=(-20.0, -40.0, -60.0), theta_min=None
     lo = float(np.min(dense.theta_deg)) if theta_min is None else float(theta_min)
     hi = float(np.max(dense.theta_deg)) if theta_max is None else float(theta_max)
     levels = sorted({float(abs(g)) for g in dense.gammas})
+    _check_three_levels(dense, levels, "paper protocol")
     triples = sorted(
         itertools.combinations(levels, 3),
         key=lambda t: (-(t[2] - t[0]), abs(t[1] - (t[0] + t[2]) / 2), t),
@@ -508,4 +511,18 @@ def paper_protocol_for(dense, *, preferred=(-20.0, -40.0, -60.0), theta_min=None
         f"no triple of {dense.name}'s angles of incidence gives a paper protocol it can "
         f"evaluate within {tolerance_deg:g} deg (tried {len(triples)}; first problem: "
         f"{errors[0] if errors else 'fewer than three angles of incidence'})"
+    )
+
+
+def _check_three_levels(dense, levels, what: str, hi=None) -> None:
+    """A protocol stands at three angles of incidence: refuse a scan with fewer, saying
+    which it has."""
+    if len(levels) >= 3:
+        return
+    within = "" if hi is None else f" within the receiver range (|gamma| <= {hi:g} deg)"
+    found = short_list(levels, fmt=lambda g: f"{g:g}") if levels else "none"
+    raise IrreflectError(
+        f"{dense.name}: a {what} needs three angles of incidence; found {len(levels)}"
+        f"{within} (|gamma| = {found} deg): measure the scan at three or more angles of "
+        "incidence"
     )
