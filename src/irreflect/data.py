@@ -313,6 +313,10 @@ def validate_table(df: pd.DataFrame, source: str = "table", *,
                 f"{source}: power must be >= 0 up to noise; found {power[i]:g} at {rows(i)}, "
                 f"below the noise allowance {-np.broadcast_to(limit, power.shape)[i]:g}: check the "
                 "detector offset or the sign of the column"
+                + ("" if sigma is not None else
+                   f", or give the noise as a sigma column (negative power down to -4 sigma "
+                   f"is kept; without it, down to -{NEGATIVE_POWER_TOLERANCE:.0%} of the "
+                   "largest power)")
             )
         notes.append(f"{source}: {int(neg.sum())} slightly negative power value(s) kept as noise "
                      "around zero")
