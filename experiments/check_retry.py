@@ -38,6 +38,9 @@ def main(argv=None) -> None:
     parser.add_argument("--seeds", type=int, nargs=2, default=[0, 2000],
                         metavar=("FIRST", "STOP"))
     args = parser.parse_args(argv)
+    if not 0 <= args.seeds[0] < args.seeds[1]:
+        parser.error(f"--seeds FIRST STOP needs 0 <= FIRST < STOP; found {args.seeds[0]} "
+                     f"{args.seeds[1]}")
     seeds = range(*args.seeds)
     fails = {False: [], True: []}
     times = {False: [], True: []}

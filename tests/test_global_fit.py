@@ -15,7 +15,7 @@ import pytest
 from irreflect import fit, fit_subsets
 from irreflect.cli import main
 from irreflect.data import Measurements, read_measurements
-from irreflect.errors import DataError, FitError, FitWarning
+from irreflect.errors import DataError, FitError, FitWarning, IrreflectError
 from irreflect.fitting import retry_reasons
 from irreflect.models import get_model, model_names, two_lobe_power
 from irreflect.synthetic import GRIDS, KINDS, synthetic_material, wild_material
@@ -370,3 +370,11 @@ def test_retry_reasons_name_each_sign_of_a_local_optimum():
     assert reasons == ("at a bound: v_as", "ill-determined: u_ns", "not converged",
                        "R^2 0.5 < 0.95", "reduced chi^2 9 > 2")
     assert retry_reasons(None) == ("no fit beat a constant",)
+
+
+def test_wild_material_is_seeded_and_refuses_a_negative_seed():
+    a, b = wild_material(5), wild_material(5)
+    np.testing.assert_array_equal(a.measurements.power, b.measurements.power)
+    assert not np.array_equal(a.measurements.power[:3], wild_material(6).measurements.power[:3])
+    with pytest.raises(IrreflectError, match="seed must be an integer >= 0; found -1"):
+        wild_material(-1)

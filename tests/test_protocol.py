@@ -515,3 +515,15 @@ def test_a_scan_at_two_angles_of_incidence_is_refused_with_what_it_has(tmp_path,
                               "of incidence; found 2 within the receiver range")
     assert "|gamma| = 33, 42 deg" in err[-1]
     assert not out.exists()
+
+
+def test_a_two_angle_pilot_is_refused_before_it_is_fitted(monkeypatch):
+    from irreflect.protocol import evaluate
+    from irreflect.synthetic import wild_material
+
+    def no_fit(*args, **kwargs):
+        raise AssertionError("the pilot was fitted before it was refused")
+
+    monkeypatch.setattr(evaluate, "fit", no_fit)
+    with pytest.raises(IrreflectError, match="a glossy protocol needs three angles"):
+        evaluate.glossy_protocol_for(wild_material(0).measurements)

@@ -50,6 +50,7 @@ from . import metrics
 from .data import Measurements
 from .errors import IrreflectError, unknown_name
 from .models import get_model, two_lobe_power
+from .validation import check_seed
 
 KINDS = ("glossy", "matte")
 GRIDS = ("paper", "goniometer", "uneven", "sparse", "mirror")
@@ -203,7 +204,8 @@ def wild_material(seed: int) -> SyntheticTable:
     with a point within 2 deg of the mirror); proportional, additive or mixed noise of
     0.03 % to 5 %, and a ``sigma`` column (that noise's 1-sigma) on 30 % of the tables,
     whose fits are then weighted over up to 10 decades."""
-    rng = np.random.default_rng(10_000 + int(seed))
+    seed = check_seed(seed)
+    rng = np.random.default_rng(10_000 + seed)
     n_gamma = int(rng.integers(1, 9))
     gammas = -np.sort(rng.choice(np.arange(3.0, 80.0, 1.0), n_gamma, replace=False))
     step = float(rng.choice([1.0, 2.0, 3.0, 5.0, 7.5, 10.0, 15.0, 20.0]))
@@ -244,4 +246,4 @@ def wild_material(seed: int) -> SyntheticTable:
     power = clean + s * rng.standard_normal(clean.size)
     meas = Measurements(gamma_deg=g, theta_deg=t, power=power,
                         sigma=s if with_sigma else None, name=f"wild-{kind}-{seed}")
-    return SyntheticTable(meas, "two-lobe", params, clean, kind, "wild", int(seed))
+    return SyntheticTable(meas, "two-lobe", params, clean, kind, "wild", seed)

@@ -406,15 +406,15 @@ def glossy_protocol_for(dense, reference: FitResult | None = None, *,
 
 
     dense = as_measurements(dense)
-    if reference is None or not {"u_ns", "v_ns"} <= set(reference.param_names):
-        reference = fit(dense, "two-lobe", seed=seed)
-    p = reference.params
     # the paper's tool reaches +-70 deg; grazing receivers see effects the model lacks
     lo = max(float(np.min(dense.theta_deg)), -70.0) if theta_min is None else float(theta_min)
     hi = min(float(np.max(dense.theta_deg)), 70.0) if theta_max is None else float(theta_max)
-    available = {float(g): dense.theta_deg[dense.gamma_deg == g] for g in dense.gammas}
     levels = sorted({float(abs(g)) for g in dense.gammas if abs(g) <= hi})
-    _check_three_levels(dense, levels, "glossy protocol", hi)
+    _check_three_levels(dense, levels, "glossy protocol", hi)  # before the pilot's fit
+    if reference is None or not {"u_ns", "v_ns"} <= set(reference.param_names):
+        reference = fit(dense, "two-lobe", seed=seed)
+    p = reference.params
+    available = {float(g): dense.theta_deg[dense.gamma_deg == g] for g in dense.gammas}
     triples = sorted(itertools.combinations(levels, 3),
                      key=lambda t: (-(t[2] - t[0]), abs(t[1] - (t[0] + t[2]) / 2), t))
     pref = tuple(sorted(abs(float(g)) for g in preferred)) if preferred is not None else None
