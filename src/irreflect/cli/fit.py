@@ -40,7 +40,7 @@ def _cmd_fit(args) -> int:
         d = result.to_dict()
         print_json({k: d[k] for k in ("model", "params", "stderr", "r2", "rmse", "mse",
                                       "n_points", "fit_ms", "converged", "message",
-                                      "at_bound", "ill_determined", "warnings")}
+                                      "at_bound", "ill_determined", "warnings", "verdict")}
                    | {"polar_error_pct": result.polar_errors()}
                    | ({"on_all_points": on_all} if on_all else {}))
     else:

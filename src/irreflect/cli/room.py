@@ -25,6 +25,10 @@ def _room(args) -> int:
         check_scheduler_address(args.scheduler)
     out = Path(args.out)
     scene = load_scene(args.scene)
+    from ..room.checks import material_notes
+
+    for line in material_notes(scene, allow_unphysical=args.allow_unphysical):
+        print(line)
     result = simulate(scene, method=args.method, bounces=args.bounces, cell_m=args.cell,
                       rays=args.rays, seed=args.seed, time_resolution_ns=args.dt,
                       scheduler=args.scheduler, workers=args.workers, progress=not args.quiet)
@@ -101,6 +105,9 @@ def register(sub) -> None:
                         "(default: local)")
     p.add_argument("--workers", type=POSITIVE_INT, default=None,
                    help="local worker processes for the receivers (default 1)")
+    p.add_argument("--allow-unphysical", action="store_true",
+                   help="simulate a material whose model predicts negative power in the room "
+                        "(clipped to 0; default: refused)")
     p.add_argument("--no-figures", action="store_true", help="numbers only")
     p.add_argument("--quiet", action="store_true",
                    help="no progress display (a bar on a terminal, lines through a pipe)")

@@ -56,6 +56,8 @@ class ReportContext:
         paper's Table 3 model plus Gaussian noise); every other dataset was measured
     scene : a room scene (TOML) for the sections of :data:`~irreflect.report.sections.SCENE_SECTIONS`
         (``irreflect reproduce --scene``), else None
+    allow_unphysical : simulate a scene material whose model predicts negative power
+        (else refused, :func:`irreflect.room.checks.material_notes`)
     """
 
     datasets: dict[str, Measurements]
@@ -67,6 +69,7 @@ class ReportContext:
     progress: Callable[[str], None] = lambda message: None
     reconstructions: frozenset = frozenset()
     scene: Path | str | None = None
+    allow_unphysical: bool = False
 
     def is_reconstruction(self, name: str) -> bool:
         """True for a bundled reconstruction, False for a measured table."""

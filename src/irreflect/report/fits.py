@@ -36,8 +36,13 @@ runs on every real set (`tests/test_global_fit.py`). When a result is not all it
 it says so: it reports whether it converged and why it stopped, which coefficients sit on
 a bound of their physical range and which the data leave ill-determined, and every
 command prints those as warnings; a fit that cannot beat a constant, or a table with
-constant power or no degree of freedom, is refused with a one-line error. The checks of
-this run's all-point fits:"""
+constant power or no degree of freedom, is refused with a one-line error. Each fit also
+gets a verdict R^2 cannot fool (`FitResult.verdict()`): per angle of incidence, whether the
+specular lobe is resolved (at least two receivers within two half widths of the mirror
+where the lobe matters), whether the model's continuous curve reproduces the measured one
+(polar-area error at most 10 %), and the coefficients' checks. The specular share
+saturates at 1 (`a_s = min(1, u_as cos^v_as(gamma))`). The checks of this run's all-point
+fits:"""
 
 
 
@@ -122,7 +127,11 @@ def section(ctx: ReportContext) -> Section:
     checks = []
     for name in ctx.datasets:
         res = ctx.fits[name]
-        checks.append({"material": name, "converged": res.converged,
+        verdict = res.verdict()
+        checks.append({"material": name,
+                       "verdict": ("trustworthy" if verdict.trustworthy else
+                                   "NOT trustworthy: " + "; ".join(verdict.problems())),
+                       "converged": res.converged,
                        "at a bound": ", ".join(res.at_bound) or "none",
                        "ill-determined": ", ".join(res.ill_determined) or "none",
                        "warnings": " / ".join(res.warnings) or "none"})

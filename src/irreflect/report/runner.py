@@ -26,6 +26,7 @@ from ..data import BUNDLED, Measurements, bundled_dir, load_bundled, read_measur
 from ..errors import FitWarning, IrreflectError
 from ..fitting import fit
 from ..paper import paper_tables_dir as _paper_tables_dir
+from ..room.checks import material_notes
 from ..room.scene import load_scene
 from ..validation import check_points_budget, check_seed, short_list
 from .base import SEVERITIES, Finding, ReportContext, Section, format_table, markdown_table
@@ -96,20 +97,24 @@ def _load_datasets(data_dir=None) -> tuple[dict[str, Measurements], frozenset]:
 
 
 def reproduce(out_dir="out", data_dir=None, quick=False, seed=0, progress=True,
-              scene=None) -> dict:
+              scene=None, allow_unphysical: bool = False) -> dict:
     """Run every section and write the report; returns a summary dict. ``scene``: a room
-    scene (TOML) whose multipath section is added (:mod:`irreflect.report.room`).
+    scene (TOML) whose multipath section is added (:mod:`irreflect.report.room`); a
+    material whose model predicts negative power in it is refused unless
+    ``allow_unphysical`` (:func:`irreflect.room.checks.material_notes`).
     ``progress``: a bar on a terminal, one line per step otherwise (False: silent)."""
     t_start = time.perf_counter()
     seed = check_seed(seed)
     out_dir = Path(out_dir)
-    if scene is not None:
-        load_scene(scene)  # refuse a bad scene before any work
+    if scene is not None:  # refuse a bad scene, or an unphysical material, before any work
+        material_notes(load_scene(scene), allow_unphysical)
     with claim_output(out_dir, "dir", "--out"):  # checked and locked before any work
-        return _reproduce(out_dir, data_dir, quick, seed, progress, t_start, scene)
+        return _reproduce(out_dir, data_dir, quick, seed, progress, t_start, scene,
+                          allow_unphysical)
 
 
-def _reproduce(out_dir: Path, data_dir, quick, seed, progress, t_start, scene=None) -> dict:
+def _reproduce(out_dir: Path, data_dir, quick, seed, progress, t_start, scene=None,
+               allow_unphysical=False) -> dict:
     datasets, recon = _load_datasets(data_dir)
     # a fit per dataset, each section once and once per dataset, the selection figures,
     # the PTFE table the comparison adds, the room section
@@ -127,7 +132,7 @@ def _reproduce(out_dir: Path, data_dir, quick, seed, progress, t_start, scene=No
     warnings.simplefilter("always")
     try:
         return _run_report(out_dir, datasets, recon, quick, seed, data_dir, t_start, bar,
-                           advance, sections, caught, scene)
+                           advance, sections, caught, scene, allow_unphysical)
     finally:
         caught_warnings.__exit__(None, None, None)
         for w in caught:  # reader notes go on to the caller; fit warnings are in the report
@@ -136,7 +141,7 @@ def _reproduce(out_dir: Path, data_dir, quick, seed, progress, t_start, scene=No
 
 
 def _run_report(out_dir, datasets, recon, quick, seed, data_dir, t_start, bar, advance,
-                sections, caught, scene=None) -> dict:
+                sections, caught, scene=None, allow_unphysical=False) -> dict:
     with atomic_directory(out_dir, command="reproduce") as tmp:
         fits = {}
         for name, meas in datasets.items():
@@ -144,7 +149,8 @@ def _run_report(out_dir, datasets, recon, quick, seed, data_dir, t_start, bar, a
             fits[name] = fit(meas, seed=seed)
         ctx = ReportContext(datasets=datasets, fits=fits, out_dir=tmp, quick=quick, seed=seed,
                             paper_dir=_paper_tables_dir(), progress=advance,
-                            reconstructions=recon, scene=scene)
+                            reconstructions=recon, scene=scene,
+                            allow_unphysical=allow_unphysical)
         run = dict(SECTIONS) | (dict(SCENE_SECTIONS) if scene is not None else {})
         for key, section in run.items():
             advance(key)
