@@ -47,9 +47,11 @@ from .design import (
 )
 from .instrument import Instrument, thin_settings
 
-#: The verdict stops when leaving out any one reading moves the predicted curve over the
-#: range by at most this share of its variance, at this and the previous number of readings.
+#: The verdict stops when the fits without the last reading and without the last two
+#: readings predict the whole range within this share of the current fit's variance over it.
 STOP_TOLERANCE = 0.005
+#: ... and no sooner than this many readings beyond the model's coefficients.
+STOP_MIN_EXTRA = 3
 
 
 @dataclass(frozen=True)
@@ -60,8 +62,8 @@ class Verdict:
     n_measured : readings so far
     r2_band : (low, high) predicted R^2 of the current fit against the whole range (NaN
         before a fit)
-    stability : the largest share of the predicted curve's variance over the range that
-        leaving out one reading moves (NaN before a fit)
+    stability : how far the fits without the last one and two readings lie from the
+        current fit over the whole range, as a share of its variance (NaN before a fit)
     ill_determined, at_bound : the current fit's coefficients that the readings do not pin
         down / that sit on a bound of their range
     reasons : why it continues (empty when it stops)
@@ -84,8 +86,8 @@ class Verdict:
             parts.append(f"predicted R^2 on the whole range {self.r2_band[0]:.4f}-"
                          f"{self.r2_band[1]:.4f}")
         if np.isfinite(self.stability):
-            parts.append(f"leaving out one reading moves the predicted curve by up to "
-                         f"{self.stability:.2%} of its variance")
+            parts.append(f"the last two readings moved the predicted curve by "
+                         f"{min(self.stability, 9.99):.2%} of its variance")
         if self.ill_determined:
             parts.append(f"ill-determined: {', '.join(self.ill_determined)}")
         if self.reasons:
@@ -151,7 +153,7 @@ class Campaign:
         self._rows = pd.DataFrame(columns=["gamma_deg", "theta_deg", "power"])
         self._sigma: bool | None = None
         self._state: _State | None = None
-        self._history: dict[int, Verdict] = {}
+        self._previous: dict[int, np.ndarray | None] = {}  # range predictions by readings
         if measured is not None:
             self.add(measured)
 
@@ -196,6 +198,8 @@ class Campaign:
         validate_table(frame, self.name)  # the table's own checks (signs, power, sigma)
         self._rows = combined.reset_index(drop=True)
         self._sigma = has_sigma
+        if self._state is not None and self._state.fit is not None:
+            self._previous[len(self._rows) - len(new)] = self._state.range_pred
         self._state = None
         return self
 
@@ -223,7 +227,28 @@ class Campaign:
             state.loo, state.loo_own = leave_one_out(self.model, meas, state.fit.values, g, t,
                                                      seed=self.seed)
         self._state = state
+        self._previous[self.n_measured] = state.range_pred
         return state
+
+    def _range_prediction(self, n: int) -> np.ndarray | None:
+        """The range prediction of the fit on the first ``n`` readings (in the order they
+        were added), from the campaign's history or refitted."""
+        if n in self._previous:
+            return self._previous[n]
+        pred = None
+        if n > self.model.n_params:
+            first = self.measurements.subset(np.arange(self.n_measured) < n)
+            try:
+                with warnings.catch_warnings():
+                    warnings.simplefilter("ignore", FitWarning)
+                    res = fit(first, self.model, seed=self.seed)
+                with np.errstate(all="ignore"):
+                    pred = self.model.predict_deg(res.values, self._settings[:, 0],
+                                                  self._settings[:, 1])
+            except (FitError, DataError):
+                pred = None
+        self._previous[n] = pred
+        return pred
 
     @property
     def fit(self) -> FitResult | None:
@@ -248,6 +273,9 @@ class Campaign:
         if len(out):
             order = np.lexsort((out["theta_deg"].to_numpy(), np.abs(out["gamma_deg"].to_numpy())))
             out = out.iloc[order].reset_index(drop=True)
+            measured = {round(g, 6) for g, _ in taken}
+            key = out["gamma_deg"].round(6)
+            out["new_gamma"] = ~key.isin(measured) & ~key.duplicated()
         return out
 
     def _taken(self) -> list[tuple[float, float]]:
@@ -348,11 +376,11 @@ class Campaign:
 
     # ------------------------------------------------------------------ verdict
     def verdict(self) -> Verdict:
-        """Whether to stop: see :class:`Verdict`. Stops when the readings pin the
-        predicted curve down: leaving out any one reading moves it over the whole range by
-        at most ``stop_tolerance`` of its variance, at this and the previous number of
-        readings, with at least three readings more than the model has coefficients and
-        no angle of incidence of the range outside the measured ones' span."""
+        """Whether to stop: see :class:`Verdict`. Stops when the readings pin the predicted
+        curve down: the fits without the last reading and without the last two predict the
+        whole range within ``stop_tolerance`` of the current fit's variance over it, with at
+        least :data:`STOP_MIN_EXTRA` readings more than the model has coefficients and no
+        angle of incidence of the instrument outside the measured ones' span."""
         state = self._current()
         if state.verdict is not None:
             return state.verdict
@@ -366,7 +394,6 @@ class Campaign:
         else:
             v = self._judge(state)
         state.verdict = v
-        self._history[n] = v
         return v
 
     def _judge(self, state: _State) -> Verdict:
@@ -375,37 +402,40 @@ class Campaign:
         n = meas.n_points
         f = state.range_pred
         ss_pred = float(np.sum((f - f.mean()) ** 2))
-        loo = None if state.loo is None else state.loo[:, :len(f)]
-        if loo is not None and len(loo) and ss_pred > 0:
-            moves = np.sum((loo - f[None]) ** 2, axis=1) / ss_pred
-            stability = float(np.max(moves))
-            spread = (len(loo) - 1) / len(loo) * np.sum((loo - loo.mean(axis=0)) ** 2) / ss_pred
-        else:
-            stability, spread = float("inf"), float("inf")
-        scale = np.abs(res.fitted) + 1e-3 * max(float(np.max(np.abs(meas.power))), 1e-300)
+        moves = []
+        for back in (1, 2):
+            before = self._range_prediction(n - back)
+            if before is None or not np.all(np.isfinite(before)) or ss_pred <= 0:
+                moves.append(float("inf"))
+            else:
+                moves.append(float(np.sum((before - f) ** 2)) / ss_pred)
+        stability = max(moves)
+        # the model's own misfit, from the readings' residuals (power-weighted, per degree
+        # of freedom), carried over the range's predicted power
         dof = max(n - self.model.n_params, 1)
-        misfit = float(np.sum((res.residuals / scale) ** 2)) / dof
+        misfit = float(np.sum(res.residuals ** 2)) / dof / max(
+            float(np.mean(meas.power ** 2)), 1e-300)
         ss_mis = misfit * float(np.sum(f ** 2))
         denom = ss_pred + ss_mis
-        r2_hi = 1.0 - ss_mis / denom if denom > 0 else float("nan")
-        r2_lo = 1.0 - (ss_mis + 4.0 * spread * ss_pred) / denom if denom > 0 else float("nan")
+        if denom > 0 and np.isfinite(stability):
+            r2_hi = 1.0 - ss_mis / denom
+            r2_lo = 1.0 - (ss_mis + 2.0 * stability * ss_pred) / denom
+        else:
+            r2_hi, r2_lo = float("nan"), float("nan")
         reasons = []
-        if n < self.model.n_params + 3:
-            reasons.append(f"at least {self.model.n_params + 3} readings before stopping")
+        need = self.model.n_params + STOP_MIN_EXTRA
+        if n < need:
+            reasons.append(f"at least {need} readings before stopping")
         if not stability <= self.stop_tolerance:
-            reasons.append(f"one reading still moves the predicted curve by "
+            reasons.append(f"the last two readings moved the predicted curve by "
                            f"{min(stability, 9.99):.2%} (stop below {self.stop_tolerance:.1%})")
-        previous = self._history.get(n - 1)
-        if previous is None or not previous.stability <= self.stop_tolerance:
-            if not reasons:
-                reasons.append("the predicted curve must hold for two readings in a row")
         mags = np.abs(meas.gamma_deg)
         outside = [g for g in self.instrument.gammas
                    if abs(g) > mags.max() + 1e-6 or abs(g) < mags.min() - 1e-6]
         if outside:
             reasons.append("angles of incidence outside the measured span: "
                            + short_list([f"{g:g}" for g in outside], 4))
-        return Verdict(not reasons, n, (float(max(r2_lo, -np.inf)), float(r2_hi)), stability,
+        return Verdict(not reasons, n, (float(r2_lo), float(r2_hi)), stability,
                        tuple(res.ill_determined), tuple(res.at_bound), tuple(reasons))
 
     # ------------------------------------------------------------------ scoring

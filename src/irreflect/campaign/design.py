@@ -69,12 +69,17 @@ class DesignRule:
     theta_scale: float = 12.0
     lobe_scale: float = 1.0
     noise: float = 0.01
+    tail_sd: float = 0.0
+    shift_sd: float = 0.0
 
 
 DEFAULT_RULE = DesignRule()
 
 
 # ----------------------------------------------------------------------------- opening
+OPENING_VARIANT = "basic"
+
+
 def opening_design(instrument, n: int) -> list[tuple[float, float, str]]:
     """The first ``n`` readings when nothing is measured: ``(gamma, theta, why)``.
 
@@ -98,6 +103,15 @@ def opening_design(instrument, n: int) -> list[tuple[float, float, str]]:
     mid = chosen[len(chosen) // 2]
     tmin, tmax = instrument.theta_min, instrument.theta_max
     plan = [(g, -g, "mirror direction: the specular peak") for g in chosen]
+    if OPENING_VARIANT == "probes":
+        d0 = max(1.0, 1.5 * instrument.theta_step)
+        plan += [
+            (lo, max(tmin, -lo - 50.0), "diffuse lobe, source side"),
+            (hi, 0.0, "diffuse lobe near the normal, grazing incidence"),
+            (hi, -hi - d0, "the specular lobe's body"),
+            (mid, min(tmax, -mid + 35.0), "far side beyond the specular lobe"),
+            (lo, -lo + d0, "the specular lobe's body"),
+        ]
     plan += [
         (lo, max(tmin, -lo - 50.0), "diffuse lobe, source side"),
         (hi, 0.0, "diffuse lobe near the normal, grazing incidence"),
@@ -296,6 +310,26 @@ def build_prior(model, result: FitResult, meas, gamma_deg, theta_deg,
                 law.append((jn[:, i] * v, sd))
     width = specular_half_width(model, values, g)
     lobe = np.arcsinh((-g - t) / width)
+    if rule.shift_sd:
+        # the lobe shifted along theta by a share of its half width (an angle offset, a
+        # tilted lobe): d f / d theta times the half width
+        h = np.minimum(0.05 * width, 0.05)
+        with np.errstate(all="ignore"):
+            slope = (np.nan_to_num(model.predict_deg(values, g, t + h))
+                     - np.nan_to_num(model.predict_deg(values, g, t - h))) / (2.0 * h)
+        law.append((slope * width, rule.shift_sd))
+    if rule.tail_sd and "u_as" in names:
+        # the specular lobe with heavier tails than cos^n (same peak, same half width)
+        q = np.array(values, float)
+        q[names.index("u_as")] = 0.0
+        with np.errstate(all="ignore"):
+            diffuse = np.nan_to_num(model.predict_deg(q, g, t)) * (1.0 - values[0])
+            peak = np.nan_to_num(model.predict_deg(values, g, -g)
+                                 - model.predict_deg(q, g, -g) * (1.0 - values[0]))
+        ratio = ((-g - t) / width) ** 2
+        cos_lobe = np.clip(f - diffuse, 0.0, None)
+        tail = np.clip(peak, 0.0, None) / (1.0 + ratio) - cos_lobe
+        law.append((tail, rule.tail_sd))
     return Prior(gamma=g, theta=t, features=features, law=law,
                  law_scale=rule.law_gamma_scale, amplitude=misfit * scale, scale=scale,
                  lobe_coord=lobe, rule=rule)
