@@ -295,6 +295,16 @@ class Campaign:
                 free &= np.isin(np.round(s[:, 0], 6), list(used))
         return free
 
+    def _is_free(self, gamma: float, theta: float, taken) -> bool:
+        """Whether the setting is neither measured (within the separation) nor beyond the
+        allowed number of angle-of-incidence settings."""
+        sep = max(self.instrument.min_separation, 1e-9)
+        if any(abs(g - gamma) < 1e-6 and abs(t - theta) <= sep + 1e-9 for g, t in taken):
+            return False
+        limit = self.instrument.max_gamma_settings
+        used = {round(g, 6) for g, _ in taken}
+        return not (limit and len(used) >= limit and round(gamma, 6) not in used)
+
     def _opening(self, k: int, taken) -> list:
         plan = opening_design(self.instrument, self.model.n_params + 1 + 7)
         rows = []
@@ -302,7 +312,7 @@ class Campaign:
         for g, t, why in plan:
             if len(rows) == k:
                 break
-            if not self._free_mask(taken)[_index_of(self._settings, g, t)]:
+            if not self._is_free(g, t, taken):
                 continue
             rows.append((g, t, f"opening design: {why}", round(g, 6) not in measured_g, np.nan))
             taken = taken + [(g, t)]
@@ -323,7 +333,8 @@ class Campaign:
         meas = self.measurements
         res = state.fit
         s = self._settings
-        prior = build_prior(self.model, res, meas, s[:, 0], s[:, 1], self.rule, loo=state.loo)
+        prior = build_prior(self.model, res, meas, s[:, 0], s[:, 1], self.rule, loo=state.loo,
+                            loo_own=state.loo_own)
         if meas.sigma is not None:
             noise_m = meas.sigma ** 2
         else:
@@ -450,11 +461,6 @@ class Campaign:
 
 
 # ----------------------------------------------------------------------------- helpers
-def _index_of(settings: np.ndarray, gamma: float, theta: float) -> int:
-    d = np.abs(settings[:, 0] - gamma) * 1e6 + np.abs(settings[:, 1] - theta)
-    return int(np.argmin(d))
-
-
 def _farthest(settings, free, taken) -> int:
     """The free setting farthest (in degrees, gamma and theta alike) from every reading."""
     if not taken:

@@ -52,7 +52,8 @@ class DesignRule:
     lobe_factors : the specular lobe index times these factors, as alternatives
     law_sd : relative deviation (1 sigma) of each law in gamma: share, indices, level
     law_gamma_scale : deg, how far in gamma a deviation of the laws extends
-    misfit_min : smallest relative local misfit assumed
+    misfit_min : smallest relative local misfit assumed (the fit's relative residuals, and
+        ``loo_misfit`` times the leave-one-out refits' relative errors, raise it)
     gamma_scale, theta_scale : deg, correlation lengths of the local misfit
     lobe_scale : correlation length of the local misfit in asinh(phi / half width)
     noise : relative noise of a reading (1 sigma) when the table gives no sigma
@@ -71,15 +72,13 @@ class DesignRule:
     noise: float = 0.01
     tail_sd: float = 0.0
     shift_sd: float = 0.0
+    loo_misfit: float = 0.5
 
 
 DEFAULT_RULE = DesignRule()
 
 
 # ----------------------------------------------------------------------------- opening
-OPENING_VARIANT = "basic"
-
-
 def opening_design(instrument, n: int) -> list[tuple[float, float, str]]:
     """The first ``n`` readings when nothing is measured: ``(gamma, theta, why)``.
 
@@ -87,8 +86,10 @@ def opening_design(instrument, n: int) -> list[tuple[float, float, str]]:
     whose mirror direction it can reach, and the one nearest their middle; fewer if it
     has fewer or ``max_gamma_settings`` says so), so that no later fit extrapolates in
     gamma; at each the mirror direction (the specular peak: its height, and whether there
-    is a lobe at all); then the diffuse lobe away from the mirror: on the source side, near
-    the normal at grazing incidence, and on the far side beyond the lobe.
+    is a lobe at all); a reading on the lobe's body a degree (or 1.5 receiver steps) from the
+    mirror at the largest and the smallest angle, which starts bracketing the lobe's width;
+    and the diffuse lobe away from the mirror: on the source side, near the normal at
+    grazing incidence, and on the far side beyond the lobe.
     """
     settings = instrument.settings()
     gammas = instrument.gammas
@@ -102,21 +103,17 @@ def opening_design(instrument, n: int) -> list[tuple[float, float, str]]:
     lo, hi = chosen[0], chosen[-1]
     mid = chosen[len(chosen) // 2]
     tmin, tmax = instrument.theta_min, instrument.theta_max
+    probe = max(1.0, 1.5 * instrument.theta_step)
     plan = [(g, -g, "mirror direction: the specular peak") for g in chosen]
-    if OPENING_VARIANT == "probes":
-        d0 = max(1.0, 1.5 * instrument.theta_step)
-        plan += [
-            (lo, max(tmin, -lo - 50.0), "diffuse lobe, source side"),
-            (hi, 0.0, "diffuse lobe near the normal, grazing incidence"),
-            (hi, -hi - d0, "the specular lobe's body"),
-            (mid, min(tmax, -mid + 35.0), "far side beyond the specular lobe"),
-            (lo, -lo + d0, "the specular lobe's body"),
-        ]
     plan += [
         (lo, max(tmin, -lo - 50.0), "diffuse lobe, source side"),
         (hi, 0.0, "diffuse lobe near the normal, grazing incidence"),
-        (hi, max(tmin, hi - 10.0), "diffuse lobe, source side at grazing incidence"),
+        (hi, -hi - probe, f"the specular lobe's body, {probe:g} deg from the mirror toward "
+                          "the normal: starts bracketing its width"),
         (mid, min(tmax, -mid + 35.0), "far side beyond the specular lobe"),
+        (lo, -lo + probe, f"the specular lobe's body, {probe:g} deg from the mirror toward "
+                          "grazing: starts bracketing its width"),
+        (hi, max(tmin, hi - 10.0), "diffuse lobe, source side at grazing incidence"),
         (mid, max(tmin, mid - 20.0), "diffuse lobe, source side"),
         (lo, min(tmax, -lo + 25.0), "far side beyond the specular lobe"),
         (hi, min(tmax, -hi + 12.0), "far side beyond the specular lobe at grazing incidence"),
@@ -213,17 +210,22 @@ class Prior:
 
     def block(self, i, j) -> np.ndarray:
         """The prior covariance between settings ``i`` and ``j`` (index arrays)."""
+        from scipy.spatial.distance import cdist
+
         out = self.features[i] @ self.features[j].T
-        gi, gj = self.gamma[i][:, None], self.gamma[j][None, :]
-        rg = np.exp(-0.5 * ((gi - gj) / self.law_scale) ** 2)
-        for values, sd in self.law:
-            out += sd * sd * (values[i][:, None] * values[j][None, :]) * rg
+        gi, gj = self.gamma[i][:, None], self.gamma[j][:, None]
+        if self.law:
+            values = np.column_stack([v for v, _ in self.law])
+            sd2 = np.array([sd * sd for _, sd in self.law])
+            rg = np.exp(-0.5 * cdist(gi / self.law_scale, gj / self.law_scale, "sqeuclidean"))
+            out += ((values[i] * sd2) @ values[j].T) * rg
         r = self.rule
-        d2 = (((gi - gj) / r.gamma_scale) ** 2
-              + ((self.theta[i][:, None] - self.theta[j][None, :]) / r.theta_scale) ** 2
-              + ((self.lobe_coord[i][:, None] - self.lobe_coord[j][None, :]) / r.lobe_scale)
-              ** 2)
-        out += self.amplitude[i][:, None] * self.amplitude[j][None, :] * np.exp(-0.5 * d2)
+        xi = np.column_stack([self.gamma[i] / r.gamma_scale, self.theta[i] / r.theta_scale,
+                              self.lobe_coord[i] / r.lobe_scale])
+        xj = np.column_stack([self.gamma[j] / r.gamma_scale, self.theta[j] / r.theta_scale,
+                              self.lobe_coord[j] / r.lobe_scale])
+        local = np.exp(-0.5 * cdist(xi, xj, "sqeuclidean"))
+        out += self.amplitude[i][:, None] * local * self.amplitude[j][None, :]
         return out
 
 
@@ -254,7 +256,7 @@ def leave_one_out(model, meas, values, gamma_deg, theta_deg, seed=0):
 
 
 def build_prior(model, result: FitResult, meas, gamma_deg, theta_deg,
-                rule: DesignRule = DEFAULT_RULE, loo=None) -> Prior:
+                rule: DesignRule = DEFAULT_RULE, loo=None, loo_own=None) -> Prior:
     """The prior covariance of the readings at the settings (gamma_deg, theta_deg) and at
     the measured readings, around the current fit (see the module docstring). The
     settings come first, the measured readings after them."""
@@ -270,6 +272,10 @@ def build_prior(model, result: FitResult, meas, gamma_deg, theta_deg,
     scale = np.abs(f) + 1e-3 * peak
     rel = (y - fm) / scale[n_set:]
     misfit = max(rule.misfit_min, float(np.sqrt(np.mean(rel ** 2))) if n_meas else 0.0)
+    if rule.loo_misfit and loo_own is not None and np.isfinite(loo_own).sum() >= 3:
+        ok = np.isfinite(loo_own)
+        held = np.clip(np.abs(y[ok] - loo_own[ok]) / scale[n_set:][ok], 0.0, 3.0)
+        misfit = max(misfit, rule.loo_misfit * float(np.sqrt(np.mean(held ** 2))))
     parts = []
     if rule.coefficient_prior:
         lo, hi = model.screen_box()

@@ -23,9 +23,9 @@ from ..errors import IrreflectError
 from ..validation import check_number
 
 #: Largest number of settings a campaign scores at once (the range and the candidates are
-#: thinned to this many, keeping every setting near a mirror direction): the proposal's
-#: kernel matrices grow with its square.
-MAX_SETTINGS = 2500
+#: thinned to this many, keeping the settings near a mirror direction first): the
+#: proposal's matrices grow with its square (900: about 0.1 s a proposal).
+MAX_SETTINGS = 900
 
 
 @dataclass(frozen=True)
