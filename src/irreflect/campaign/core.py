@@ -42,16 +42,20 @@ from .design import (
     natural_jacobian,
     opening_design,
     posterior,
+    posterior_error,
     region,
     specular_half_width,
 )
 from .instrument import Instrument, thin_settings
 
-#: The verdict stops when the fits without the last reading and without the last two
-#: readings predict the whole range within this share of the current fit's variance over it.
+#: The verdict stops when the fits without the last readings (see :data:`STOP_HOLD`)
+#: predict the whole range within this share of the current fit's variance over it.
 STOP_TOLERANCE = 0.005
 #: ... and no sooner than this many readings beyond the model's coefficients.
 STOP_MIN_EXTRA = 3
+#: The fits without the last one to ``STOP_HOLD + 1`` readings must all agree (the curve has
+#: held for that many readings).
+STOP_HOLD = 2
 
 
 @dataclass(frozen=True)
@@ -62,8 +66,8 @@ class Verdict:
     n_measured : readings so far
     r2_band : (low, high) predicted R^2 of the current fit against the whole range (NaN
         before a fit)
-    stability : how far the fits without the last one and two readings lie from the
-        current fit over the whole range, as a share of its variance (NaN before a fit)
+    stability : how far the fits without the last readings lie from the current fit over
+        the whole range, as a share of its variance (NaN before a fit)
     ill_determined, at_bound : the current fit's coefficients that the readings do not pin
         down / that sit on a bound of their range
     reasons : why it continues (empty when it stops)
@@ -86,7 +90,7 @@ class Verdict:
             parts.append(f"predicted R^2 on the whole range {self.r2_band[0]:.4f}-"
                          f"{self.r2_band[1]:.4f}")
         if np.isfinite(self.stability):
-            parts.append(f"the last two readings moved the predicted curve by "
+            parts.append(f"the last {STOP_HOLD + 1} readings moved the predicted curve by "
                          f"{min(self.stability, 9.99):.2%} of its variance")
         if self.ill_determined:
             parts.append(f"ill-determined: {', '.join(self.ill_determined)}")
@@ -388,10 +392,12 @@ class Campaign:
     # ------------------------------------------------------------------ verdict
     def verdict(self) -> Verdict:
         """Whether to stop: see :class:`Verdict`. Stops when the readings pin the predicted
-        curve down: the fits without the last reading and without the last two predict the
-        whole range within ``stop_tolerance`` of the current fit's variance over it, with at
-        least :data:`STOP_MIN_EXTRA` readings more than the model has coefficients and no
-        angle of incidence of the instrument outside the measured ones' span."""
+        curve down: the fits on the first n - 1, ..., n - 1 - :data:`STOP_HOLD` readings
+        predict the whole range within ``stop_tolerance`` of the current fit's variance
+        over it, with at least :data:`STOP_MIN_EXTRA` readings more than the model has
+        coefficients and no angle of incidence of the instrument outside the measured
+        ones' span. The predicted R^2 band is that of the design's posterior: the expected
+        squared difference between the material and the current fit at every setting."""
         state = self._current()
         if state.verdict is not None:
             return state.verdict
@@ -413,32 +419,37 @@ class Campaign:
         n = meas.n_points
         f = state.range_pred
         ss_pred = float(np.sum((f - f.mean()) ** 2))
+        # how far the fits on the first n - 1, n - 2 and n - 3 readings lie from this one
         moves = []
-        for back in (1, 2):
+        for back in range(1, STOP_HOLD + 2):
             before = self._range_prediction(n - back)
             if before is None or not np.all(np.isfinite(before)) or ss_pred <= 0:
                 moves.append(float("inf"))
             else:
                 moves.append(float(np.sum((before - f) ** 2)) / ss_pred)
         stability = max(moves)
-        # the model's own misfit, from the readings' residuals (power-weighted, per degree
-        # of freedom), carried over the range's predicted power
-        dof = max(n - self.model.n_params, 1)
-        misfit = float(np.sum(res.residuals ** 2)) / dof / max(
-            float(np.mean(meas.power ** 2)), 1e-300)
-        ss_mis = misfit * float(np.sum(f ** 2))
-        denom = ss_pred + ss_mis
-        if denom > 0 and np.isfinite(stability):
-            r2_hi = 1.0 - ss_mis / denom
-            r2_lo = 1.0 - (ss_mis + 2.0 * stability * ss_pred) / denom
+        # the expected squared difference between the material and the fit over the range:
+        # the design's posterior (its variance, and its mean's departure from the fit)
+        s_ = self._settings
+        prior = build_prior(self.model, res, meas, s_[:, 0], s_[:, 1], self.rule,
+                            loo=state.loo, loo_own=state.loo_own)
+        noise_m = (meas.sigma ** 2 if meas.sigma is not None
+                   else (self.rule.noise * prior.scale[len(s_):]) ** 2)
+        expected = posterior_error(prior, len(s_), np.maximum(noise_m, 1e-300),
+                                   meas.power - res.fitted)
+        denom = ss_pred + expected
+        if denom > 0:
+            r2_mid = 1.0 - expected / denom
+            r2_lo, r2_hi = 1.0 - 2.0 * expected / denom, 1.0 - 0.5 * expected / denom
         else:
-            r2_hi, r2_lo = float("nan"), float("nan")
+            r2_lo = r2_hi = r2_mid = float("nan")
+        state.extra["r2_predicted"] = r2_mid
         reasons = []
         need = self.model.n_params + STOP_MIN_EXTRA
         if n < need:
             reasons.append(f"at least {need} readings before stopping")
         if not stability <= self.stop_tolerance:
-            reasons.append(f"the last two readings moved the predicted curve by "
+            reasons.append(f"the last {STOP_HOLD + 1} readings moved the predicted curve by "
                            f"{min(stability, 9.99):.2%} (stop below {self.stop_tolerance:.1%})")
         mags = np.abs(meas.gamma_deg)
         outside = [g for g in self.instrument.gammas

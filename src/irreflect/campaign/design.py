@@ -382,6 +382,32 @@ def posterior(prior: Prior, n_settings: int, measured_noise: np.ndarray,
     return Posterior(cov=k_ss, noise=noise)
 
 
+def posterior_error(prior: Prior, n_settings: int, measured_noise: np.ndarray,
+                    residuals: np.ndarray) -> float:
+    """The expected summed squared difference, over the first ``n_settings`` settings,
+    between the material and the current fit (the prior's mean), given the readings'
+    ``residuals`` from the fit: the posterior's variance plus its mean's squared
+    departure from the fit."""
+    s = np.arange(n_settings)
+    m = np.arange(n_settings, len(prior.gamma))
+    var = np.clip(np.einsum("ij,ij->i", prior.features[s], prior.features[s])
+                  + sum(sd * sd * v[s] ** 2 for v, sd in prior.law)
+                  + prior.amplitude[s] ** 2, 0.0, None)
+    if not m.size:
+        return float(np.sum(var))
+    k_sm = prior.block(s, m)
+    k_mm = prior.block(m, m) + np.diag(measured_noise)
+    jitter = 1e-10 * max(float(np.max(np.diag(k_mm))), 1e-300)
+    a = k_mm + jitter * np.eye(m.size)
+    try:
+        sol = np.linalg.solve(a, np.column_stack([k_sm.T, residuals]))
+    except np.linalg.LinAlgError:
+        sol = np.linalg.lstsq(a, np.column_stack([k_sm.T, residuals]), rcond=None)[0]
+    reduce = np.einsum("ij,ji->i", k_sm, sol[:, :-1])
+    mean = k_sm @ sol[:, -1]
+    return float(np.sum(np.clip(var - reduce, 0.0, None) + mean ** 2))
+
+
 # ----------------------------------------------------------------------------- why
 def region(gamma: float, theta: float, width: float, measured_gammas) -> str:
     """Where a setting lies, in words."""
