@@ -43,6 +43,7 @@ from ..errors import FitWarning
 from ..fitting import FitResult, fit_subsets
 from ..protocol.core import lobe_half_width_deg
 
+
 @dataclass(frozen=True)
 class DesignRule:
     """The knobs of the adaptive rule (the defaults are what the benchmark ran).
@@ -108,10 +109,10 @@ def opening_design(instrument, n: int) -> list[tuple[float, float, str]]:
     plan += [
         (lo, max(tmin, -lo - 50.0), "diffuse lobe, source side"),
         (hi, 0.0, "diffuse lobe near the normal, grazing incidence"),
-        (hi, -hi - probe, f"the specular lobe's body, {probe:g} deg from the mirror toward "
-                          "the normal: starts bracketing its width"),
+        (hi, -hi - probe, "the specular lobe's body, {off} deg from the mirror toward the "
+                          "normal: starts bracketing its width"),
         (mid, min(tmax, -mid + 35.0), "far side beyond the specular lobe"),
-        (lo, -lo + probe, f"the specular lobe's body, {probe:g} deg from the mirror toward "
+        (lo, -lo + probe, "the specular lobe's body, {off} deg from the mirror toward "
                           "grazing: starts bracketing its width"),
         (hi, max(tmin, hi - 10.0), "diffuse lobe, source side at grazing incidence"),
         (mid, max(tmin, mid - 20.0), "diffuse lobe, source side"),
@@ -124,7 +125,8 @@ def opening_design(instrument, n: int) -> list[tuple[float, float, str]]:
         if idx is None:
             continue
         taken.append(idx)
-        out.append((float(settings[idx, 0]), float(settings[idx, 1]), why))
+        g_, t_ = float(settings[idx, 0]), float(settings[idx, 1])
+        out.append((g_, t_, why.replace("{off}", f"{abs(g_ + t_):.3g}")))
         if len(out) == n:
             break
     return out
@@ -409,22 +411,22 @@ def posterior_error(prior: Prior, n_settings: int, measured_noise: np.ndarray,
 
 
 # ----------------------------------------------------------------------------- why
-def region(gamma: float, theta: float, width: float, measured_gammas) -> str:
-    """Where a setting lies, in words."""
+def region(gamma: float, theta: float, width: float, measured_gammas=()) -> str:
+    """Where a setting lies, in words (``width``: the specular lobe's half width, deg)."""
     phi = -gamma - theta
-    if abs(phi) <= max(0.3 * width, 0.05):
-        where = "the mirror direction (specular peak)"
-    elif abs(phi) <= 2.5 * width:
-        where = f"the specular lobe's body, {abs(phi):.2g} deg from the mirror"
-    elif abs(phi) <= 8.0 * width and abs(phi) <= 30.0:
-        where = f"the specular lobe's flank, {abs(phi):.2g} deg from the mirror"
-    elif abs(theta) >= 60.0:
-        where = f"grazing reception (theta {theta:g} deg)"
-    elif theta * (-gamma if gamma else 1.0) < 0 or (gamma == 0 and theta < 0):
-        where = "the diffuse lobe on the source side"
-    else:
-        where = "the diffuse lobe on the far side"
-    return where
+    off = abs(phi)
+    if off <= max(0.3 * width, 0.05) and off <= 2.0:
+        return "the mirror direction (specular peak)"
+    if off <= min(2.5 * width, 20.0):
+        return f"the specular lobe's body, {off:.1f} deg from the mirror"
+    if off <= min(8.0 * width, 30.0):
+        return f"the specular lobe's flank, {off:.1f} deg from the mirror"
+    if abs(theta) >= 60.0:
+        return f"grazing reception (theta {theta:g} deg)"
+    if abs(theta) <= 10.0:
+        return "the diffuse lobe near the normal"
+    side = theta * (-gamma) < 0 if gamma else theta < 0
+    return "the diffuse lobe on the source side" if side else "the diffuse lobe on the far side"
 
 
 def coefficient_gain(jn: np.ndarray, measured_rows: np.ndarray, row: np.ndarray,

@@ -108,7 +108,8 @@ def _next(args) -> int:
         print("no setting left to propose: every setting of the instrument is measured")
     print(f"verdict: {verdict.text}")
     if args.out:
-        print(f"wrote {args.out} ({len(proposals)} settings: fill in power and add the rows "
+        what = "setting" if len(proposals) == 1 else "settings"
+        print(f"wrote {args.out} ({len(proposals)} {what}: fill in power and add the rows "
               f"to {Path(args.measured).name})")
     return 0
 
@@ -188,7 +189,7 @@ def format_replay(result) -> str:
         lines.append(f"  {name:<{width}}  {text}{extra}{note}")
     if result.verdicts:
         stop = result.stop_n
-        lines.append(f"  adaptive verdict: " + (f"stop at N = {stop}" if stop else
+        lines.append("  adaptive verdict: " + (f"stop at N = {stop}" if stop else
                                                  "never said stop")
                      + (f", R^2 {result.curves['adaptive'].r2.get(stop, float('nan')):.4f} "
                         "there" if stop else ""))
