@@ -3,6 +3,7 @@ with :func:`irreflect.plots.save_figure`)."""
 
 from __future__ import annotations
 
+import matplotlib.ticker
 import numpy as np
 
 from .common import plt
@@ -69,6 +70,7 @@ def plot_campaign(result, ax=None, *, title=None, span: float = 0.25):
         ax.axvline(stop, color="tab:red", lw=0.8, ls="-.",
                    label=f"adaptive verdict: stop at N = {stop}")
     ax.set_xlim(left, right)
+    ax.xaxis.set_major_locator(matplotlib.ticker.MaxNLocator(integer=True))
     ax.set_ylim(bottom - 0.01 * span, min(1.0, ref + 0.2 * span))
     ax.set_xlabel("number of readings N")
     ax.set_ylabel("R^2 against all points")
