@@ -372,7 +372,7 @@ class Campaign:
             row = natural_jacobian(self.model, res.values, np.array([g]), np.array([t]))[0]
             jm = np.vstack([jn_meas, *extra_rows]) if extra_rows else jn_meas
             nm = np.concatenate([noise_meas, extra_noise]) if extra_noise else noise_meas
-            coef, drop = coefficient_gain(jm, jm, row, names, res.values, nm, post.noise[j])
+            coef, drop = coefficient_gain(jm, row, names, res.values, nm, post.noise[j])
             why = region(g, t, float(width[j]), measured_g)
             if round(g, 6) not in measured_g:
                 lo, hi = float(np.min(mags)), float(np.max(mags))

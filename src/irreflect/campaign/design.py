@@ -58,6 +58,11 @@ class DesignRule:
     gamma_scale, theta_scale : deg, correlation lengths of the local misfit
     lobe_scale : correlation length of the local misfit in asinh(phi / half width)
     noise : relative noise of a reading (1 sigma) when the table gives no sigma
+    tail_sd : a specular lobe with heavier tails than cos^n (same peak and half width), per
+        angle of incidence (0: off; the benchmark found no gain)
+    shift_sd : the lobe shifted along theta by this share of its half width (an angle
+        offset or a tilted lobe; 0: off, no gain in the benchmark either)
+    loo_misfit : weight of the leave-one-out refits' relative errors in the local misfit
     """
 
     coefficient_prior: float = 1.0
@@ -429,10 +434,11 @@ def region(gamma: float, theta: float, width: float, measured_gammas=()) -> str:
     return "the diffuse lobe on the source side" if side else "the diffuse lobe on the far side"
 
 
-def coefficient_gain(jn: np.ndarray, measured_rows: np.ndarray, row: np.ndarray,
-                     names, values, noise_var: np.ndarray, noise_row: float) -> tuple[str, float]:
+def coefficient_gain(measured_rows: np.ndarray, row: np.ndarray, names, values,
+                     noise_var: np.ndarray, noise_row: float) -> tuple[str, float]:
     """The coefficient whose (linearised) standard error a reading with Jacobian ``row``
-    shrinks most, relative to its value, and by what fraction."""
+    (natural coefficients) shrinks most, and by what fraction, given the readings' Jacobian
+    ``measured_rows`` and noise variances."""
     scale = np.maximum(np.abs(values), 1e-3)
     a = measured_rows * scale / np.sqrt(noise_var)[:, None]
     b = row * scale / np.sqrt(noise_row)

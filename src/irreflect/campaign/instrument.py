@@ -127,7 +127,7 @@ class Instrument:
         kwargs.setdefault("source_clearance", 0.0)
         kwargs.setdefault("theta_step", step)
         kwargs.setdefault("min_separation", 1e-6)
-        return cls(gammas_deg=tuple(np.unique(g)), theta_min=float(min(t.min(), 89.0)) - 0.0,
+        return cls(gammas_deg=tuple(np.unique(g)), theta_min=float(t.min()),
                    theta_max=float(t.max()), settings_deg=np.column_stack([g, t]), **kwargs)
 
     @property
