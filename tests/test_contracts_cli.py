@@ -41,12 +41,16 @@ def _parser(command):
 #: the smallest real run of each command that offers --json (inputs under ``root``)
 def _json_argv(command, root: Path):
     (root / "protocol.csv").write_text(PROTOCOL)
+    (root / "empty.csv").write_text("gamma_deg,theta_deg,power\n")
     return {
         "fit": ["fit", TERRAZZO, "--json"],
         "compare": ["compare", TERRAZZO, "--models", "two-lobe,phong@10", "--json"],
         "diagnose": ["diagnose", TERRAZZO, "--max-effects", "0", "--json"],
         "evaluate-protocol": ["evaluate-protocol", str(root / "protocol.csv"), TERRAZZO,
                               "--json"],
+        "next": ["next", str(root / "empty.csv"), "--n", "3", "--json"],
+        "campaign": ["campaign", TERRAZZO, "--strategies", "adaptive,paper", "--n-max", "9",
+                     "--json"],
     }[command]
 
 

@@ -33,6 +33,8 @@ COMMANDS = {
     "evaluate-protocol": "protocol",
     "compare": "compare",
     "diagnose": "diagnose",
+    "next": "campaign",
+    "campaign": "campaign",
     "reproduce": "reproduce",
     "room": "room",
 }

@@ -38,7 +38,8 @@ def how_to_read(ctx: ReportContext, source: str) -> str:
     text = ("**How to read this.** The findings come first: what failed and where, then "
             "one section per question: does the two-component model fit (fit quality, "
             "coefficients, figures), which measurement points matter (the optimiser), what a "
-            "technician should measure (the protocol), how the model compares with the "
+            "technician should measure (the protocol), how many readings a new material needs "
+            "without a dense scan (adaptive campaigns), how the model compares with the "
             "literature's, and what it still misses (diagnostics). Columns headed *paper* are "
             "copied from the paper's tables (`../shared/paper/tables/`); columns headed *ours* "
             "are measured by this run. ")
