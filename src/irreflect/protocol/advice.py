@@ -46,6 +46,7 @@ from scipy import stats
 
 from .. import metrics
 from ..models import get_model
+from .core import floor_sig
 
 #: The drop of R^2 within which a protocol passes (the adaptive campaign's target).
 PASS_MARGIN = 0.01
@@ -506,7 +507,7 @@ def _causes(dense, fit_p, reference, pts, pred_p, pred_a, n_distinct, k, what, i
                 text += "; " + gap
             causes.append(Cause(
                 "unresolved-lobe", text, s_near,
-                f"resolve the lobe: a receiver step of at most {min(hws):.2g} deg within "
+                f"resolve the lobe: a receiver step of at most {floor_sig(min(hws)):g} deg within "
                 f"+-{2 * max(hws):.2g} deg of the mirror"))
 
     # what is left: the coefficients the points leave free, seen at the measured angles

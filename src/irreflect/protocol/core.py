@@ -47,6 +47,16 @@ ORDER_RULE = (
 _EPS = 1e-9
 
 
+def floor_sig(x: float, digits: int = 2) -> float:
+    """``x > 0`` rounded *down* to ``digits`` significant digits (a limit stated as "at
+    most" must not round up past the value it stands for): 0.617 -> 0.61."""
+    x = float(x)
+    if not (np.isfinite(x) and x > 0):
+        return x
+    scale = 10.0 ** (np.floor(np.log10(x)) - digits + 1)
+    return float(np.round(np.floor(x / scale * (1 + 1e-12)) * scale, 12))
+
+
 def _clean(x: float) -> float:
     """Round away binary noise (e.g. 69.99999999) and turn -0.0 into 0.0."""
     return float(np.round(float(x), 9)) + 0.0
@@ -459,7 +469,8 @@ GLOSSY_RULE = (
     "a pilot scan's two-lobe fit (u_ns cos^v_ns(gamma)) or is given. With a pilot scan, every "
     "point is moved to the nearest angle the pilot measured at that gamma (a tool with fixed "
     "receiver positions), distinct points kept distinct. Points outside the receiver range "
-    "are clamped as in the paper's rule."
+    "are clamped as in the paper's rule, and a clamped point on top of another of its gamma "
+    "is replaced as there (separation: half the lobe offset)."
 )
 
 
@@ -571,6 +582,19 @@ def glossy_protocol(gammas_deg, theta_min: float = -70.0, theta_max: float = 70.
             value, moved = _nearest_free(available, g, value, taken.get(g, []), lo, hi)
             if moved:
                 adj = "snapped"
+        elif adj and _coincides(value, taken.get(g, []), 0.5 * offsets[g]):
+            # a clamped point on top of another of its gamma: the paper's coincidence rule
+            # with half the lobe offset as the separation (see PAPER_RULE)
+            mirror = _clean(-g)
+            other = _replacement(mirror, wanted, taken.get(g, []), lo, hi, 0.5 * offsets[g])
+            if other is None:
+                raise IrreflectError(
+                    f"gamma {g:g}: the receiver range [{lo:g}, {hi:g}] has no room for the "
+                    f"{kind} point away from the others: widen the range")
+            notes.append(f"gamma {g:g}: {kind} theta {wanted:g} clamped to {value:g} coincides "
+                         f"with another point of that gamma; replaced by {other:g}, the "
+                         f"reachable angle farthest from the mirror direction {mirror:g}")
+            value, adj = other, "replaced"
         taken.setdefault(g, []).append(value)
         gamma_out.append(g)
         theta_out.append(value)
@@ -600,7 +624,7 @@ def glossy_protocol(gammas_deg, theta_min: float = -70.0, theta_max: float = 70.
             text, step = problem
             notes.append(text)
             settings["placement_warning"] = text
-            settings["receiver_step_needed_deg"] = round(step, 4)
+            settings["receiver_step_needed_deg"] = floor_sig(step)
     return Protocol(
         gamma_deg=gamma_arr,
         theta_deg=theta_arr,
@@ -668,8 +692,8 @@ def _placement_problem(designed: dict, placed: dict, available: dict):
     step = min(w_bad)
 
     def span(values, digits=3):
-        lo, hi = min(values), max(values)
-        return f"{lo:.{digits}g}" if abs(hi - lo) < 1e-9 else f"{lo:.{digits}g}-{hi:.{digits}g}"
+        lo, hi = f"{min(values):.{digits}g}", f"{max(values):.{digits}g}"
+        return lo if lo == hi else f"{lo}-{hi}"
 
     text = (f"the pilot's receiver grid cannot place the designed points at gamma "
             f"{', '.join(f'{g:g}' for g in bad)}: lobe-width points designed {span(w_bad)} deg "
@@ -677,7 +701,7 @@ def _placement_problem(designed: dict, placed: dict, available: dict):
             + (f", mirror points up to {max(mirrors):.3g} deg off it" if mirrors else "")
             + (f" (the pilot's receivers are {span(gaps)} deg apart at the mirror)" if gaps
                else "")
-            + f"; placing them needs a receiver step of at most {step:.2g} deg within "
+            + f"; placing them needs a receiver step of at most {floor_sig(step):g} deg within "
             f"+-{2 * max(w_bad):.2g} deg of the mirror. The file holds the placed points")
     return text, step
 
