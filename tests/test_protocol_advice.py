@@ -324,8 +324,6 @@ def test_ptfe_glossy_aware_protocol_is_marginal_not_failed(real_dir):
     meas = read_measurements(real_dir / "ptfe_nist" / "ptfe_sintered_1064nm.csv")
     reference = fit(meas)
     proto = glossy_protocol_for(meas, reference)
-    # never at |gamma| < 5 deg, where the mirror is the source's direction
-    assert min(abs(g) for g in proto.settings["gammas_deg"]) >= 5
     ev = evaluate_protocol(proto, meas, reference=reference)
     drop = ev.reference_r2 - ev.r2
     assert advice.PASS_MARGIN < drop <= advice.PASS_MARGIN + advice.FAIL_BAND

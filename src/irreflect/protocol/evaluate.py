@@ -42,9 +42,6 @@ from .core import Protocol, glossy_protocol, lobe_half_width_deg, paper_protocol
 from .export import as_protocol
 
 METHODS = ("interpolate", "snap")
-#: The glossy-aware protocol's smallest |gamma| (deg): below it the mirror direction is the
-#: source's, where no receiver can stand.
-MIN_GLOSSY_GAMMA = 5.0
 
 
 @dataclass(frozen=True)
@@ -324,7 +321,9 @@ def glossy_protocol_for(dense, reference: FitResult | None = None, *,
     the scan measured (:func:`~.core.glossy_protocol` with ``available``: the tool stands
     only where the pilot's receivers stood). Angle-of-incidence triples are tried as in
     :func:`paper_protocol_for` (the paper's -20/-40/-60 if present, else the widest spread;
-    never below 5 deg, where the mirror is the source's direction), the first
+    near normal incidence the mirror is the source's direction, where a tool's receiver
+    may not stand: the point goes to the nearest angle the pilot measured, and the
+    placement warning says how far that is), the first
     ``n_triples`` that work, each in every layout with lobe offsets of ``lobe_factors``
     times the half width; the variant whose 12-point fit predicts the pilot best (R^2 on
     all its points) is returned, its score in ``settings["pilot_r2"]``. ``kwargs`` go to
@@ -336,8 +335,7 @@ def glossy_protocol_for(dense, reference: FitResult | None = None, *,
     # the paper's tool reaches +-70 deg; grazing receivers see effects the model lacks
     lo = max(float(np.min(dense.theta_deg)), -70.0) if theta_min is None else float(theta_min)
     hi = min(float(np.max(dense.theta_deg)), 70.0) if theta_max is None else float(theta_max)
-    # below 5 deg the mirror direction is the source's: no receiver can stand there
-    levels = sorted({float(abs(g)) for g in dense.gammas if MIN_GLOSSY_GAMMA <= abs(g) <= hi})
+    levels = sorted({float(abs(g)) for g in dense.gammas if abs(g) <= hi})
     _check_three_levels(dense, levels, "glossy protocol", hi)  # before the pilot's fit
     if reference is None or not {"u_ns", "v_ns"} <= set(reference.param_names):
         reference = fit(dense, "two-lobe", seed=seed)
@@ -447,8 +445,7 @@ def _check_three_levels(dense, levels, what: str, hi=None) -> None:
     which it has."""
     if len(levels) >= 3:
         return
-    within = ("" if hi is None else f" within the receiver range ({MIN_GLOSSY_GAMMA:g} <= "
-              f"|gamma| <= {hi:g} deg)")
+    within = "" if hi is None else f" within the receiver range (|gamma| <= {hi:g} deg)"
     found = short_list(levels, fmt=lambda g: f"{g:g}") if levels else "none"
     raise IrreflectError(
         f"{dense.name}: a {what} needs three angles of incidence; found {len(levels)}"
