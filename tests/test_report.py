@@ -226,5 +226,5 @@ def test_report_on_measured_data_names_the_failed_protocol_first(real_report_dir
     ev = pd.read_csv(real_report_dir / "tables" / "protocol_evaluation.csv")
     assert f"R^2 = {t2['R^2 ours'].iloc[0]:.4g}" in findings
     assert f"R^2 = {ev['R^2 protocol'].iloc[0]:.4g}" in findings
-    assert "specular lobe" in findings and ev["fails"].iloc[0] == "yes"
+    assert "specular lobe" in findings and ev["verdict"].iloc[0] == "fails"
     assert t2["R^2 ours"].iloc[0] < t2["R^2 all-points fit"].iloc[0] - 0.5
