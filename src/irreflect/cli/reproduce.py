@@ -6,8 +6,11 @@ from .options import SEED
 
 
 def _cmd_reproduce(args) -> int:
+    from ..data import resolve_scene
     from ..report.runner import reproduce
 
+    if args.scene is not None:
+        args.scene = resolve_scene(args.scene)
     reproduce(out_dir=args.out, data_dir=args.data_dir, quick=args.quick, seed=args.seed,
               progress=not args.no_progress, scene=args.scene)
     return 0
@@ -27,6 +30,6 @@ def register(sub) -> None:
                    help="no progress display (a bar on a terminal, one line per step through "
                         "a pipe)")
     p.add_argument("--scene", default=None, metavar="SCENE.toml",
-                   help="add the room multipath section for this scene (irreflect room; "
-                        "default: none)")
+                   help="add the room multipath section for this scene (a TOML file or a "
+                        "bundled scene's name, e.g. office; default: none)")
     p.set_defaults(handler=_cmd_reproduce)
