@@ -6,7 +6,6 @@ from __future__ import annotations
 
 import itertools
 import json
-from pathlib import Path
 
 import numpy as np
 import pandas as pd
@@ -20,6 +19,7 @@ from irreflect.data import bundled_dir, load_bundled, read_measurements
 from irreflect.errors import IrreflectError
 from irreflect.fitting import fit
 from irreflect.models import two_lobe_power
+from irreflect.paper import paper_tables_dir
 from irreflect.plots.protocol import plot_protocol
 from irreflect.protocol import (
     Protocol,
@@ -37,7 +37,6 @@ from irreflect.protocol import (
     write_protocol,
 )
 from irreflect.report import ReportContext
-from irreflect.paper import paper_tables_dir
 from irreflect.report.protocol import section as protocol_section
 from irreflect.selection import choose_gamma_settings, design_protocol
 from tests.conftest import TABLE3, synthetic

@@ -17,7 +17,6 @@ import warnings
 from pathlib import Path
 
 import markdown as markdown_lib
-import pandas as pd
 
 from .. import __version__
 from .._atomic import atomic_directory, atomic_path, claim_output
