@@ -10,8 +10,6 @@ from __future__ import annotations
 
 from pathlib import Path
 
-import numpy as np
-
 from .._atomic import atomic_directory
 from .._jsonio import dumps
 from .common import NORMALIZED, plot_polar_per_gamma, plot_residual_map, plt, save_figure
@@ -51,16 +49,10 @@ def plot_diagnosis_polar(diagnosis, measurements, fig=None):
     curves = {f"base ({diagnosis.before.model_name})": diagnosis.before.fit.predict}
     if len(diagnosis.steps) > 1:
         curves[f"extended ({diagnosis.after.model_name})"] = diagnosis.after.fit.predict
-    fig = plot_polar_per_gamma(measurements, curves, fig=fig,
-                               title=f"{diagnosis.name}: {diagnosis.verdict}",
-                               styles={k: s for k, s in zip(curves, ("--", "-"), strict=False)})
-    # a sharp model peak between receivers must not squash the measured curve
-    polar = [ax for ax in fig.axes if ax.name == "polar"]
-    for ax, g in zip(polar, measurements.gammas, strict=False):
-        top = float(np.max(measurements.power[measurements.gamma_deg == g]))
-        if top > 0:
-            ax.set_rmax(1.25 * top)
-    return fig
+    return plot_polar_per_gamma(measurements, curves, fig=fig,
+                                title=f"{diagnosis.name}: {diagnosis.verdict}",
+                                styles={k: s for k, s in zip(curves, ("--", "-"),
+                                                             strict=False)})
 
 
 def write_outputs(diagnosis, measurements, out_dir) -> list[Path]:

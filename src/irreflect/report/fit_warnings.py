@@ -92,8 +92,8 @@ def group(notes: list[FitNote], names) -> pd.DataFrame:
         row["fits"] += 1
         if _stage(n.stage) not in row["raised in"]:
             row["raised in"].append(_stage(n.stage))
-    table = sorted(rows.values(), key=lambda r: (r["_rank"], r["table"], r["model"],
-                                                 r["warning"]))
+    table = sorted(rows.values(), key=lambda r: (r["_rank"], r["table"] not in names,
+                                                 r["table"], r["model"], r["warning"]))
     for r in table:
         r["raised in"] = ", ".join(r["raised in"])
         del r["_rank"]
@@ -106,7 +106,7 @@ def _kinds(notes: list[FitNote]) -> str:
     parts = []
     for kind, count in counts.most_common():
         coefs = sorted({c for n in notes if n.kind == kind for c in n.coefficients})
-        parts.append(f"{kind} {count}" + (f" ({', '.join(coefs)})" if coefs else ""))
+        parts.append(f"{count} {kind}" + (f" ({', '.join(coefs)})" if coefs else ""))
     return "; ".join(parts)
 
 
