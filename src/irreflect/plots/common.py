@@ -116,17 +116,15 @@ def _flag_negative(ax, scale, theta_deg, values) -> bool:
 
 def _flag_unmeasured_peak(ax, scale, theta_grid, curve, theta_measured, power_measured,
                           colour) -> bool:
-    """An open diamond at a model peak that no measured point lies near (more than 2 deg
-    and 1.5 receiver steps away, and above every measured power of that incidence): the
-    fit puts power where nothing was measured. True when drawn."""
+    """An open diamond at a model peak that rises above every measured power of that
+    incidence (by 20 %) more than 1 deg from any measured point: the fit puts power where
+    nothing was measured. True when drawn."""
     if not np.isfinite(curve).any() or theta_measured.size == 0:
         return False
     k = int(np.nanargmax(curve))
     peak_theta, peak = float(theta_grid[k]), float(curve[k])
-    steps = np.diff(np.sort(np.unique(theta_measured)))
-    gap = max(2.0, 1.5 * float(np.median(steps)) if steps.size else 2.0)
     near = float(np.min(np.abs(theta_measured - peak_theta)))
-    if near <= gap or peak <= 1.2 * float(np.nanmax(power_measured)):
+    if near <= 1.0 or peak <= 1.2 * float(np.nanmax(power_measured)):
         return False
     ax.plot([np.radians(peak_theta)], [scale.clip([peak])[0][0]], "D", ms=8, mfc="none",
             mew=1.5, color=colour, zorder=6,
@@ -282,7 +280,7 @@ def plot_surface(measurements, predict, ax=None, *, highlight=None, title=None):
                    label="fitted points")
     ax.set_xlabel("gamma (deg)")
     ax.set_ylabel("theta (deg)")
-    ax.set_zlabel("power")
+    ax.set_zlabel("power (table's power units)")
     ax.legend(fontsize=7)
     if title:
         ax.set_title(title, fontsize=10)
@@ -393,7 +391,8 @@ def plot_residual_map(gamma_deg, theta_deg, values, ax=None, *, title=None,
 
 
 #: The diagnosis's maps: residuals in noise sigmas, clipped at 4, source direction marked.
-NORMALIZED = {"limit": 4.0, "label": "(measured - model) / sigma", "source_line": True}
+NORMALIZED = {"limit": 4.0, "label": "(measured - model) / sigma (noise sigmas)",
+              "source_line": True}
 
 
 def plot_residual_histogram(values, ax=None, *, title=None,
@@ -417,7 +416,7 @@ def plot_residual_histogram(values, ax=None, *, title=None,
     else:
         ax.hist(values, bins=bins, color="tab:blue", edgecolor="white")
     ax.set_xlabel(label)
-    ax.set_ylabel("number of points")
+    ax.set_ylabel("number of points (count)")
     if title:
         ax.set_title(title, fontsize=10)
     return ax
