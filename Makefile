@@ -4,12 +4,12 @@ VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 
-.PHONY: demo test lint bench clean venv
+.PHONY: demo test lint bench clean venv docs pip-check
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
 	$(BIN)/pip install --quiet --upgrade pip
-	$(BIN)/pip install --quiet -e '.[dev]'
+	$(BIN)/pip install --quiet -e '.[dev,docs]'
 	$(BIN)/python -c "import irreflect._kernel as k; k.warm()"  # compile the fitting kernel once
 	touch $(STAMP)
 
@@ -24,6 +24,12 @@ test: $(STAMP)
 
 lint: $(STAMP)
 	$(BIN)/ruff check src tests experiments
+
+docs: $(STAMP)
+	$(BIN)/mkdocs build --strict --site-dir build/site
+
+pip-check: $(STAMP)
+	$(BIN)/python .ci/pip_install_check.py
 
 bench: $(STAMP)
 	$(BIN)/python experiments/bench_fit.py
