@@ -239,6 +239,11 @@ def run_selection(measurements, model="two-lobe", selector: str = "nsga2",
                   include_all_points: bool = True, enough: bool = True) -> SelectionResult:
     """Find the Pareto frontier of (number of points N, 1 - R^2) over subsets of a dense set.
 
+    The frontier is completed for every N from the smallest to ``max(knee, 12)``
+    (:func:`.front.complete_front`) and the knee taken in a fixed normalisation
+    (:func:`.front.knee_index`), so neither depends on how far the search's frontier
+    happens to extend.
+
     Parameters
     ----------
     measurements : Measurements, DataFrame or path (angles in degrees)
@@ -259,11 +264,6 @@ def run_selection(measurements, model="two-lobe", selector: str = "nsga2",
     include_all_points : put the full candidate set in the first population (NSGA-II)
         when ``max_points`` allows it, so the frontier ends at Method A
     enough : also find the noise-aware "enough points" (:func:`.front.enough_points`)
-
-    The frontier is completed for every N from the smallest to ``max(knee, 12)``
-    (:func:`.front.complete_front`) and the knee taken in a fixed normalisation
-    (:func:`.front.knee_index`), so neither depends on how far the search's frontier
-    happens to extend.
 
     Returns
     -------
