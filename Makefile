@@ -16,8 +16,8 @@ $(STAMP): pyproject.toml
 venv: $(STAMP)
 
 demo: $(STAMP)
-	$(BIN)/irreflect reproduce --out out --scene datasets/rooms/office.toml
-	$(BIN)/irreflect room datasets/rooms/office.toml --out out/room --workers 2
+	$(BIN)/irreflect reproduce --out out --scene office
+	$(BIN)/irreflect room office --out out/room --workers 2
 
 test: $(STAMP)
 	$(BIN)/python -m pytest -q -n 2 --dist loadfile
