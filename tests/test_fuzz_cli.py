@@ -295,6 +295,7 @@ BAD_OPTIONS = [
     ("room", ["{scene}", "--bounces", "-1", "--out", "{root}/r"]),
     ("room", ["{scene}", "--method", "raytrace", "--out", "{root}/r"]),
     ("room", ["{root}/nothing.toml", "--out", "{root}/r"]),
+    ("datasets", ["--path", "terazzo"]), ("datasets", ["--path"]), ("datasets", ["--nope"]),
     ("room", ["{root}/file.txt", "--out", "{root}/r"]),
     ("room", ["{scene}", "--out", "{root}/foreign"]),
     ("next", ["{data}", "--n", "0"]), ("next", ["{data}", "--seed", "-1"]),

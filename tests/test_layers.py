@@ -23,7 +23,7 @@ PACKAGE = Path(irreflect.__file__).parent
 LAYERS = [
     ("data and models", ["errors", "validation", "_atomic", "_progress", "_jsonio", "paper",
                          "data", "metrics", "models"]),
-    ("fitting", ["fitting", "_kernel", "_draws", "synthetic", "verdict"]),
+    ("fitting", ["fitting", "_kernel", "_compiled", "_draws", "synthetic", "verdict"]),
     ("capabilities", ["diagnose", "protocol", "compare", "selection", "campaign", "room"]),
     ("plots", ["plots"]),
     ("report", ["report"]),

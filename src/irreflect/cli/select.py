@@ -36,7 +36,12 @@ PAPER_N = 12  # the paper's protocol size (irreflect.selection.run.PAPER_N)
 def _print_run(result, methods: dict | None) -> None:
     m = result.measurements
     state = " (interrupted: results so far)" if result.interrupted else ""
-    print(f"{m.name}: {m.n_points} points, selector {result.selector}, seed {result.seed}{state}")
+    cfg = result.settings
+    limit = (f"at most {cfg['max_points']} points"
+             if cfg.get("max_points") and cfg["max_points"] < m.n_points else "all points")
+    print(f"{m.name}: {m.n_points} points, selector {result.selector}, population "
+          f"{cfg.get('pop_size')}, {cfg.get('generations')} generations, {limit}, seed "
+          f"{result.seed}{state}")
     print(f"  {result.evaluations} subset fits ({result.failed_fits} failed) in "
           f"{result.seconds:.1f} s, {result.fits_per_second:.0f} fits/s; "
           f"hypervolume {result.hypervolume:.5f}")

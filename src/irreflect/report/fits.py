@@ -228,7 +228,7 @@ def _fit_figures(ctx, name, meas, full, mask, twelve):
     ax = plot_residual_map(meas.gamma_deg, meas.theta_deg, resid,
                            title=f"{name}: residuals of the {which} "
                                  f"(R$^2$ = {r2:.4g} on all points)",
-                           label="measured - model (power)", robust=True)
+                           label="measured - model (table's power units)", robust=True)
     out[f"residuals_{name}"] = save_figure(ax.figure, ctx.figure_path(f"residuals_{name}"))
     with np.errstate(divide="ignore", invalid="ignore"):
         rel = 100 * resid / meas.power
