@@ -71,11 +71,50 @@ def plot_diagnosis_polar(diagnosis, measurements, fig=None):
                                                              strict=False)})
 
 
+def plot_separation(diagnosis, measurements, fig=None, *, max_panels: int = 3):
+    """When the diagnosis is ambiguous: the alternatives' predicted power along theta at
+    the angles of incidence of the proposed separating measurements (the measured points
+    where that angle was measured; the proposals as vertical lines). Returns the Figure."""
+    gammas = list(dict.fromkeys(r["gamma_deg"] for r in diagnosis.separating))[:max_panels]
+    fig = fig or plt.figure(figsize=(5.0 * max(len(gammas), 1), 3.6))
+    t = np.arange(np.floor(measurements.theta_deg.min()),
+                  np.ceil(measurements.theta_deg.max()) + 0.25, 0.25)
+    for i, g in enumerate(gammas):
+        ax = fig.add_subplot(1, max(len(gammas), 1), i + 1)
+        for name, a in diagnosis.alternative_fits.items():
+            ax.plot(t, a.fit.predict(np.full_like(t, g), t), label=f"+ {name}")
+        sel = measurements.gamma_deg == g
+        if np.any(sel):
+            ax.plot(measurements.theta_deg[sel], measurements.power[sel], "k.", label="measured")
+        for r in diagnosis.separating:
+            if r["gamma_deg"] == g:
+                ax.axvline(r["theta_deg"], color="0.5", ls=":", lw=1)
+                ax.annotate(f"x{r['readings']}: {r['separation_sigma']:.1f} sigma",
+                            (r["theta_deg"], 1.0),
+                            xycoords=("data", "axes fraction"), fontsize=8, ha="center",
+                            va="bottom")
+        ax.set_yscale("symlog", linthresh=max(float(np.percentile(np.abs(
+            measurements.power), 20)), 1e-12))
+        ax.set_xlabel("receiver angle theta (deg)")
+        ax.set_ylabel("power (table units)")
+        ax.set_title(f"gamma {g:g} deg" + ("" if np.any(sel) else " (not measured)"),
+                     fontsize=10)
+        if i == 0:
+            ax.legend(fontsize=8)
+    fig.suptitle(f"{diagnosis.name}: measurements that would separate the alternatives",
+                 fontsize=11)
+    fig.tight_layout()
+    return fig
+
+
 def write_outputs(diagnosis, measurements, out_dir) -> list[Path]:
     """Residual maps before/after (``residuals_before.png``, and ``residuals_after.png``
     when an effect was added: otherwise it would be the same map), the polar fits
-    (``polar_fits.png``) and ``diagnosis.json``, written into ``out_dir`` all together or
-    not at all. Returns the final paths."""
+    (``polar_fits.png``), when the diagnosis is ambiguous the alternatives at the proposed
+    separating measurements (``separation.png``, and ``separating.csv``: the settings as a
+    measurement plan, ``gamma_deg, theta_deg, readings, why, separation_sigma``) and
+    ``diagnosis.json``, written into ``out_dir`` all together or not at all. Returns the
+    final paths."""
     out = Path(out_dir)
     names = []
     maps = (("before", diagnosis.before), ("after", diagnosis.after))
@@ -89,6 +128,10 @@ def write_outputs(diagnosis, measurements, out_dir) -> list[Path]:
             names.append(f"residuals_{label}.png")
         save_figure(plot_diagnosis_polar(diagnosis, measurements), tmp / "polar_fits.png")
         names.append("polar_fits.png")
+        if diagnosis.separating:
+            save_figure(plot_separation(diagnosis, measurements), tmp / "separation.png")
+            diagnosis.separating_table().to_csv(tmp / "separating.csv", index=False)
+            names += ["separation.png", "separating.csv"]
         (tmp / "diagnosis.json").write_text(dumps(diagnosis.to_dict()))
         names.append("diagnosis.json")
     return [out / n for n in names]
