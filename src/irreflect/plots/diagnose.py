@@ -10,6 +10,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import numpy as np
+
 from .._atomic import atomic_directory
 from .._jsonio import dumps
 from .common import NORMALIZED, plot_polar_per_gamma, plot_residual_map, plt, save_figure
