@@ -40,7 +40,7 @@ def register(sub) -> None:
     p.add_argument("--separate-out", metavar="FILE",
                    help="when ambiguous, write the measurements that would separate the "
                         "alternatives as a plan (gamma_deg, theta_deg, why, separation_sigma; "
-                        "CSV); header only when nothing is ambiguous")
+                        "CSV); header only when nothing is ambiguous (default: not written)")
     p.add_argument("--extensions", metavar="A,B",
                    help="candidate extensions, comma-separated (default: all registered)")
     p.add_argument("--max-effects", type=NON_NEGATIVE_INT, default=3, metavar="N",

@@ -743,11 +743,24 @@ def diagnose(measurements, model="two-lobe", *, extensions: Sequence[str] | None
         work = dataclasses.replace(meas, sigma=noise.sigma)
         if noise.relative > 0:  # weight the base fit by the noise found, then look again
             z0, _ = base_model.from_natural(base_fit.values[None])
-            with warnings.catch_warnings():
-                warnings.simplefilter("ignore", FitWarning)
-                base_fit = fit(work, base_model, seed=seed, extra_starts=z0)
-            noise = estimate_noise(meas, residuals=base_fit.residuals,
-                                   fitted=base_fit.fitted, seed=seed, alpha=alpha)
+            try:
+                with warnings.catch_warnings():
+                    warnings.simplefilter("ignore", FitWarning)
+                    weighted = fit(work, base_model, seed=seed, extra_starts=z0)
+            except FitError as exc:
+                # weighted by a noise proportional to the power, the model cannot follow
+                # the table at all (a sub-degree lobe that the weights make invisible):
+                # the proportional part is not usable; the noise is taken as additive
+                warnings.warn(
+                    f"{meas.name}: a noise proportional to the power was found, but the "
+                    f"model weighted by it fails ({str(exc).split(': check')[0]}); the diagnosis takes the noise as "
+                    "constant: give a sigma column to settle it", FitWarning, stacklevel=2)
+                noise = estimate_noise(meas, residuals=base_fit.residuals, seed=seed,
+                                       alpha=alpha)
+            else:
+                base_fit = weighted
+                noise = estimate_noise(meas, residuals=base_fit.residuals,
+                                       fitted=base_fit.fitted, seed=seed, alpha=alpha)
             work = dataclasses.replace(meas, sigma=noise.sigma)
     search = _Search(meas, work, base_model, names, noise, seed, say)
     search.add("", base_fit, ())
