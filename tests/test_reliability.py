@@ -167,8 +167,9 @@ def table_10_001(tmp_path_factory):
 @pytest.mark.parametrize("command", ["diagnose", "reproduce", "select", "protocol"])
 def test_tables_over_a_command_budget_are_refused_up_front(table_10_001, tmp_path, command,
                                                            monkeypatch):
-    # the computation must not start: any fit would raise here
-    monkeypatch.setattr("irreflect.fitting.fit", _must_not_run)
+    # the computation must not start: any fit would raise here (the search itself is
+    # patched: a module imported meanwhile that binds `fit` would keep a patched `fit`)
+    monkeypatch.setattr("irreflect.fitting._fit_search", _must_not_run)
     argv = {
         "diagnose": ["diagnose", str(table_10_001)],
         "reproduce": ["reproduce", "--data-dir", str(table_10_001.parent), "--out",

@@ -22,7 +22,8 @@ import numpy as np
 import pandas as pd
 
 from ._atomic import atomic_path
-from .errors import DataError, unknown_name
+from ._inputs import read_bytes
+from .errors import DataError, IrreflectError, unknown_name
 from .paper import real_data_dir as _real
 from .validation import MAX_FILE_BYTES, MAX_TABLE_ROWS, check_real_array, short_list
 
@@ -345,32 +346,44 @@ def read_measurements(path, *, average_duplicates: bool = False) -> Measurements
     if not isinstance(path, str | os.PathLike):
         _fail(f"expected a path to a CSV or Parquet table, found {type(path).__name__}")
     path = Path(path)
-    if not path.exists():
-        _fail(f"{path}: no such file: expected a CSV or Parquet measurement table")
     if path.is_dir():
         _fail(f"{path}: is a folder; expected a CSV or Parquet measurement table")
     suffix = path.suffix.lower()
+    if path.exists() and suffix not in _SUFFIXES:
+        _fail(f"{path}: unknown file type '{suffix}': expected .csv or .parquet")
+    try:
+        raw = read_bytes(path, str(path), _EXPECTED, MAX_FILE_BYTES, _SUBSAMPLE)
+    except DataError:
+        raise
+    except IrreflectError as exc:  # the reader's one line, as the table's DataError
+        raise DataError(str(exc)) from None
     if suffix not in _SUFFIXES:
         _fail(f"{path}: unknown file type '{suffix}': expected .csv or .parquet")
-    size = path.stat().st_size
-    if size > MAX_FILE_BYTES:
-        _fail(f"{path}: {size / 2**20:.0f} MB is more than irreflect reads "
-              f"({MAX_FILE_BYTES // 2**20} MB): subsample the table")
     if suffix in (".parquet", ".pq"):
-        df = _read_parquet(path)
+        df = _read_parquet(path, raw)
         lines = None
     else:
-        df, lines = _read_csv(path)
+        df, lines = _read_csv(path, raw)
     return validate_table(df, str(path), average_duplicates=average_duplicates, name=path.stem,
                           _row_lines=lines)
 
 
-def _read_parquet(path: Path) -> pd.DataFrame:
+_EXPECTED = "a CSV or Parquet measurement table"
+_SUBSAMPLE = "subsample the table"
+#: Parquet columns are decoded into at most this many bytes in all (the file itself is at
+#: most MAX_FILE_BYTES; compressed, repetitive text can decode to gigabytes).
+MAX_DECODED_BYTES = 512 * 2**20
+
+
+def _read_parquet(path: Path, raw: bytes) -> pd.DataFrame:
+    """The columns irreflect reads from a Parquet file, decoded within
+    :data:`MAX_DECODED_BYTES` (counted on what is decoded, batch by batch, not on what
+    the file declares)."""
     import pyarrow as pa
     import pyarrow.parquet as pq
 
     try:
-        pf = pq.ParquetFile(path)
+        pf = pq.ParquetFile(pa.BufferReader(raw))
         names = pf.schema_arrow.names
         dup = sorted({n for n in names if names.count(n) > 1})
         if dup:
@@ -379,13 +392,58 @@ def _read_parquet(path: Path) -> pd.DataFrame:
         if pf.metadata.num_rows > MAX_TABLE_ROWS:
             _fail(f"{path}: {pf.metadata.num_rows} rows is more than irreflect reads "
                   f"({MAX_TABLE_ROWS}): subsample the table")
-        return pf.read().to_pandas()
-    except (OSError, pa.ArrowException, ValueError, TypeError) as exc:
+        wanted = [n for n in names if str(n).strip() in REQUIRED + OPTIONAL]
+        if len(wanted) < len(REQUIRED):  # the column check names what is missing
+            return pd.DataFrame(columns=names)
+        text = [n for n in wanted if _is_text(pf.schema_arrow.field(n).type)]
+        if text:  # text read as dictionaries: counted value by value before decoding
+            pf = pq.ParquetFile(pa.BufferReader(raw), read_dictionary=text)
+        batches, decoded = [], 0
+        for batch in pf.iter_batches(batch_size=4096, columns=wanted):
+            decoded += _decoded_size(batch)
+            if decoded > MAX_DECODED_BYTES:
+                _fail(f"{path}: its columns decode to more than "
+                      f"{MAX_DECODED_BYTES // 2**20} MB (long or many text values), more "
+                      "than irreflect reads: keep numbers in gamma_deg, theta_deg, power "
+                      "and sigma, and a short material name")
+            batches.append(batch)
+        table = (pa.Table.from_batches(batches) if batches else
+                 pf.schema_arrow.empty_table().select(wanted))
+        for i, column in enumerate(table.columns):
+            if pa.types.is_dictionary(column.type):
+                table = table.set_column(i, table.field(i).name,
+                                         column.cast(column.type.value_type))
+        return table.to_pandas()
+    except (OSError, pa.ArrowException, ValueError, TypeError, IndexError) as exc:
         if isinstance(exc, DataError):
             raise
         first = (str(exc).strip().splitlines() or [type(exc).__name__])[0]
         _fail(f"{path}: cannot be read as Parquet ({first}): write it again with pandas or "
               "pyarrow, or export the table as CSV")
+
+
+def _is_text(kind) -> bool:
+    import pyarrow as pa
+
+    return (pa.types.is_string(kind) or pa.types.is_large_string(kind)
+            or pa.types.is_binary(kind) or pa.types.is_large_binary(kind))
+
+
+def _decoded_size(batch) -> int:
+    """Bytes a record batch takes once decoded to pandas: dictionary-encoded text counted
+    value by value (its dictionary is shared, its expansion is not)."""
+    import pyarrow as pa
+    import pyarrow.compute as pc
+
+    total = 0
+    for column in batch.columns:
+        if pa.types.is_dictionary(column.type):
+            lengths = pc.binary_length(column.dictionary.cast(pa.large_binary()))
+            per_row = pc.take(lengths, column.indices)
+            total += int(pc.sum(per_row).as_py() or 0) + 64 * len(column)
+        else:
+            total += column.nbytes
+    return total
 
 
 def _decode(raw: bytes, path: Path) -> str:
@@ -431,10 +489,10 @@ def _looks_utf16(head: bytes) -> bool:
     return False
 
 
-def _read_csv(path: Path) -> tuple[pd.DataFrame, list[int]]:
+def _read_csv(path: Path, raw: bytes) -> tuple[pd.DataFrame, list[int]]:
     """Parse a CSV strictly: every row has as many fields as the header (pandas would take
     an extra leading field as the index and shift every column silently)."""
-    text = _decode(path.read_bytes(), path)
+    text = _decode(raw, path)
     numbers, kept = [], []
     for no, line in enumerate(text.splitlines(), 1):
         cut = line.find("#")

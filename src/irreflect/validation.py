@@ -12,6 +12,7 @@ from __future__ import annotations
 import math
 import numbers
 import os
+import stat
 import tempfile
 from pathlib import Path
 
@@ -236,10 +237,16 @@ def check_output_path(path, kind: str = "file", option: str = "--out",
                       suffixes: tuple[str, ...] | None = None) -> Path:
     """Check before any work that ``path`` can be written as a ``kind`` (``file`` or
     ``dir``): not an existing folder where a file is expected (or a file where a folder is),
-    inside a folder that exists or can be created, and writable."""
-    if path is None or str(path).strip() == "":
-        raise IrreflectError(f"{option} must name a {'folder' if kind == 'dir' else 'file'}")
-    path = Path(path)
+    not a device, FIFO or anything else that is not a regular file or folder, inside a folder
+    that exists or can be created, and writable. A symlink is followed only within the
+    folder it lies in; the path to write (the link's target, else ``path``) is returned."""
+    noun = "folder" if kind == "dir" else "file"
+    if path is None or not isinstance(path, str | os.PathLike) or str(path).strip() == "":
+        raise IrreflectError(f"{option} must name a {noun}; found "
+                             f"{'an empty name' if isinstance(path, str) else repr(path)}")
+    if "\0" in str(path):
+        raise IrreflectError(f"{option} {path!r}: a path cannot hold a NUL character")
+    path = _follow_link(Path(path), noun, option)
     if kind == "file":
         if path.is_dir():
             raise IrreflectError(f"{option} {path}: is a folder; expected a file name"
@@ -250,6 +257,7 @@ def check_output_path(path, kind: str = "file", option: str = "--out",
     elif path.exists() and not path.is_dir():
         raise IrreflectError(f"{option} {path}: is a file; expected a folder (give a new or "
                              "existing folder name)")
+    _check_special(path, noun, option)
     parent = path.absolute().parent
     ancestor = parent
     while not ancestor.exists():
@@ -261,6 +269,40 @@ def check_output_path(path, kind: str = "file", option: str = "--out",
         raise IrreflectError(f"{option} {path}: cannot write in '{ancestor}' (permission "
                              "denied or read-only): choose a folder you can write to")
     return path
+
+
+def _follow_link(path: Path, noun: str, option: str) -> Path:
+    """``path``, or the target of the symlink ``path`` when it lies within the link's own
+    folder; a link out of it is refused (an output never follows a link elsewhere)."""
+    if not path.is_symlink():
+        return path
+    folder = Path(os.path.realpath(path.absolute().parent))
+    target = Path(os.path.realpath(path))
+    if folder != target and folder not in target.parents:
+        raise IrreflectError(
+            f"{option} {path}: is a symlink to '{os.readlink(path)}', outside '{folder}': "
+            f"irreflect does not write through links out of the folder asked for: give the "
+            f"real {noun} ({target}) or another name")
+    return target
+
+
+def _check_special(path: Path, noun: str, option: str) -> None:
+    """Refuse an existing output that is a device, a FIFO, a socket or a link that leads
+    nowhere it may write: it would be replaced by a regular file (or written into)."""
+    try:
+        mode = os.stat(path).st_mode
+    except FileNotFoundError:
+        return
+    except OSError as exc:
+        raise IrreflectError(f"{option} {path}: cannot be checked ({exc.strerror or exc}): "
+                             "choose another path") from None
+    if stat.S_ISREG(mode) or stat.S_ISDIR(mode):
+        return
+    kind = ("a device" if stat.S_ISCHR(mode) or stat.S_ISBLK(mode) else
+            "a pipe (FIFO)" if stat.S_ISFIFO(mode) else
+            "a socket" if stat.S_ISSOCK(mode) else "not a regular file")
+    raise IrreflectError(f"{option} {path}: is {kind}; expected a {noun} name (irreflect "
+                         f"writes regular files and replaces nothing else): choose another path")
 
 
 def _writable(folder: Path) -> bool:

@@ -60,10 +60,15 @@ def _cmd_diagnose(args: argparse.Namespace) -> int:
     extensions = None
     if args.extensions is not None:
         extensions = [e.strip() for e in args.extensions.split(",") if e.strip()]
+        if not extensions:
+            raise IrreflectError("--extensions is empty: expected a comma-separated list of "
+                                 "extensions (see 'irreflect models'), or leave the option out "
+                                 "to try them all")
         for name in extensions:
             get_extension(name)
     get_model(args.model)
-    claim = claim_output(args.out, "dir", "--out") if args.out else contextlib.nullcontext()
+    claim = (claim_output(args.out, "dir", "--out") if args.out is not None
+             else contextlib.nullcontext())
     with claim:
         return _diagnose(args, extensions)
 
@@ -79,7 +84,7 @@ def _diagnose(args, extensions) -> int:
                           seed=args.seed, alpha=args.alpha, progress=bar)
     finally:
         bar.close()
-    written = write_outputs(result, meas, args.out) if args.out else []
+    written = write_outputs(result, meas, args.out) if args.out is not None else []
     if args.json:
         print_json(result.to_dict())
     else:

@@ -29,6 +29,9 @@ def _cmd_protocol(args) -> int:
     from .._atomic import claim_output
 
     fmt = args.format
+    if args.out is not None and not args.out.strip():
+        raise IrreflectError("--out must name a file; found an empty name (leave it out to "
+                             "print on stdout)")
     if args.out and Path(args.out).is_dir():
         raise IrreflectError(f"--out {args.out}: is a folder; expected a file name ending in "
                              ".csv, .json or .md")
