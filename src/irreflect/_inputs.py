@@ -74,11 +74,13 @@ def input_path(path, what: str, expected: str) -> Path:
     return path
 
 
-def read_bytes(path, what: str, expected: str, limit: int, fix: str = "") -> bytes:
+def read_bytes(path, what: str, expected: str, limit: int, fix: str = "",
+               reading: str | None = None) -> bytes:
     """The content of a regular file, at most ``limit`` bytes (else one line naming the
-    limit and ``fix``)."""
+    limit and ``fix``). ``reading``: the option of an output of this run that may be read
+    back (a checkpoint)."""
     path = input_path(path, what, expected)
-    check_not_output(path, expected)
+    check_not_output(path, expected, reading)
     try:
         fd = os.open(path, os.O_RDONLY | os.O_NONBLOCK | getattr(os, "O_CLOEXEC", 0))
     except OSError as exc:

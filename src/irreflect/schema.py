@@ -28,9 +28,6 @@ from dataclasses import dataclass, field
 
 from .errors import IrreflectError
 
-#: How a key path is written in messages: parts (str keys and int list indices) -> text.
-KeyFormat = Callable[[tuple], str]
-
 
 def dotted(parts: tuple) -> str:
     """``("params", "u_as")`` -> ``params.u_as``; ``("emitter", 0, "name")`` ->
@@ -41,7 +38,7 @@ def dotted(parts: tuple) -> str:
             out += f"[{part + 1}]"
         else:
             out += ("." if out else "") + str(part)
-    return out or "top level"
+    return out
 
 
 class SchemaError(IrreflectError):
@@ -51,15 +48,49 @@ class SchemaError(IrreflectError):
 
 @dataclass
 class Context:
-    """Where a document came from and how its keys are named in messages."""
+    """Where a document came from and how its keys are named in messages: ``style``
+    ``"json"`` (``params.u_as``) or ``"toml"`` (``[[emitter]] 2: power_w``,
+    ``[materials.wood]: lambertian``, as the keys are written in a TOML file)."""
 
     source: str | None = None
-    key_format: KeyFormat = dotted
+    style: str = "json"
+    arrays: frozenset = frozenset()  # TOML: top-level keys that are arrays of tables
+
+    def place(self, key: tuple) -> str:
+        """How the table (or list item) at ``key`` is named."""
+        if self.style != "toml":
+            return dotted(key)
+        if not key:
+            return "top level"
+        if len(key) >= 2 and isinstance(key[1], int):
+            rest = dotted(key[2:])
+            return f"[[{key[0]}]] {key[1] + 1}" + (f" {rest}" if rest else "")
+        if len(key) == 1 and key[0] in self.arrays:
+            return f"[[{key[0]}]]"
+        return f"[{dotted(key)}]"
 
     def fail(self, key: tuple, message: str, fix: str = "") -> None:
-        where = self.key_format(tuple(key))
+        where = self.place(tuple(key))
         prefix = f"{self.source}: " if self.source else ""
-        raise SchemaError(f"{prefix}{where}: {message}" + (f": {fix}" if fix else ""))
+        raise SchemaError(f"{prefix}{where + ': ' if where else ''}{message}"
+                          + (f": {fix}" if fix else ""))
+
+    def refuse(self, key: tuple, expected: str, value, fix: str = "", *,
+               shown: str | None = None) -> None:
+        """``KEY must be EXPECTED; found VALUE: FIX`` (``shown``: how to show the value)."""
+        key = tuple(key)
+        seen = found(value) if shown is None else shown
+        if not key:
+            self.fail(key, f"expected {expected}; found {seen}", fix)
+        if self.style == "toml":  # the table's header, then the key within it
+            j = max((i for i, k in enumerate(key) if isinstance(k, str)), default=0)
+            if j + 1 < len(key) and isinstance(key[j + 1], int) and j == 0 and \
+                    key[0] in self.arrays:  # an item of an array of tables
+                self.fail(key, f"expected {expected}; found {seen}", fix)
+            self.fail(key[:j], f"{dotted(key[j:])} must be {expected}; found {seen}", fix)
+        prefix = f"{self.source}: " if self.source else ""
+        raise SchemaError(f"{prefix}{dotted(key)} must be {expected}; found {seen}"
+                          + (f": {fix}" if fix else ""))
 
 
 def found(value) -> str:
@@ -79,13 +110,6 @@ def found(value) -> str:
     return text if len(text) <= 60 else text[:57] + "..."
 
 
-def _last(key: tuple) -> str:
-    for part in reversed(key):
-        if isinstance(part, str):
-            return part
-    return "value"
-
-
 # ----------------------------------------------------------------------------- nodes
 @dataclass(frozen=True)
 class Node:
@@ -97,8 +121,7 @@ class Node:
         raise NotImplementedError
 
     def refuse(self, value, key: tuple, ctx: Context, expected: str):
-        ctx.fail(key[:-1] if key and isinstance(key[-1], str) else key,
-                 f"{_last(key)} must be {expected}; found {found(value)}", self.fix)
+        ctx.refuse(key, expected, value, self.fix)
 
 
 def as_float(value) -> float | None:
@@ -213,10 +236,9 @@ class Name(Text):
         bad = next((c for c in value if not (c.isalnum() or c in NAME_PUNCTUATION)), None)
         if bad is not None or not value[0].isalnum():
             what = (f"'{bad}'" if bad is not None else f"a first character '{value[0]}'")
-            ctx.fail(key[:-1] if key and isinstance(key[-1], str) else key,
-                     f"{_last(key)} {value!r} has {what}; a name holds letters, digits and "
-                     f"'{NAME_PUNCTUATION.strip()}' or spaces, and starts with a letter or "
-                     "digit (it appears in figures and file names)", "rename it")
+            self.refuse(value, key, ctx, f"letters, digits, spaces and "
+                                         f"'{NAME_PUNCTUATION.strip()}', starting with a letter "
+                                         f"or digit (it names figures and files); it has {what}")
         return value
 
 
@@ -311,7 +333,8 @@ class ListOf(Node):
         if not self.min_items <= len(value) <= self.max_items:
             size = (f"at least {self.min_items}" if len(value) < self.min_items
                     else f"at most {self.max_items}")
-            ctx.fail(key, f"{self.what} of {size} item(s); found {len(value)}", self.fix)
+            ctx.refuse(key, f"{self.what} of {size} item(s)", value, self.fix,
+                       shown=f"{len(value)}")
         return [self.item.check(v, (*key, i), ctx) for i, v in enumerate(value)]
 
 
@@ -328,9 +351,7 @@ class Table(Node):
 
     def check(self, value, key, ctx):
         if not isinstance(value, dict):
-            if key:
-                self.refuse(value, key, ctx, self.what)
-            ctx.fail(key, f"expected {self.what}; found {found(value)}", self.fix)
+            self.refuse(value, key, ctx, self.what)
         for name in self.required:
             if name not in value:
                 ctx.fail(key, f"missing key '{name}' (expected {', '.join(self.required)})",
@@ -363,8 +384,8 @@ class MapOf(Node):
         if not isinstance(value, dict):
             self.refuse(value, key, ctx, self.what)
         if len(value) > self.max_items:
-            ctx.fail(key, f"{self.what} of at most {self.max_items} entries; found "
-                          f"{len(value)}", self.fix)
+            ctx.refuse(key, f"{self.what} of at most {self.max_items} entries", value,
+                       self.fix, shown=f"{len(value)}")
         out = {}
         for name, item in value.items():
             name = self.keys.check(name, (*key, str(name)), ctx)
@@ -407,9 +428,12 @@ class Document(Node):
         return value
 
 
-def validate(node: Node, value, source: str | None = None, key_format: KeyFormat = dotted):
-    """Check ``value`` against ``node``; returns the converted value."""
-    return node.check(value, (), Context(source, key_format))
+def validate(node: Node, value, source: str | None = None, style: str = "json",
+             arrays=()):
+    """Check ``value`` against ``node``; returns the converted value. ``source`` (the file)
+    starts every message; ``style`` names the keys as in JSON or TOML, ``arrays`` the
+    top-level keys that are arrays of tables (:class:`Context`)."""
+    return node.check(value, (), Context(source, style, frozenset(arrays)))
 
 
 __all__ = ["SchemaError", "Context", "Node", "Number", "Integer", "Text", "Name", "Choice",

@@ -14,6 +14,7 @@ import numbers
 import os
 import stat
 import tempfile
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -201,14 +202,36 @@ _OTHERWISE = {
 }
 
 
+def point_budget(command: str) -> int | None:
+    """Measured points ``command`` accepts: :data:`POINT_BUDGET`, or the environment
+    variable ``IRREFLECT_BUDGET_POINTS_<COMMAND>`` when set."""
+    limit = POINT_BUDGET.get(command)
+    if limit is None:
+        return None
+    env = "IRREFLECT_BUDGET_POINTS_" + command.upper().replace("-", "_")
+    text = os.environ.get(env)
+    if text is None or not text.strip():
+        return limit
+    try:
+        value = int(float(text))
+    except (ValueError, OverflowError):
+        value = 0
+    if value < 1:
+        raise BudgetError(f"{env}={text!r}: expected a number of points >= 1 (default {limit})")
+    return value
+
+
 def check_points_budget(n_points: int, command: str, source: str = "") -> None:
     """Refuse up front a table too large for ``command`` (see :data:`POINT_BUDGET`)."""
-    limit = POINT_BUDGET.get(command)
+    limit = point_budget(command)
+    note_memory_option("the table's size: subsample the table")
     if limit is not None and n_points > limit:
         where = f"{source}: " if source else ""
+        env = "IRREFLECT_BUDGET_POINTS_" + command.upper().replace("-", "_")
         raise DataError(
             f"{where}{n_points} measured points is more than '{command}' handles within its "
-            f"memory budget ({limit} points): {_SUBSAMPLE}{_OTHERWISE.get(command, '')}"
+            f"memory budget ({limit} points): {_SUBSAMPLE}{_OTHERWISE.get(command, '')} "
+            f"(or raise the budget: {env}=N)"
         )
 
 
@@ -230,6 +253,115 @@ def check_selection_budget(n_points: int, max_points: int | None, source: str = 
             f"subset may have on a table of {n_points} points: pass {option} "
             f"{SELECT_MAX_SUBSET} or less (e.g. 30)"
         )
+
+
+# ----------------------------------------------------------------------------- work budgets
+class BudgetError(IrreflectError):
+    """A run larger than its budget, refused before it starts (one line naming the option
+    and the largest value allowed on this machine)."""
+
+
+@dataclass(frozen=True)
+class Budget:
+    """A limit on the size of one kind of work, checked before the work starts.
+
+    ``limit`` is the default; the environment variable :attr:`env` (``IRREFLECT_BUDGET_`` +
+    the name in capitals) replaces it, for a machine that can do more (or should do less).
+    """
+
+    name: str
+    limit: float
+    unit: str
+    what: str
+
+    @property
+    def env(self) -> str:
+        return "IRREFLECT_BUDGET_" + self.name.upper().replace("-", "_")
+
+    def value(self) -> float:
+        text = os.environ.get(self.env)
+        if text is None or not text.strip():
+            return float(self.limit)
+        try:
+            value = float(text)
+        except ValueError:
+            value = math.nan
+        if not (math.isfinite(value) and value > 0):
+            raise BudgetError(f"{self.env}={text!r}: expected a number > 0 ({self.what}, in "
+                              f"{self.unit}; default {self.limit:g})")
+        return value
+
+
+def physical_memory() -> int:
+    """Bytes of memory of this machine (8 GiB when the system does not say)."""
+    try:
+        return int(os.sysconf("SC_PAGE_SIZE")) * int(os.sysconf("SC_PHYS_PAGES"))
+    except (ValueError, OSError, AttributeError):  # pragma: no cover - not POSIX
+        return 8 * 2**30
+
+
+#: The budgets of every command (README, "Bad input"; docs/bad-input.md). Work budgets
+#: bound the time a run takes (a few tens of minutes on one core at most), the memory
+#: budget what one run may allocate (a quarter of this machine's memory, at most 8 GiB).
+BUDGETS = {b.name: b for b in (
+    Budget("memory", min(physical_memory() / 4, 8 * 2**30) / 2**30, "GB",
+           "memory one run may take"),
+    Budget("ray-bounces", 1e9, "ray-bounces",
+           "Monte Carlo rays x emitter-receiver pairs x bounces of one room run"),
+    Budget("cell-pairs", 2e11, "cell pairs",
+           "cells^2 x (emitter-receiver pairs + emitters x (bounces - 2)) of one recursive "
+           "room run"),
+    Budget("receivers", 40_000, "receivers", "receivers of one scene (grids included)"),
+    Budget("subset-fits", 5e6, "subset fits",
+           "generations x population of one selection run"),
+    Budget("trials", 20_000, "trials", "Monte Carlo trials of evaluate-protocol"),
+)}
+
+
+def budget(name: str) -> float:
+    """The value in force of budget ``name`` (bytes for ``memory``)."""
+    b = BUDGETS[name]
+    return b.value() * (2**30 if name == "memory" else 1)
+
+
+#: What to lower when a command runs out of memory (the CLI's message), set by the last
+#: budget check of the run.
+_memory_hint: list[str] = []
+
+
+def memory_hint(default: str) -> str:
+    """The option that sized the run that ran out of memory (the last budget checked)."""
+    return _memory_hint[-1] if _memory_hint else default
+
+
+def note_memory_option(text: str) -> None:
+    """Remember which option(s) size this run's memory, for an out-of-memory message."""
+    _memory_hint[:] = [text]
+
+
+def _amount(x: float) -> str:
+    return f"{x:,.0f}" if abs(x) < 1e7 else f"{x:.3g}"
+
+
+def check_budget(name: str, amount: float, *, option: str, value, largest, detail: str,
+                 direction: str = "or less", alternative: str = "") -> None:
+    """Refuse work of ``amount`` (in the budget's unit) above budget ``name``: one line
+    naming ``option`` (given ``value``), what the amount is made of (``detail``) and the
+    ``largest`` value the option may take here (``direction``: "or less", "or more")."""
+    limit = budget(name)
+    b = BUDGETS[name]
+    if name == "memory":
+        note_memory_option(f"{option} (at most {largest} with {detail})")
+    if amount <= limit:
+        return
+    unit = b.unit
+    shown = (f"{amount / 2**30:.3g} GB" if name == "memory" else f"{_amount(amount)} {unit}")
+    allowed = (f"{limit / 2**30:.3g} GB" if name == "memory" else f"{_amount(limit)}")
+    way = (f"pass {option} {largest} {direction}" if largest is not None
+           else f"lower {option}")
+    raise BudgetError(
+        f"{option} {value}: {shown} ({detail}) is more than this machine's budget of "
+        f"{allowed} ({b.what}): {way}{alternative} (or raise the budget: {b.env}=N)")
 
 
 # ----------------------------------------------------------------------------- output paths

@@ -16,6 +16,7 @@ def _cmd_room(args) -> int:
 def _room(args) -> int:
     from pathlib import Path
 
+    from ..room.checks import CLI_OPTIONS, check_room_budget, resolve_settings
     from ..room.engine import simulate
     from ..room.scene import load_scene
 
@@ -24,7 +25,11 @@ def _room(args) -> int:
 
         check_scheduler_address(args.scheduler)
     out = Path(args.out)
-    scene = load_scene(args.scene)
+    scene = load_scene(args.scene, materials_dir=args.materials_dir)
+    settings = resolve_settings(scene, {"method": args.method, "bounces": args.bounces,
+                                        "cell_m": args.cell, "rays": args.rays,
+                                        "time_resolution_ns": args.dt})
+    check_room_budget(scene, settings, CLI_OPTIONS)  # before any work, named as options
     result = simulate(scene, method=args.method, bounces=args.bounces, cell_m=args.cell,
                       rays=args.rays, seed=args.seed, time_resolution_ns=args.dt,
                       scheduler=args.scheduler, workers=args.workers, progress=not args.quiet)
@@ -101,6 +106,9 @@ def register(sub) -> None:
                         "(default: local)")
     p.add_argument("--workers", type=POSITIVE_INT, default=None,
                    help="local worker processes for the receivers (default 1)")
+    p.add_argument("--materials-dir", default=None, metavar="DIR",
+                   help="also read the scene's material files from DIR (default: only from "
+                        "the scene's own folder)")
     p.add_argument("--no-figures", action="store_true", help="numbers only")
     p.add_argument("--quiet", action="store_true",
                    help="no progress display (a bar on a terminal, lines through a pipe)")

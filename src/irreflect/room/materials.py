@@ -56,7 +56,9 @@ from pathlib import Path
 
 import numpy as np
 
+from .. import schema as sc
 from .._atomic import atomic_path
+from .._inputs import parse_json, read_text
 from ..errors import IrreflectError
 from ..models import get_model
 from .kernels import (  # noqa: F401  (the table constants are re-exported)
@@ -406,45 +408,96 @@ def save_material(result, path, *, data_file=None, wavelength_nm=None, notes=Non
     return doc
 
 
+#: Material files larger than this are refused (they are about a kilobyte).
+MAX_MATERIAL_BYTES = 1 * 2**20
+_FROM_FIT = "a material file written by 'irreflect fit DATA --save MATERIAL.json'"
+#: A material's total reflectance: a number in [0, 1], or "K" (see the module docstring).
+REFLECTANCE = sc.AnyOf(
+    shape=lambda v: sc.Choice(options=("K",)) if isinstance(v, str) else sc.Number(lo=0.0,
+                                                                                  hi=1.0),
+    expected='a number from 0 to 1 or "K"')
+_PARAM_NAME = sc.Text(max_len=64, what="a parameter name")
+#: The declared schema of a material file (:func:`save_material` writes it; the fit's
+#: ``verdict`` and ``warnings`` are kept as written).
+MATERIAL_FILE_SCHEMA = sc.Table({
+    "format": sc.Choice(options=(MATERIAL_FORMAT,)),
+    "format_version": sc.Integer(),
+    "model": sc.Text(max_len=100, what="a model name (see 'irreflect models')"),
+    "params": sc.MapOf(keys=_PARAM_NAME, values=sc.Number(), max_items=64,
+                       what="a table of NAME: VALUE"),
+    "stderr": sc.Nullable(sc.MapOf(keys=_PARAM_NAME, max_items=64, what="a table",
+                                   values=sc.Nullable(sc.Number(lo=0.0, allow_nan=True)))),
+    "r2": sc.Nullable(sc.Number(hi=1.0, allow_nan=True)),
+    "rmse": sc.Nullable(sc.Number(lo=0.0, allow_nan=True)),
+    "n_points": sc.Nullable(sc.Integer(lo=0)),
+    "gamma_range_deg": sc.Nullable(sc.Vector(2, item=sc.Number(lo=0.0, hi=90.0),
+                                             what="[min, max] in degrees")),
+    "data_file": sc.Nullable(sc.Text(max_len=4096)),
+    "reflectance": sc.Nullable(REFLECTANCE),
+    "wavelength_nm": sc.Nullable(sc.Number(lo=0.0, hi=1e6, lo_open=True, unit="nm")),
+    "notes": sc.Nullable(sc.Text(max_len=100_000, multiline=True)),
+    "verdict": sc.Nullable(sc.Document(max_depth=8)),
+    "warnings": sc.Nullable(sc.ListOf(sc.Text(max_len=10_000, multiline=True),
+                                      max_items=1_000, what="a list of text")),
+}, required=("format", "format_version", "model", "params"))
+
+
+def check_params(model, params: dict, source: str) -> None:
+    """Natural parameters of ``model`` within the model's physical bounds (one line naming
+    the parameter, its range and the value); names are checked by :func:`from_model`."""
+    model_obj = get_model(model)
+    for p in model_obj.params:
+        value = params.get(p.name)
+        if value is None:
+            continue
+        x = sc.as_float(value)
+        span = p.upper - p.lower if math.isfinite(p.upper - p.lower) else 1.0
+        tol = 1e-9 * max(span, 1.0)
+        if x is None or x < p.lower - tol or x > p.upper + tol:
+            raise IrreflectError(
+                f"{source}: {p.name} of {model_obj.name} must be a number from {p.lower:g} to "
+                f"{p.upper:g} ({p.description}); found {sc.found(value)}")
+
+
 def load_material(path, *, name: str | None = None, reflectance=None) -> Material:
     """Read a material file written by ``irreflect fit --save``.
 
-    ``reflectance`` overrides the file's (a number in [0, 1] or ``"K"``); one of the two must
-    give it.
+    Every key is checked against :data:`MATERIAL_FILE_SCHEMA` and the coefficients against
+    the model's physical bounds. ``reflectance`` overrides the file's (a number in [0, 1] or
+    ``"K"``); one of the two must give it.
     """
-    path = Path(path)
-    label = name or path.stem
-    if not path.exists():
-        raise IrreflectError(f"material '{label}': file {path} not found: expected a material file "
-                             "written by 'irreflect fit DATA --save MATERIAL.json'")
+    label = name or (Path(path).stem if isinstance(path, str | Path) else "material")
     try:
-        doc = json.loads(path.read_text())
-    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
-        raise IrreflectError(f"material '{label}': {path} is not JSON ({exc}); expected a file "
-                             "written by 'irreflect fit DATA --save MATERIAL.json'") from exc
-    if not isinstance(doc, dict) or doc.get("format") != MATERIAL_FORMAT:
-        raise IrreflectError(f"material '{label}': {path} is not an irreflect material file "
-                             f"(no \"format\": \"{MATERIAL_FORMAT}\"); write one with "
-                             "'irreflect fit DATA --save MATERIAL.json'")
-    version = doc.get("format_version")
-    if version != MATERIAL_FORMAT_VERSION:
-        raise IrreflectError(f"material '{label}': {path} has format_version {version!r}; this "
-                             f"irreflect reads version {MATERIAL_FORMAT_VERSION}")
-    for key in ("model", "params"):
-        if key not in doc:
-            raise IrreflectError(f"material '{label}': {path} has no \"{key}\"")
+        text = read_text(path, f"material '{label}'", _FROM_FIT, MAX_MATERIAL_BYTES)
+        doc = parse_json(text, str(path), _FROM_FIT)
+        path = Path(path)
+        if not isinstance(doc, dict) or doc.get("format") != MATERIAL_FORMAT:
+            raise IrreflectError(f"{path} is not an irreflect material file (no \"format\": "
+                                 f"\"{MATERIAL_FORMAT}\"); write one with 'irreflect fit DATA "
+                                 "--save MATERIAL.json'")
+        version = doc.get("format_version")
+        if version != MATERIAL_FORMAT_VERSION:
+            raise IrreflectError(f"{path} has format_version {sc.found(version)}; this "
+                                 f"irreflect reads version {MATERIAL_FORMAT_VERSION}")
+        doc = sc.validate(MATERIAL_FILE_SCHEMA, doc, str(path))
+        check_params(doc["model"], doc["params"], str(path))
+    except IrreflectError as exc:
+        raise IrreflectError(f"material '{label}': {exc}") from None
     rho = reflectance if reflectance is not None else doc.get("reflectance")
     if rho is None:
         raise IrreflectError(
             f"material '{label}': {path} gives no total reflectance: add reflectance = RHO "
             "(0..1) to the scene's material, or save the fit with --reflectance RHO")
     grange = doc.get("gamma_range_deg")
-    gmax = float(grange[1]) if isinstance(grange, list) and len(grange) == 2 else None
+    if grange is not None and grange[0] > grange[1]:
+        raise IrreflectError(f"material '{label}': {path}: gamma_range_deg must be [min, max] "
+                             f"with min <= max; found {list(grange)}")
     return from_model(doc["model"], doc["params"], rho, name=label,
                       source=f"{path.name} ({doc['model']})", stderr=doc.get("stderr"),
-                      gamma_max_deg=gmax,
+                      gamma_max_deg=None if grange is None else grange[1],
                       metadata={k: doc.get(k) for k in ("r2", "data_file", "wavelength_nm",
-                                                        "notes", "gamma_range_deg")})
+                                                        "notes", "gamma_range_deg", "verdict",
+                                                        "warnings")})
 
 
 _LAMBERTIAN_RE = re.compile(r"^\s*lambertian\s*\(\s*([^)]*)\)\s*$", re.IGNORECASE)
@@ -462,5 +515,6 @@ def parse_lambertian(text: str):
 
 
 __all__ = ["Material", "lambertian", "from_model", "load_material", "save_material",
+           "check_params", "MATERIAL_FILE_SCHEMA", "REFLECTANCE",
            "lobe_fraction_above", "lobe_hemisphere_integral", "parse_lambertian",
            "MATERIAL_FORMAT", "MATERIAL_FORMAT_VERSION"]

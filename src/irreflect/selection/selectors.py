@@ -110,7 +110,8 @@ def nsga2(spec: SearchSpec) -> None:
     algorithm.setup(problem, termination=("n_gen", spec.generations), seed=spec.seed,
                     verbose=False)
     if spec.checkpoint is not None and Path(spec.checkpoint).exists():
-        state = load_checkpoint(Path(spec.checkpoint), spec.fingerprint, spec.evaluator.n)
+        state = load_checkpoint(Path(spec.checkpoint), spec.fingerprint, spec.evaluator.n,
+                                spec.evaluator.model.n_nonlinear)
         generation = restore(state, algorithm, spec.evaluator)
         previous_seconds = state["meta"]["seconds"]
         spec.info["resumed_from_generation"] = generation

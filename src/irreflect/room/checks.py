@@ -1,0 +1,196 @@
+"""Checks before a room simulation starts: its arguments, and its size against the
+budgets of this machine (:data:`irreflect.validation.BUDGETS`).
+
+The size of a run is known before it starts:
+
+* **Monte Carlo**: ``rays x emitter-receiver pairs x bounces`` ray-bounces (budget
+  ``ray-bounces``, about 1e9: tens of minutes on one core);
+* **recursive method**: ``cells^2 x (pairs + emitters x (bounces - 2))`` cell pairs (budget
+  ``cell-pairs``), the cells counted as :func:`irreflect.room.geometry.discretize` cuts them;
+* **memory**: the impulse responses kept for every pair, ``pairs x (bounces + 1) x time
+  bins`` (the bins follow ``--dt`` and the room's diagonal), and for the recursive method the
+  per-cell responses, ``cells x time bins x ...`` (budget ``memory``).
+
+A run above a budget is refused with one line naming the option to change and the largest
+(or smallest) value this machine allows with the other settings as they are.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+
+from ..errors import IrreflectError
+from ..validation import check_budget, note_memory_option
+
+C_LIGHT = 299_792_458.0
+#: Bytes each kept time bin of each emitter-receiver pair and order costs: the float64
+#: histogram while it is computed, the float32 one kept, and its row of the long-form
+#: impulse response table written at the end.
+BYTES_PER_BIN = 64
+#: Option names in messages: the command line's, and the library's keywords.
+CLI_OPTIONS = {"rays": "--rays", "cell_m": "--cell", "time_resolution_ns": "--dt",
+               "bounces": "--bounces"}
+KEYWORDS = {k: k for k in CLI_OPTIONS}
+
+
+def check_simulate_arguments(scene, scheduler=None, workers=None, threads=None) -> None:
+    """The arguments of :func:`irreflect.room.simulate` that are not settings."""
+    from .scene import Scene
+
+    if not isinstance(scene, Scene):
+        raise IrreflectError(f"simulate expects a Scene (from irreflect.room.load_scene or "
+                             f"scene_from_dict); found {type(scene).__name__}")
+    if scheduler is not None and not _is_client(scheduler):
+        from ..selection.parallel import check_scheduler_address
+
+        check_scheduler_address(scheduler)
+    for name, value in (("workers", workers), ("threads", threads)):
+        if value is not None and (isinstance(value, bool) or not isinstance(value, int)
+                                  or value < 1):
+            raise IrreflectError(f"{name} must be an integer >= 1 (or None); found {value!r}")
+
+
+def _is_client(obj) -> bool:
+    try:
+        from distributed import Client
+    except ImportError:  # pragma: no cover - dask is a dependency
+        return False
+    return isinstance(obj, Client)
+
+
+def resolve_settings(scene, overrides: Mapping) -> dict:
+    """The settings a run will use: the engine's defaults, the scene's [simulation], then
+    ``overrides`` that are not None."""
+    from .engine import DEFAULTS
+
+    out = dict(DEFAULTS)
+    out.update(scene.settings)
+    out.update({k: v for k, v in overrides.items() if v is not None})
+    return out
+
+
+def count_cells(scene, cell_m: float) -> int:
+    """Cells :func:`irreflect.room.geometry.discretize` would cut (room faces and the box
+    faces that do not lie on one; cells under boxes counted too: an upper bound)."""
+    size = [float(x) for x in scene.size]
+
+    def n(length: float) -> int:
+        return max(1, round(min(length / cell_m, 1e12)))
+
+    total = 0
+    for axis in range(3):
+        a, b = (size[i] for i in range(3) if i != axis)
+        total += 2 * n(a) * n(b)
+    for box in scene.boxes:
+        for axis in range(3):
+            others = [i for i in range(3) if i != axis]
+            face = n(box.hi[others[0]] - box.lo[others[0]]) * n(box.hi[others[1]]
+                                                                  - box.lo[others[1]])
+            for coord in (box.lo[axis], box.hi[axis]):
+                if 1e-12 < coord < size[axis] - 1e-12:
+                    total += face
+    return total
+
+
+def time_bins(scene, bounces: int, dt_ns: float, legs: int | None = None) -> float:
+    """Bins of an impulse response covering ``legs`` (default ``bounces + 1``) room
+    diagonals at ``dt_ns``."""
+    legs = bounces + 1 if legs is None else legs
+    diagonal = math.sqrt(sum(float(x) ** 2 for x in scene.size))
+    return legs * diagonal / C_LIGHT / (dt_ns * 1e-9) + 2
+
+
+def check_room_budget(scene, settings: Mapping, options: Mapping = KEYWORDS) -> None:
+    """Refuse a run larger than this machine's budgets, before it starts (see the module
+    docstring); ``settings`` as :func:`resolve_settings` gives them."""
+    method, bounces = settings["method"], int(settings["bounces"])
+    dt = float(settings["time_resolution_ns"])
+    emitters, receivers = len(scene.emitters), len(scene.receivers)
+    pairs = emitters * receivers
+    note_memory_option(f"{options['time_resolution_ns']}, {options['bounces']} or the "
+                       "number of receivers")
+    _check_memory(scene, pairs, bounces, dt, options)
+    if method == "montecarlo" and bounces >= 1:
+        rays = int(settings["rays"])
+        per_ray = pairs * bounces
+        check_budget("ray-bounces", rays * per_ray, option=options["rays"], value=rays,
+                     largest=max(1, int(_limit("ray-bounces") // per_ray)),
+                     detail=f"{options['rays']} x {receivers} receiver(s) x {emitters} "
+                            f"emitter(s) x {bounces} bounce(s)",
+                     alternative=f", fewer {options['bounces']} or fewer receivers")
+    elif method == "recursive" and bounces >= 1:
+        _check_recursive(scene, settings, pairs, emitters, bounces, dt, options)
+
+
+def _limit(name: str) -> float:
+    from ..validation import budget
+
+    return budget(name)
+
+
+def _check_memory(scene, pairs: int, bounces: int, dt: float, options) -> None:
+    bins = time_bins(scene, bounces, dt)
+    per_bin = pairs * (bounces + 1) * BYTES_PER_BIN
+    largest_bins = _limit("memory") / per_bin
+    smallest_dt = (bounces + 1) * scene.diagonal / C_LIGHT * 1e9 / max(largest_bins - 2, 1e-300)
+    check_budget("memory", per_bin * bins, option=options["time_resolution_ns"], value=dt,
+                 largest=f"{_round_up(smallest_dt):g}", direction="or more",
+                 detail=f"{pairs} emitter-receiver pair(s) x {bounces + 1} orders x "
+                        f"{bins:,.0f} time bins of {dt:g} ns",
+                 alternative=f", fewer {options['bounces']} or fewer receivers")
+
+
+def _check_recursive(scene, settings, pairs, emitters, bounces, dt, options) -> None:
+    cell = float(settings["cell_m"])
+    # the per-cell responses a run keeps: after 1 .. K-2 reflections per emitter (of
+    # 2 .. K-1 legs' length) and the receiver's 2-leg response, in float32
+    legs = emitters * sum(m + 1 for m in range(1, bounces - 1)) + 3
+
+    def work(c: float) -> float:
+        n = count_cells(scene, c)
+        return float(n) ** 2 * (pairs * (bounces >= 2) + emitters * max(bounces - 2, 0)) + n * pairs
+
+    def memory(c: float) -> float:
+        return 4.0 * count_cells(scene, c) * time_bins(scene, bounces, dt, legs=1) * legs
+
+    n_cells = count_cells(scene, cell)
+    check_budget("cell-pairs", work(cell), option=options["cell_m"], value=cell,
+                 largest=f"{_smallest_cell(work, _limit('cell-pairs'), scene):g}",
+                 direction="or more", detail=f"{n_cells:,} cells of {cell:g} m, {pairs} "
+                                             f"pair(s), {bounces} bounce(s)",
+                 alternative=f", fewer {options['bounces']} or receivers, or the Monte "
+                             "Carlo method")
+    check_budget("memory", memory(cell), option=options["cell_m"], value=cell,
+                 largest=f"{_smallest_cell(memory, _limit('memory'), scene):g}",
+                 direction="or more", detail=f"{n_cells:,} cells x time bins of {dt:g} ns x "
+                                             f"{legs} responses",
+                 alternative=f" or a larger {options['time_resolution_ns']}")
+
+
+def _smallest_cell(cost, limit: float, scene) -> float:
+    """The smallest cell size (m, rounded up to 3 digits) whose ``cost`` is within
+    ``limit`` (bisection on a log scale; the room's smallest side if none is)."""
+    hi = float(min(scene.size))
+    if cost(hi) > limit:
+        return hi
+    lo = hi * 1e-9
+    for _ in range(80):
+        mid = math.sqrt(lo * hi)
+        if cost(mid) > limit:
+            lo = mid
+        else:
+            hi = mid
+    return _round_up(hi)
+
+
+def _round_up(x: float) -> float:
+    """``x`` rounded up to 3 significant digits (a value the user can type that passes)."""
+    if not (x > 0 and math.isfinite(x)):
+        return x
+    scale = 10 ** (math.floor(math.log10(x)) - 2)
+    return math.ceil(x / scale) * scale
+
+
+__all__ = ["check_simulate_arguments", "check_room_budget", "resolve_settings", "count_cells",
+           "time_bins", "CLI_OPTIONS", "KEYWORDS"]
