@@ -64,6 +64,17 @@ class Measurements:
         if len(set(sizes.values())) > 1:
             _fail(f"{source}: gamma_deg, theta_deg, power (and sigma) need one value per "
                   f"point; found lengths {', '.join(f'{k} {n}' for k, n in sizes.items())}")
+        if not isinstance(self.name, str):
+            _fail(f"Measurements: name must be text; found {self.name!r}")
+        if sizes["power"] == 0:
+            _fail(f"{source}: no points: expected at least one measurement")
+        for k in ("gamma_deg", "theta_deg"):
+            out = np.abs(arrays[k]) >= 90
+            if out.any():
+                _fail(f"{source}: {k} must lie strictly between -90 and 90 degrees (from the "
+                      f"surface normal); found {arrays[k][out][0]:g}")
+        if "sigma" in arrays:  # sigma <= 0 is the fit's to refuse (a table may carry it)
+            check_sigma(arrays["power"], arrays["sigma"], source, positive=False)
         for k, v in arrays.items():
             object.__setattr__(self, k, v)
 
@@ -99,6 +110,34 @@ class Measurements:
 
 def _fail(msg: str):
     raise DataError(msg)
+
+
+#: sigma must lie within these multiples of the largest |power|: weights 1/sigma^2 beyond
+#: them over- or underflow in the fit.
+SIGMA_RANGE = (1e-12, 1e12)
+
+
+def check_sigma(power: np.ndarray, sigma: np.ndarray, source: str, rows=None,
+                positive: bool = True) -> None:
+    """sigma > 0 (with ``positive``; else the fit refuses it) and within
+    :data:`SIGMA_RANGE` of the largest |power| (one line naming the row)."""
+    rows = rows or (lambda i: f"point {i + 1}")
+    if positive and np.any(sigma <= 0):
+        i = int(np.nonzero(sigma <= 0)[0][0])
+        _fail(f"{source}: sigma must be > 0 (fits are weighted by 1/sigma^2); found "
+              f"{sigma[i]:g} in {rows(i)}: give that point's uncertainty, or drop sigma to fit "
+              "unweighted")
+    peak = float(np.max(np.abs(power)))
+    if peak == 0:
+        return
+    low, high = SIGMA_RANGE[0] * peak, SIGMA_RANGE[1] * peak
+    bad = ((sigma < low) & (sigma > 0)) | (sigma > high)
+    if bad.any():
+        i = int(np.nonzero(bad)[0][0])
+        side = "below 1e-12 of" if sigma[i] < low else "above 1e12 times"
+        _fail(f"{source}: sigma {sigma[i]:g} in {rows(i)} is {side} the largest power "
+              f"({peak:g}): weights 1/sigma^2 that {'large' if sigma[i] < low else 'small'} "
+              "cannot be fitted; give a realistic uncertainty or delete the sigma column")
 
 
 # ----------------------------------------------------------------------------- row labels
@@ -256,11 +295,8 @@ def validate_table(df: pd.DataFrame, source: str = "table", *,
         _fail(f"{source}: the largest |power| is {peak:g}, outside what the fitter handles "
               f"({POWER_RANGE[0]:g} to {POWER_RANGE[1]:g}): rescale the column (any consistent "
               "unit works, e.g. divide by its maximum)")
-    if sigma is not None and np.min(sigma) < 1e-12 * peak:
-        i = int(np.argmin(sigma))
-        _fail(f"{source}: sigma {sigma[i]:g} in {rows(i)} is below 1e-12 of the largest power "
-              f"({peak:g}): weights 1/sigma^2 that large cannot be fitted; give a realistic "
-              "uncertainty or delete the sigma column")
+    if sigma is not None:
+        check_sigma(power, sigma, source, rows)
     positive, negative = np.any(gamma > 0), np.any(gamma < 0)
     if positive and negative:
         _fail(

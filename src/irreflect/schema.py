@@ -26,7 +26,7 @@ import numbers
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
-from .errors import IrreflectError
+from .errors import SchemaError
 
 
 def dotted(parts: tuple) -> str:
@@ -41,11 +41,6 @@ def dotted(parts: tuple) -> str:
     return out
 
 
-class SchemaError(IrreflectError):
-    """A document that does not follow its schema (one line: file, key, expected, found,
-    fix)."""
-
-
 @dataclass
 class Context:
     """Where a document came from and how its keys are named in messages: ``style``
@@ -55,6 +50,7 @@ class Context:
     source: str | None = None
     style: str = "json"
     arrays: frozenset = frozenset()  # TOML: top-level keys that are arrays of tables
+    error: type = SchemaError  # the kind of error raised (a SchemaError subclass)
 
     def place(self, key: tuple) -> str:
         """How the table (or list item) at ``key`` is named."""
@@ -72,8 +68,8 @@ class Context:
     def fail(self, key: tuple, message: str, fix: str = "") -> None:
         where = self.place(tuple(key))
         prefix = f"{self.source}: " if self.source else ""
-        raise SchemaError(f"{prefix}{where + ': ' if where else ''}{message}"
-                          + (f": {fix}" if fix else ""))
+        raise self.error(f"{prefix}{where + ': ' if where else ''}{message}"
+                         + (f": {fix}" if fix else ""))
 
     def refuse(self, key: tuple, expected: str, value, fix: str = "", *,
                shown: str | None = None) -> None:
@@ -89,8 +85,8 @@ class Context:
                 self.fail(key, f"expected {expected}; found {seen}", fix)
             self.fail(key[:j], f"{dotted(key[j:])} must be {expected}; found {seen}", fix)
         prefix = f"{self.source}: " if self.source else ""
-        raise SchemaError(f"{prefix}{dotted(key)} must be {expected}; found {seen}"
-                          + (f": {fix}" if fix else ""))
+        raise self.error(f"{prefix}{dotted(key)} must be {expected}; found {seen}"
+                         + (f": {fix}" if fix else ""))
 
 
 def found(value) -> str:
@@ -274,13 +270,19 @@ class AnyOf(Node):
     options: tuple[Node, ...] = ()
     expected: str = ""
     shape: Callable | None = None  # picks the option by the value's type when given
+    whole: bool = False  # with shape: a refusal names all options, not the one picked
 
     def check(self, value, key, ctx):
         if self.shape is not None:
             node = self.shape(value)
             if node is None:
                 self.refuse(value, key, ctx, self.expected)
-            return node.check(value, key, ctx)
+            if not self.whole:
+                return node.check(value, key, ctx)
+            try:
+                return node.check(value, key, ctx)
+            except SchemaError:
+                self.refuse(value, key, ctx, self.expected)
         for node in self.options:
             try:
                 return node.check(value, key, ctx)
@@ -429,11 +431,12 @@ class Document(Node):
 
 
 def validate(node: Node, value, source: str | None = None, style: str = "json",
-             arrays=()):
+             arrays=(), error: type = SchemaError):
     """Check ``value`` against ``node``; returns the converted value. ``source`` (the file)
     starts every message; ``style`` names the keys as in JSON or TOML, ``arrays`` the
-    top-level keys that are arrays of tables (:class:`Context`)."""
-    return node.check(value, (), Context(source, style, frozenset(arrays)))
+    top-level keys that are arrays of tables, ``error`` the kind of error raised
+    (:class:`Context`)."""
+    return node.check(value, (), Context(source, style, frozenset(arrays), error))
 
 
 __all__ = ["SchemaError", "Context", "Node", "Number", "Integer", "Text", "Name", "Choice",

@@ -76,6 +76,63 @@ def check_number(value, name: str, *, low=None, high=None, low_open=False,
     return x
 
 
+def check_bool(value, name: str) -> bool:
+    """True or False (numpy's too), not a string or a number: ``use_sigma="no"`` must not
+    mean True."""
+    if isinstance(value, bool | np.bool_):
+        return bool(value)
+    raise IrreflectError(f"{name} must be True or False; found {value!r}")
+
+
+#: Integer settings of :func:`irreflect.fitting.fit` and ``fit_subsets``: (smallest,
+#: largest; None: the setting may be None for its default). The largest values bound the
+#: work of one fit.
+_FIT_COUNTS = {
+    "n_random_starts": (0, 10_000, False), "n_screen": (1, 1_000_000, True),
+    "n_keep": (0, 10_000, True), "n_data_starts": (0, 10_000, True),
+    "max_iter": (1, 100_000, False), "max_rounds": (0, 1_000, True),
+    "n_hops": (0, 10_000, True),
+}
+_FIT_FLAGS = ("use_sigma", "polish", "retry", "data_starts", "scan", "exhaustive")
+
+
+def check_fit_options(**options) -> None:
+    """The keyword settings of :func:`irreflect.fitting.fit` and ``fit_subsets``: counts
+    are integers in their range (:data:`_FIT_COUNTS`), flags are booleans, ``ftol`` a
+    number in (0, 1), ``seed`` a seed; one line naming the setting otherwise."""
+    for name, value in options.items():
+        if name in _FIT_COUNTS:
+            low, high, optional = _FIT_COUNTS[name]
+            if value is None and optional:
+                continue
+            if isinstance(value, bool) or not isinstance(value, numbers.Integral) or \
+                    not low <= value <= high:
+                raise IrreflectError(f"{name} must be an integer from {low} to {high}"
+                                     f"{' (or None for the default)' if optional else ''}; "
+                                     f"found {value!r}")
+        elif name in _FIT_FLAGS:
+            check_bool(value, name)
+        elif name == "ftol":
+            check_number(value, "ftol", low=0.0, high=1.0, low_open=True, high_open=True)
+        elif name == "seed":
+            check_seed(value)
+
+
+def check_starts(starts, n_nonlinear: int, name: str = "extra_starts") -> np.ndarray | None:
+    """Starting points of the nonlinear coordinates: None, or finite numbers of shape
+    (S, ``n_nonlinear``) (a single start may be 1-D)."""
+    if starts is None:
+        return None
+    arr = check_real_array(starts, name, ndim=None)
+    if arr.ndim == 1:
+        arr = arr[None]
+    if arr.ndim != 2 or arr.shape[1] != n_nonlinear or arr.shape[0] > 100_000:
+        raise IrreflectError(f"{name} must be an array of shape (starts, {n_nonlinear}) (the "
+                             f"model's nonlinear coordinates, at most 100000 starts); found "
+                             f"shape {np.shape(starts)}")
+    return arr
+
+
 # ----------------------------------------------------------------------------- arrays
 def check_real_array(values, name: str, *, ndim: int | None = 1, finite: bool = True,
                      source: str = "") -> np.ndarray:
@@ -308,13 +365,13 @@ BUDGETS = {b.name: b for b in (
            "memory one run may take"),
     Budget("ray-bounces", 1e9, "ray-bounces",
            "Monte Carlo rays x emitter-receiver pairs x bounces of one room run"),
-    Budget("cell-pairs", 2e11, "cell pairs",
+    Budget("cell-pairs", 3e11, "cell pairs",
            "cells^2 x (emitter-receiver pairs + emitters x (bounces - 2)) of one recursive "
-           "room run"),
+           "room run, a pair counted 30 times when a material is not Lambertian"),
     Budget("receivers", 40_000, "receivers", "receivers of one scene (grids included)"),
     Budget("subset-fits", 5e6, "subset fits",
            "generations x population of one selection run"),
-    Budget("trials", 20_000, "trials", "Monte Carlo trials of evaluate-protocol"),
+    Budget("trials", 500_000, "trials", "Monte Carlo trials of evaluate-protocol"),
 )}
 
 
@@ -335,8 +392,17 @@ def memory_hint(default: str) -> str:
 
 
 def note_memory_option(text: str) -> None:
-    """Remember which option(s) size this run's memory, for an out-of-memory message."""
+    """Remember which option(s) size this run's memory, for an out-of-memory message. A
+    command-line option (``--dt``) is not replaced by the library's name of the same
+    setting checked again further down (``time_resolution_ns``); the CLI clears the note
+    when a command starts (:func:`forget_memory_options`)."""
+    if _memory_hint and _memory_hint[-1].startswith("--") and not text.startswith("--"):
+        return
     _memory_hint[:] = [text]
+
+
+def forget_memory_options() -> None:
+    _memory_hint.clear()
 
 
 def _amount(x: float) -> str:
@@ -351,7 +417,7 @@ def check_budget(name: str, amount: float, *, option: str, value, largest, detai
     limit = budget(name)
     b = BUDGETS[name]
     if name == "memory":
-        note_memory_option(f"{option} (at most {largest} with {detail})")
+        note_memory_option(f"{option} ({largest} {direction} with {detail})")
     if amount <= limit:
         return
     unit = b.unit
@@ -362,6 +428,36 @@ def check_budget(name: str, amount: float, *, option: str, value, largest, detai
     raise BudgetError(
         f"{option} {value}: {shown} ({detail}) is more than this machine's budget of "
         f"{allowed} ({b.what}): {way}{alternative} (or raise the budget: {b.env}=N)")
+
+
+def check_search_budget(pop_size: int, generations: int, n_points: int, *,
+                        pop_option: str = "pop_size",
+                        gen_option: str = "generations") -> None:
+    """A subset search of ``generations x pop_size`` fits on ``n_points`` points within the
+    ``subset-fits`` budget (time) and the memory budget (every scored subset is cached)."""
+    fits = int(pop_size) * int(generations)
+    limit = budget("subset-fits")
+    if pop_size * 2 > limit or generations < 2:  # the population alone is too large
+        check_budget("subset-fits", fits, option=pop_option, value=pop_size,
+                     largest=max(2, int(limit // generations)),
+                     detail=f"{pop_option} x {gen_option} {generations}",
+                     alternative=f" or fewer {gen_option}")
+    check_budget("subset-fits", fits, option=gen_option, value=generations,
+                 largest=max(1, int(limit // pop_size)),
+                 detail=f"{gen_option} x {pop_option} {pop_size}",
+                 alternative=f" or a smaller {pop_option}")
+    per_fit = (n_points + 7) // 8 + 160  # the cache entry of a scored subset
+    check_budget("memory", fits * per_fit + pop_size * n_points * 16, option=gen_option,
+                 value=generations,
+                 largest=max(1, int(budget("memory") // (per_fit * pop_size))),
+                 detail=f"{fits:,} cached subsets of {n_points} points",
+                 alternative=f" or a smaller {pop_option}")
+
+
+def check_trials_budget(n_trials: int, option: str = "n_trials") -> None:
+    """A Monte Carlo of ``n_trials`` fits within the ``trials`` budget."""
+    check_budget("trials", n_trials, option=option, value=n_trials,
+                 largest=int(budget("trials")), detail="one fit per trial")
 
 
 # ----------------------------------------------------------------------------- output paths

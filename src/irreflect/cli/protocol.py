@@ -85,8 +85,11 @@ def _protocol(args, fmt: str) -> int:
         )
     elif args.design_from:
         from ..selection.design import design_protocol
+        from ..validation import check_search_budget
 
         dense = load_data(args, "protocol", args.design_from)
+        check_search_budget(args.pop_size, args.generations, dense.n_points,
+                            pop_option="--pop-size", gen_option="--generations")
         protocol = design_protocol(
             dense, args.n, args.model, theta_min=args.theta_min, theta_max=args.theta_max,
             n_gamma_settings=args.gamma_settings, selector=args.selector, seed=args.seed,
@@ -117,8 +120,11 @@ def _cmd_evaluate(args) -> int:
     from ..models import get_model
     from ..protocol.evaluate import evaluate_protocol
     from ..protocol.export import read_protocol
+    from ..validation import check_trials_budget
 
     get_model(args.model)
+    if args.monte_carlo:
+        check_trials_budget(args.monte_carlo, "--monte-carlo")
     protocol = read_protocol(args.protocol)
     dense = load_data(args, "evaluate-protocol", args.dense)
     ev = evaluate_protocol(protocol, dense, args.model, tolerance_deg=args.tolerance,

@@ -39,9 +39,24 @@ def _room(args) -> int:
     written = result.write(out, figures=figures)
     summary = result.summary()
     print(_report(result, summary))
+    _warn_dark(summary)
     print(f"wrote {out}/: {', '.join(written[:6])}{' ...' if len(written) > 6 else ''} "
           f"({len(written)} files)")
     return 0
+
+
+def _warn_dark(summary) -> None:
+    """A pair that receives no light at all is worth a word: a receiver turned to a wall,
+    shut in by boxes, or out of every emitter's reach (its delays are NaN)."""
+    import sys
+
+    dark = summary[~(summary.dc_gain_total > 0)]
+    if len(dark):
+        first = dark.iloc[0]
+        print(f"irreflect: warning: {len(dark)} emitter-receiver pair(s) receive no light, "
+              f"e.g. {first.emitter} -> {first.receiver} (their delays are NaN): check that "
+              "the receivers face the room and are not shut in by boxes, or follow more "
+              "--bounces", file=sys.stderr)
 
 
 def _report(result, summary) -> str:

@@ -46,6 +46,7 @@ from ..models.extensions import (
     get_extension,
     warm_starts,
 )
+from ..validation import check_int, check_number, check_seed
 
 #: verdict codes (the ``verdict`` key of the JSON output)
 NO_MISSING_EFFECT = "no missing effect"
@@ -540,6 +541,28 @@ def _share(before: Assessment, after: Assessment) -> float:
     return float(np.clip((b.chi2 - a.chi2) / excess, 0.0, 1.0))
 
 
+def _check_settings(extensions, max_effects, seed, min_delta_bic, min_share, min_margin,
+                    alpha) -> None:
+    """:func:`diagnose`'s settings, each in its range (one line otherwise)."""
+    if extensions is not None and (isinstance(extensions, str) or not all(
+            isinstance(e, str) for e in _iterable(extensions))):
+        raise IrreflectError(f"extensions must be a list of extension names (or None for "
+                             f"all); found {extensions!r}")
+    check_int(max_effects, "max_effects", 0)
+    check_seed(seed)
+    check_number(alpha, "alpha", low=0.0, high=1.0, low_open=True, high_open=True)
+    check_number(min_share, "min_share", low=0.0, high=1.0)
+    check_number(min_delta_bic, "min_delta_bic", low=0.0)
+    check_number(min_margin, "min_margin", low=0.0)
+
+
+def _iterable(obj):
+    try:
+        return list(obj)
+    except TypeError:
+        return [None]
+
+
 def diagnose(measurements, model="two-lobe", *, extensions: Sequence[str] | None = None,
              max_effects: int = 3, seed: int = 0, min_delta_bic: float = 10.0,
              min_share: float = 0.5, min_margin: float = 6.0, alpha: float = 0.01,
@@ -575,6 +598,7 @@ def diagnose(measurements, model="two-lobe", *, extensions: Sequence[str] | None
     Diagnosis
     """
     t0 = time.perf_counter()
+    _check_settings(extensions, max_effects, seed, min_delta_bic, min_share, min_margin, alpha)
     meas = as_measurements(measurements)
     base_model = get_model(model)
     names = list(EXTENSIONS) if extensions is None else list(extensions)

@@ -20,6 +20,13 @@ import numpy as np  # noqa: E402
 from .._atomic import atomic_path  # noqa: E402
 
 
+def plain(text):
+    """``text`` as plain text in a figure: every ``$`` escaped, so that a name (a file
+    stem, a scene's emitter) is never read as matplotlib mathtext (``$\\frac{$`` would stop
+    the drawing). irreflect's own labels use no mathtext (R² is a character)."""
+    return text if not isinstance(text, str) else text.replace("$", r"\$")
+
+
 def _polar_axes(ax=None, fig=None):
     if ax is None:
         fig = fig or plt.figure(figsize=(6.4, 4.6))
@@ -57,7 +64,7 @@ def plot_polar(measurements, predict=None, ax=None, *, label="fit", title=None):
                     color=colour)
     ax.set_xlabel("receiver angle theta (deg); radius: power")
     if title:
-        ax.set_title(title, fontsize=10)
+        ax.set_title(plain(title), fontsize=10)
     ax.legend(loc="lower left", bbox_to_anchor=(-0.12, -0.18), fontsize=7, ncol=3, frameon=False)
     return ax
 
@@ -87,11 +94,11 @@ def plot_polar_per_gamma(measurements, curves: dict, fig=None, *, title=None, st
             else:
                 ax.plot(np.radians(grid), predict(np.full_like(grid, g), grid), style, lw=1.2,
                         label=label)
-        ax.set_title(f"gamma = {g:g} deg", fontsize=9)
+        ax.set_title(plain(f"gamma = {g:g} deg"), fontsize=9)
         if i == 0:
             ax.legend(loc="lower left", bbox_to_anchor=(-0.2, -0.25), fontsize=7, frameon=False)
     if title:
-        fig.suptitle(title, fontsize=11)
+        fig.suptitle(plain(title), fontsize=11)
     fig.tight_layout()
     return fig
 
@@ -131,7 +138,7 @@ def plot_surface(measurements, predict, ax=None, *, highlight=None, title=None):
     ax.set_zlabel("power")
     ax.legend(fontsize=7)
     if title:
-        ax.set_title(title, fontsize=10)
+        ax.set_title(plain(title), fontsize=10)
     return ax
 
 
@@ -234,7 +241,7 @@ def plot_residual_map(gamma_deg, theta_deg, values, ax=None, *, title=None,
         ax.legend(fontsize=7, loc="lower left", bbox_to_anchor=(0.0, 1.0), frameon=False,
                   borderaxespad=0.2)
     if title:
-        ax.set_title(title, fontsize=10, pad=18 if source_line else 16)
+        ax.set_title(plain(title), fontsize=10, pad=18 if source_line else 16)
     return ax
 
 
@@ -265,5 +272,5 @@ def plot_residual_histogram(values, ax=None, *, title=None,
     ax.set_xlabel(label)
     ax.set_ylabel("number of points")
     if title:
-        ax.set_title(title, fontsize=10)
+        ax.set_title(plain(title), fontsize=10)
     return ax

@@ -9,7 +9,7 @@ import matplotlib.patches
 import numpy as np
 
 from ..room.results import grid_values, safe_name
-from .common import plt
+from .common import plain, plt
 
 _ORDER_LABEL = {0: "line of sight", 1: "1 reflection"}
 
@@ -50,8 +50,8 @@ def plot_impulse_response(result, emitter=0, receiver=0, ax=None, *, max_order=N
     ax.set_xlabel("delay t (ns)")
     ax.set_ylabel("h(t) (1/ns)")
     rx = result.scene.receivers[link.receiver]
-    ax.set_title(f"{result.scene.name}: {result.scene.emitters[link.emitter].name} -> {rx.name} "
-                 f"({result.method})", fontsize=9)
+    ax.set_title(plain(f"{result.scene.name}: {result.scene.emitters[link.emitter].name} -> {rx.name} "
+                 f"({result.method})"), fontsize=9)
     ax.legend(fontsize=7)
     return ax
 
@@ -69,13 +69,13 @@ def plot_bounce_gains(result, emitter=0, receivers=None, ax=None):
         orders = np.arange(len(link.power_w))
         ax.bar(orders + i * width - 0.4 + width / 2, link.power_w / P, width,
                yerr=link.stderr_w / P if np.any(link.stderr_w > 0) else None,
-               label=scene.receivers[r].name)
+               label=plain(scene.receivers[r].name))
     ax.set_yscale("log")
     ax.set_xticks(np.arange(result.bounces + 1))
     ax.set_xticklabels(["LoS"] + [str(k) for k in range(1, result.bounces + 1)])
     ax.set_xlabel("reflections")
     ax.set_ylabel("DC gain H(0)")
-    ax.set_title(f"{scene.name}: DC gain per order ({result.method})", fontsize=9)
+    ax.set_title(plain(f"{scene.name}: DC gain per order ({result.method})"), fontsize=9)
     ax.legend(fontsize=7)
     return ax
 
@@ -102,8 +102,8 @@ def plot_map(result, summary, grid, column, emitter, ax=None, *, label=None, cma
     ax.set_aspect("equal")
     ax.set_xlabel("x (m)")
     ax.set_ylabel("y (m)")
-    ax.set_title(f"{result.scene.name}: {label or column}\n{grid.name} at z = {grid.z_m:g} m, "
-                 f"{emitter} ({result.method})", fontsize=9)
+    ax.set_title(plain(f"{result.scene.name}: {label or column}\n{grid.name} at z = {grid.z_m:g} m, "
+                 f"{emitter} ({result.method})"), fontsize=9)
     return ax
 
 
@@ -122,7 +122,7 @@ def plot_material_3d(material, gamma_deg: float, ax=None, azimuths=(0, 30, 60, 9
     ax.tick_params(labelsize=7)
     ax.set_thetamin(-90)
     ax.set_thetamax(90)
-    ax.set_title(f"{material.name}: 3D intensity (1/sr per W), gamma = {gamma_deg:g} deg", fontsize=9)
+    ax.set_title(plain(f"{material.name}: 3D intensity (1/sr per W), gamma = {gamma_deg:g} deg"), fontsize=9)
     ax.legend(fontsize=7, loc="lower left")
     return ax
 
@@ -133,15 +133,22 @@ def write_figures(result, summary, singles, folder) -> list[str]:
     receiver grid, per emitter. Returns the file names."""
     out = []
     scene = result.scene
+
+    def unique(name: str) -> str:  # names are distinct as files (the scene checks); in case
+        stem, k = name[:-4], 2
+        while name in out:
+            name, k = f"{stem}_{k}.png", k + 1
+        return name
+
     shown = singles[:6]
     for e, em in enumerate(scene.emitters):
         for r in shown:
-            name = f"impulse_{safe_name(em.name)}_{safe_name(scene.receivers[r].name)}.png"
+            name = unique(f"impulse_{safe_name(em.name)}_{safe_name(scene.receivers[r].name)}.png")
             ax = plot_impulse_response(result, e, r)
             save(ax, folder / name)
             out.append(name)
         if shown:
-            name = f"bounce_gains_{safe_name(em.name)}.png"
+            name = unique(f"bounce_gains_{safe_name(em.name)}.png")
             ax = plot_bounce_gains(result, e, shown)
             save(ax, folder / name)
             out.append(name)
@@ -151,7 +158,7 @@ def write_figures(result, summary, singles, folder) -> list[str]:
                                   ("rms_delay_spread_ns", "RMS delay spread (ns)")):
                 if summary[column].isna().all():
                     continue
-                name = f"map_{column}_{safe_name(grid.name)}_{safe_name(em.name)}.png"
+                name = unique(f"map_{column}_{safe_name(grid.name)}_{safe_name(em.name)}.png")
                 ax = plot_map(result, summary, grid, column, em.name, label=label)
                 save(ax, folder / name)
                 out.append(name)

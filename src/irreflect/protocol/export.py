@@ -20,6 +20,7 @@ from .. import schema as sc
 from .._atomic import atomic_path
 from .._inputs import parse_json, read_bytes
 from ..errors import IrreflectError, unknown_name
+from ..validation import check_output_path
 from .core import ORDER_RULE, Protocol, protocol_from_frame
 
 SCHEMA_VERSION = 1
@@ -135,7 +136,8 @@ def format_from_path(path, default: str = "csv") -> str:
 
 def write_protocol(protocol: Protocol, path, fmt: str | None = None) -> Path:
     """Write a protocol atomically; the format follows ``fmt`` or the file's extension."""
-    path = Path(path)
+    protocol = as_protocol(protocol)
+    path = check_output_path(path, "file", "--out")
     text = render(protocol, fmt or format_from_path(path))
     with atomic_path(path) as tmp:
         tmp.write_text(text, encoding="utf-8")

@@ -61,6 +61,7 @@ from .._atomic import atomic_path
 from .._inputs import parse_json, read_text
 from ..errors import IrreflectError
 from ..models import get_model
+from ..validation import check_output_path
 from .kernels import (  # noqa: F401  (the table constants are re-exported)
     GAMMA_NODES,
     LOBE_MAX,
@@ -221,6 +222,7 @@ def from_model(model, params: dict, reflectance, *, name: str = "material",
     """
 
     model_obj = get_model(model)
+    _check_model_arguments(model_obj, params, gamma_max_deg, name)
     spec = model if isinstance(model, str) else model_obj.name
     names = tuple(model_obj.param_names)
     missing = [p for p in names if p not in params]
@@ -258,6 +260,20 @@ def from_model(model, params: dict, reflectance, *, name: str = "material",
         mat = Material(kind=KIND_TABLE, table=table, **base)
         S = table_hemisphere_integral(mat)
     return _with_scale(mat, S, K)
+
+
+def _check_model_arguments(model_obj, params, gamma_max_deg, name) -> None:
+    """:func:`from_model`'s arguments: params a table of numbers within the model's bounds,
+    gamma_max_deg None or in (0, 90]."""
+    if not isinstance(params, dict):
+        raise IrreflectError(f"material '{name}': params must be a table NAME: VALUE of the "
+                             f"parameters of {model_obj.name}; found {sc.found(params)}")
+    check_params(model_obj, params, f"material '{name}'")
+    if gamma_max_deg is not None:
+        x = sc.as_float(gamma_max_deg)
+        if x is None or not 0 <= x <= 90:
+            raise IrreflectError(f"material '{name}': gamma_max_deg must be a number from 0 to "
+                                 f"90 (degrees) or None; found {sc.found(gamma_max_deg)}")
 
 
 def _with_scale(mat: Material, S: np.ndarray, K: float) -> Material:
@@ -384,6 +400,10 @@ def save_material(result, path, *, data_file=None, wavelength_nm=None, notes=Non
     BRDF x cos(theta) in 1/sr, or None (then a scene must give it).
     """
 
+    if not all(hasattr(result, k) for k in ("model", "param_names", "values", "gamma_deg")):
+        raise IrreflectError(f"save_material expects a FitResult (from irreflect.fit); found "
+                             f"{type(result).__name__}")
+    check_output_path(path, "file", "--save", (".json",))
     reflectance = parse_reflectance(reflectance, Path(path).stem)
     gamma = np.abs(np.asarray(result.gamma_deg, float))
     doc = {
@@ -415,7 +435,7 @@ _FROM_FIT = "a material file written by 'irreflect fit DATA --save MATERIAL.json
 REFLECTANCE = sc.AnyOf(
     shape=lambda v: sc.Choice(options=("K",)) if isinstance(v, str) else sc.Number(lo=0.0,
                                                                                   hi=1.0),
-    expected='a number from 0 to 1 or "K"')
+    expected='a number from 0 to 1 or "K"', whole=True)
 _PARAM_NAME = sc.Text(max_len=64, what="a parameter name")
 #: The declared schema of a material file (:func:`save_material` writes it; the fit's
 #: ``verdict`` and ``warnings`` are kept as written).

@@ -32,7 +32,7 @@ import numpy as np
 
 from .. import schema as sc
 from .._inputs import parse_toml, read_text
-from ..errors import IrreflectError
+from ..errors import IrreflectError, SceneError
 from ..validation import budget
 from .materials import (
     REFLECTANCE,
@@ -262,7 +262,7 @@ class _Ctx:
         self.path = path
         self.base = Path(path).parent if path else Path.cwd()
         self.roots = [self.base] + ([Path(materials_dir)] if materials_dir is not None else [])
-        self.schema = sc.Context(path, "toml", _ARRAYS)
+        self.schema = sc.Context(path, "toml", _ARRAYS, SceneError)
 
     def fail(self, key, msg: str):
         """``FILE: TABLE: msg`` (``key`` names the table or array item)."""
@@ -281,9 +281,14 @@ def load_scene(path, *, materials_dir=None) -> Scene:
     ``materials_dir``: a folder from which material files may be read besides the scene's
     own folder.
     """
-    text = read_text(path, "scene", "a scene TOML file (see datasets/rooms/office.toml)",
-                     fix="a scene is a few KB of text")
-    doc = parse_toml(text, str(path), "a scene TOML file")
+    try:
+        text = read_text(path, "scene", "a scene TOML file (see datasets/rooms/office.toml)",
+                         fix="a scene is a few KB of text")
+        doc = parse_toml(text, str(path), "a scene TOML file")
+    except SceneError:
+        raise
+    except IrreflectError as exc:
+        raise SceneError(str(exc)) from None
     return scene_from_dict(doc, path=str(path), materials_dir=materials_dir)
 
 
@@ -292,8 +297,10 @@ def scene_from_dict(doc: dict, path: str | None = None, *, materials_dir=None) -
     the rules that tie keys together (see the module docstring)."""
     if materials_dir is not None:
         _check_materials_dir(materials_dir)
+    if not isinstance(path, str | os.PathLike | None):
+        raise SceneError(f"path must be the scene file's path (or None); found {path!r}")
     ctx = _Ctx(path, materials_dir)
-    doc = sc.validate(SCENE_SCHEMA, doc, path, "toml", _ARRAYS)
+    doc = sc.validate(SCENE_SCHEMA, doc, path, "toml", _ARRAYS, SceneError)
     size = np.array(doc["room"]["size_m"])
     materials = _Materials(ctx, doc.get("materials", {}))
     faces = _room_faces(ctx, doc["room"]["materials"], materials)
@@ -318,7 +325,7 @@ def _default_name(path) -> str:
 
 def _check_materials_dir(folder) -> None:
     if not isinstance(folder, str | os.PathLike) or not Path(folder).is_dir():
-        raise IrreflectError(f"--materials-dir {folder}: expected an existing folder of "
+        raise SceneError(f"--materials-dir {folder}: expected an existing folder of "
                              "material files")
 
 
@@ -410,7 +417,7 @@ def _material(ctx: _Ctx, name: str, spec: dict) -> Material:
         return from_model(spec["model"], spec["params"], spec["reflectance"], name=name,
                           source=f"{spec['model']} (scene)",
                           gamma_max_deg=spec.get("gamma_max_deg"))
-    except sc.SchemaError:
+    except SceneError:
         raise
     except IrreflectError as exc:
         if ctx.path and str(exc).startswith(str(ctx.path)):

@@ -33,7 +33,7 @@ from pymoo.core.population import Population
 from .. import schema as sc
 from .._atomic import atomic_path
 from .._inputs import parse_json, read_bytes
-from ..errors import IrreflectError
+from ..errors import IrreflectError, SchemaError
 
 FORMAT = "irreflect-selection-checkpoint"
 VERSION = 4  # 4: a digest of the arrays; the metadata checked against a declared schema
@@ -233,7 +233,7 @@ def _read_meta(path: Path, arr, fingerprint: str) -> dict:
                       f"irreflect reads version {VERSION}")
     try:
         meta = sc.validate(META_SCHEMA, meta, f"{path} (metadata)")
-    except sc.SchemaError as exc:
+    except SchemaError as exc:
         _refuse(path, f"corrupt checkpoint ({str(exc).removeprefix(f'{path} (metadata): ')})")
     if meta["fingerprint"] != fingerprint:
         raise IrreflectError(

@@ -288,6 +288,6 @@ SELECTORS: dict[str, Selector] = {
 
 def get_selector(name: str) -> Selector:
     """The selector called ``name`` (see :data:`SELECTORS`)."""
-    if name not in SELECTORS:
+    if not isinstance(name, str) or name not in SELECTORS:
         raise unknown_name("selector", name, SELECTORS)
     return SELECTORS[name]
