@@ -256,7 +256,7 @@ def _write(ckpt, arrays, meta, digest=True):
     from irreflect.selection.checkpoint import _digest as array_digest
 
     if digest:
-        meta["digest"] = array_digest(arrays)
+        meta["digest"] = array_digest(arrays, meta)
     arrays = dict(arrays, meta=np.array(json.dumps(meta)))
     with open(ckpt, "wb") as fh:
         np.savez(fh, **arrays)

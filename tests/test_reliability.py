@@ -125,7 +125,7 @@ def test_foreign_or_corrupt_checkpoints_are_one_line_errors(tmp_path, damage, me
             from irreflect.selection.checkpoint import _digest
 
             arrays["pop_F"] = arrays["pop_F"][:-1]
-            meta["digest"] = _digest(arrays)
+            meta["digest"] = _digest(arrays, meta)
         arrays["meta"] = np.array(json.dumps(meta))
         with open(ckpt, "wb") as fh:
             np.savez(fh, **arrays)

@@ -501,8 +501,14 @@ def load_material(path, *, name: str | None = None, reflectance=None) -> Materia
                                  f"irreflect reads version {MATERIAL_FORMAT_VERSION}")
         doc = sc.validate(MATERIAL_FILE_SCHEMA, doc, str(path))
         check_params(doc["model"], doc["params"], str(path))
+        extra = sorted(set(doc.get("stderr") or {}) - set(doc["params"]))
+        if extra:
+            raise IrreflectError(f"{path}: stderr has '{extra[0]}', which is not one of the "
+                                 f"params ({', '.join(doc['params'])})")
     except IrreflectError as exc:
-        raise IrreflectError(f"material '{label}': {exc}") from None
+        text = str(exc)
+        where = "" if str(path) in text else f"{path}: "
+        raise IrreflectError(f"material '{label}': {where}{text}") from None
     rho = reflectance if reflectance is not None else doc.get("reflectance")
     if rho is None:
         raise IrreflectError(
@@ -512,12 +518,16 @@ def load_material(path, *, name: str | None = None, reflectance=None) -> Materia
     if grange is not None and grange[0] > grange[1]:
         raise IrreflectError(f"material '{label}': {path}: gamma_range_deg must be [min, max] "
                              f"with min <= max; found {list(grange)}")
-    return from_model(doc["model"], doc["params"], rho, name=label,
-                      source=f"{path.name} ({doc['model']})", stderr=doc.get("stderr"),
-                      gamma_max_deg=None if grange is None else grange[1],
-                      metadata={k: doc.get(k) for k in ("r2", "data_file", "wavelength_nm",
-                                                        "notes", "gamma_range_deg", "verdict",
-                                                        "warnings")})
+    try:
+        return from_model(doc["model"], doc["params"], rho, name=label,
+                          source=f"{path.name} ({doc['model']})", stderr=doc.get("stderr"),
+                          gamma_max_deg=None if grange is None else grange[1],
+                          metadata={k: doc.get(k) for k in ("r2", "data_file", "wavelength_nm",
+                                                            "notes", "gamma_range_deg",
+                                                            "verdict", "warnings")})
+    except IrreflectError as exc:  # the file named in the one line
+        text = str(exc).removeprefix(f"material '{label}': ")
+        raise IrreflectError(f"material '{label}': {path}: {text}") from None
 
 
 _LAMBERTIAN_RE = re.compile(r"^\s*lambertian\s*\(\s*([^)]*)\)\s*$", re.IGNORECASE)

@@ -75,10 +75,13 @@ def _refuse(path, what: str):
                          "start afresh")
 
 
-def _digest(arrays: dict) -> str:
-    """SHA-256 of every array but ``meta`` (name, dtype, shape and bytes): a checkpoint
-    edited or damaged after it was written is refused rather than resumed from."""
+def _digest(arrays: dict, meta: dict) -> str:
+    """SHA-256 of the metadata (but its digest) and of every array but ``meta`` (name,
+    dtype, shape and bytes): a checkpoint edited or damaged after it was written is refused
+    rather than resumed from."""
     h = hashlib.sha256()
+    h.update(json.dumps({k: v for k, v in meta.items() if k != "digest"}, sort_keys=True)
+             .encode())
     for name in sorted(arrays):
         if name == "meta":
             continue
@@ -117,12 +120,12 @@ def save_checkpoint(path, fingerprint: str, algorithm, evaluator, generation: in
     }
     meta = {
         "format": FORMAT, "version": VERSION, "fingerprint": fingerprint,
-        "digest": _digest(arrays),
         "generation": int(generation), "seconds": float(seconds), "n_points": evaluator.n,
         "n_iter": int(algorithm.n_iter), "n_eval": int(algorithm.evaluator.n_eval),
         "rng": algorithm.random_state.bit_generator.state,
         "counters": {k: getattr(evaluator, k) for k in _COUNTERS},
     }
+    meta["digest"] = _digest(arrays, json.loads(json.dumps(meta)))
     arrays["meta"] = np.array(json.dumps(meta))
     with atomic_path(Path(path), "--checkpoint") as tmp, open(tmp, "wb") as fh:
         np.savez(fh, **arrays)
@@ -145,7 +148,10 @@ def load_checkpoint(path, fingerprint: str, n_points: int, n_nonlinear: int | No
     missing = [k for k in _ARRAYS if k not in data]
     if missing:
         _refuse(path, f"not an irreflect selection checkpoint (no '{missing[0]}' array)")
-    meta = _read_meta(path, data["meta"], fingerprint)
+    meta, written = _read_meta(path, data["meta"], fingerprint)
+    if _digest(data, written) != meta["digest"]:
+        _refuse(path, "the checkpoint was modified after it was written (it does not match "
+                      "its digest)")
     _check_arrays(path, data, meta, n_points, n_nonlinear)
     data["meta"] = meta
     return data
@@ -231,6 +237,7 @@ def _read_meta(path: Path, arr, fingerprint: str) -> dict:
     if meta.get("version") != VERSION:
         _refuse(path, f"checkpoint format version {sc.found(meta.get('version'))}; this "
                       f"irreflect reads version {VERSION}")
+    written = meta
     try:
         meta = sc.validate(META_SCHEMA, meta, f"{path} (metadata)")
     except SchemaError as exc:
@@ -240,7 +247,7 @@ def _read_meta(path: Path, arr, fingerprint: str) -> dict:
             f"{path}: checkpoint of a different run (other data, model, seed, population or "
             "selection settings): use another --checkpoint file or delete this one"
         )
-    return meta
+    return meta, written
 
 
 def _check_arrays(path, data, meta, n_points, n_nonlinear=None) -> None:
@@ -249,9 +256,6 @@ def _check_arrays(path, data, meta, n_points, n_nonlinear=None) -> None:
         if arr.dtype.kind not in kinds or arr.ndim != ndim:
             _refuse(path, f"corrupt checkpoint ('{name}' has dtype {arr.dtype}, "
                           f"{arr.ndim} dimensions)")
-    if _digest(data) != meta["digest"]:
-        _refuse(path, "the checkpoint was modified after it was written (its arrays do not "
-                      "match their digest)")
     nbytes = (n_points + 7) // 8
     pop = len(data["pop_X"])
     shapes_ok = (
