@@ -19,6 +19,7 @@ import tomllib
 from pathlib import Path
 
 import numpy as np
+import pandas as pd
 import pytest
 from conftest import synthetic
 
@@ -716,3 +717,23 @@ def test_budget_table_in_the_docs_lists_every_budget():
     assert "IRREFLECT_BUDGET_POINTS_" in docs
     readme = (Path(__file__).resolve().parents[1] / "README.md").read_text()
     assert "docs/bad-input.md" in readme
+
+
+def test_a_key_given_twice_in_a_material_file_is_refused_not_the_last_one_kept(tmp_path):
+    from irreflect.room import load_material
+
+    text = (ROOMS / "terrazzo.json").read_text()
+    path = tmp_path / "m.json"
+    path.write_text(text.replace('"reflectance": null', '"reflectance": 0.9, "reflectance": 0.2'))
+    with pytest.raises(IrreflectError, match="key 'reflectance' appears twice"):
+        load_material(path)
+
+
+def test_a_protocol_of_more_points_than_a_protocol_lists_is_refused(tmp_path):
+    m = synthetic()
+    rows = pd.DataFrame({"gamma_deg": np.repeat(-np.linspace(1, 80, 200), 60),
+                         "theta_deg": np.tile(np.linspace(-80, 80, 60), 200)})
+    rows.to_csv(tmp_path / "p.csv", index=False)
+    m.to_frame().to_csv(tmp_path / "dense.csv", index=False)
+    line = _one_error(["evaluate-protocol", tmp_path / "p.csv", tmp_path / "dense.csv"])
+    assert "12000 points is more than a protocol may list (10000)" in line

@@ -200,10 +200,27 @@ def parse_json(text: str, source: str, expected: str):
     check; one line for anything that is not JSON."""
     check_nesting(text, source, expected)
     try:
-        return json.loads(text)
+        return json.loads(text, object_pairs_hook=_unique_keys)
+    except _DuplicateKey as exc:
+        raise IrreflectError(f"{source}: key '{exc.args[0]}' appears twice in one object; "
+                             f"expected {expected}: keep one") from None
     except (ValueError, RecursionError) as exc:
         first = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
         raise IrreflectError(f"{source}: not JSON ({first}); expected {expected}") from None
+
+
+class _DuplicateKey(Exception):
+    pass
+
+
+def _unique_keys(pairs) -> dict:
+    """A JSON object whose keys are distinct (``json`` would keep the last one silently)."""
+    out = {}
+    for key, value in pairs:
+        if key in out:
+            raise _DuplicateKey(key)
+        out[key] = value
+    return out
 
 
 def parse_toml(text: str, source: str, expected: str) -> dict:

@@ -144,8 +144,10 @@ def write_protocol(protocol: Protocol, path, fmt: str | None = None) -> Path:
     return path
 
 
-#: Protocol files larger than this are refused (a protocol lists tens of points).
+#: Protocol files larger than this, or with more points, are refused (a protocol lists tens
+#: of points; every one is fitted).
 MAX_PROTOCOL_BYTES = 16 * 2**20
+MAX_PROTOCOL_POINTS = 10_000
 _EXPECTED = "a protocol CSV or JSON (written by 'irreflect protocol')"
 _POINT = sc.Table({
     "step": sc.Integer(lo=1), "gamma_deg": sc.Number(lo=-90, hi=90, lo_open=True, hi_open=True),
@@ -161,7 +163,7 @@ PROTOCOL_SCHEMA = sc.Table({
     "tool_limits": sc.Table({"theta_min_deg": sc.Nullable(sc.Number(lo=-90, hi=90)),
                              "theta_max_deg": sc.Nullable(sc.Number(lo=-90, hi=90))}),
     "rule": sc.Text(max_len=10_000, multiline=True), "order_rule": sc.Text(max_len=10_000),
-    "settings": sc.Document(), "points": sc.ListOf(_POINT, min_items=1, max_items=100_000),
+    "settings": sc.Document(), "points": sc.ListOf(_POINT, min_items=1, max_items=MAX_PROTOCOL_POINTS),
     "notes": sc.ListOf(sc.Text(max_len=10_000, multiline=True), max_items=10_000),
 }, required=("kind", "schema_version", "points"))
 
@@ -180,6 +182,10 @@ def read_protocol(path) -> Protocol:
             ValueError) as exc:
         first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
         raise IrreflectError(f"{path}: cannot be read as a CSV protocol ({first})") from None
+    if len(df) > MAX_PROTOCOL_POINTS:
+        raise IrreflectError(f"{path}: {len(df)} points is more than a protocol may list "
+                             f"({MAX_PROTOCOL_POINTS}): a protocol names the few settings to "
+                             "measure; give the dense scan as DENSE instead")
     return protocol_from_frame(df, str(path), name=path.stem)
 
 
