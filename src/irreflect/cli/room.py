@@ -29,7 +29,7 @@ def _room(args) -> int:
     settings = resolve_settings(scene, {"method": args.method, "bounces": args.bounces,
                                         "cell_m": args.cell, "rays": args.rays,
                                         "time_resolution_ns": args.dt})
-    check_room_budget(scene, settings, CLI_OPTIONS)  # before any work, named as options
+    check_room_budget(scene, settings, CLI_OPTIONS, args.workers)  # before any work
     result = simulate(scene, method=args.method, bounces=args.bounces, cell_m=args.cell,
                       rays=args.rays, seed=args.seed, time_resolution_ns=args.dt,
                       scheduler=args.scheduler, workers=args.workers, progress=not args.quiet)

@@ -105,9 +105,45 @@ def time_bins(scene, bounces: int, dt_ns: float, legs: int | None = None) -> flo
     return legs * diagonal / C_LIGHT / (dt_ns * 1e-9) + 2
 
 
-def check_room_budget(scene, settings: Mapping, options: Mapping = KEYWORDS) -> None:
+def results_memory(scene, settings: Mapping) -> float:
+    """Bytes of the impulse responses a run keeps: pairs x (bounces + 1) x time bins x
+    :data:`BYTES_PER_BIN`."""
+    bounces = int(settings["bounces"])
+    pairs = len(scene.emitters) * len(scene.receivers)
+    bins = time_bins(scene, bounces, float(settings["time_resolution_ns"]))
+    return pairs * (bounces + 1) * BYTES_PER_BIN * bins
+
+
+def cells_memory(scene, settings: Mapping, cell_m: float, copies: int = 1) -> float:
+    """Bytes of the recursive method's per-cell responses: after 1 .. K-2 reflections per
+    emitter (of 2 .. K-1 legs' length) and the receiver's 2-leg response, float32, in each
+    of ``copies`` processes; orders >= 3 convolve them by FFT in chunks of up to 256 cells
+    (complex128)."""
+    bounces = int(settings["bounces"])
+    legs = len(scene.emitters) * sum(m + 1 for m in range(1, bounces - 1)) + 3
+    bins = time_bins(scene, bounces, float(settings["time_resolution_ns"]), legs=1)
+    n = count_cells(scene, cell_m)
+    fft = 32.0 * min(256, n) * (bounces + 1) * bins if bounces >= 3 else 0.0
+    return 4.0 * n * bins * legs * copies + fft
+
+
+def memory_estimate(scene, settings: Mapping, workers: int | None = None) -> float:
+    """Bytes a run takes beyond the interpreter, as the budget check counts them."""
+    total = results_memory(scene, settings)
+    if settings["method"] == "recursive" and int(settings["bounces"]) >= 1:
+        total += cells_memory(scene, settings, float(settings["cell_m"]), _copies(workers))
+    return total
+
+
+def _copies(workers) -> int:
+    return 1 + (workers if workers and workers > 1 else 0)
+
+
+def check_room_budget(scene, settings: Mapping, options: Mapping = KEYWORDS,
+                      workers: int | None = None) -> None:
     """Refuse a run larger than this machine's budgets, before it starts (see the module
-    docstring); ``settings`` as :func:`resolve_settings` gives them."""
+    docstring); ``settings`` as :func:`resolve_settings` gives them; ``workers``: local
+    worker processes, each of which holds the recursive method's per-cell responses."""
     for key in ("bounces", "rays", "seed"):
         if isinstance(settings.get(key), bool):
             raise IrreflectError(f"{options.get(key, key)} must be an integer; found "
@@ -118,7 +154,7 @@ def check_room_budget(scene, settings: Mapping, options: Mapping = KEYWORDS) -> 
     pairs = emitters * receivers
     note_memory_option(f"{options['time_resolution_ns']}, {options['bounces']} or the "
                        "number of receivers")
-    _check_memory(scene, pairs, bounces, dt, options)
+    _check_memory(scene, settings, pairs, bounces, dt, options)
     if method == "montecarlo" and bounces >= 1:
         rays = int(settings["rays"])
         per_ray = pairs * bounces
@@ -128,7 +164,8 @@ def check_room_budget(scene, settings: Mapping, options: Mapping = KEYWORDS) -> 
                             f"emitter(s) x {bounces} bounce(s)",
                      alternative=f", fewer {options['bounces']} or fewer receivers")
     elif method == "recursive" and bounces >= 1:
-        _check_recursive(scene, settings, pairs, emitters, bounces, dt, options)
+        _check_recursive(scene, settings, pairs, emitters, bounces, dt, options,
+                         _copies(workers))
 
 
 def _limit(name: str) -> float:
@@ -137,24 +174,21 @@ def _limit(name: str) -> float:
     return budget(name)
 
 
-def _check_memory(scene, pairs: int, bounces: int, dt: float, options) -> None:
-    bins = time_bins(scene, bounces, dt)
+def _check_memory(scene, settings, pairs: int, bounces: int, dt: float, options) -> None:
     per_bin = pairs * (bounces + 1) * BYTES_PER_BIN
     largest_bins = _limit("memory") / per_bin
     smallest_dt = (bounces + 1) * scene.diagonal / C_LIGHT * 1e9 / max(largest_bins - 2, 1e-300)
-    check_budget("memory", per_bin * bins, option=options["time_resolution_ns"], value=dt,
+    check_budget("memory", results_memory(scene, settings),
+                 option=options["time_resolution_ns"], value=dt,
                  largest=f"{_round_up(smallest_dt):g}", direction="or more",
                  detail=f"{pairs} emitter-receiver pair(s) x {bounces + 1} orders x "
-                        f"{bins:,.0f} time bins of {dt:g} ns",
+                        f"{time_bins(scene, bounces, dt):,.0f} time bins of {dt:g} ns",
                  alternative=f", fewer {options['bounces']} or fewer receivers")
 
 
-def _check_recursive(scene, settings, pairs, emitters, bounces, dt, options) -> None:
+def _check_recursive(scene, settings, pairs, emitters, bounces, dt, options,
+                     copies: int = 1) -> None:
     cell = float(settings["cell_m"])
-    # the per-cell responses a run keeps: after 1 .. K-2 reflections per emitter (of
-    # 2 .. K-1 legs' length) and the receiver's 2-leg response, in float32
-    legs = emitters * sum(m + 1 for m in range(1, bounces - 1)) + 3
-
     cost = 1 if all(m.is_lambertian for m in scene.materials.values()) else GENERAL_PAIR_COST
 
     def work(c: float) -> float:
@@ -162,8 +196,10 @@ def _check_recursive(scene, settings, pairs, emitters, bounces, dt, options) -> 
         passes = pairs * (bounces >= 2) + emitters * max(bounces - 2, 0)
         return (float(n) ** 2 * passes + n * pairs) * cost
 
+    results = results_memory(scene, settings)
+
     def memory(c: float) -> float:
-        return 4.0 * count_cells(scene, c) * time_bins(scene, bounces, dt, legs=1) * legs
+        return results + cells_memory(scene, settings, c, copies)
 
     n_cells = count_cells(scene, cell)
     check_budget("cell-pairs", work(cell), option=options["cell_m"], value=cell,
@@ -174,8 +210,8 @@ def _check_recursive(scene, settings, pairs, emitters, bounces, dt, options) -> 
                              "Carlo method")
     check_budget("memory", memory(cell), option=options["cell_m"], value=cell,
                  largest=f"{_smallest_cell(memory, _limit('memory'), scene):g}",
-                 direction="or more", detail=f"{n_cells:,} cells x time bins of {dt:g} ns x "
-                                             f"{legs} responses",
+                 direction="or more", detail=f"{n_cells:,} cells x time bins of {dt:g} ns "
+                                             f"in {copies} process(es)",
                  alternative=f" or a larger {options['time_resolution_ns']}")
 
 
@@ -204,4 +240,5 @@ def _round_up(x: float) -> float:
 
 
 __all__ = ["check_simulate_arguments", "check_room_budget", "resolve_settings", "count_cells",
-           "time_bins", "CLI_OPTIONS", "KEYWORDS"]
+           "time_bins", "results_memory", "cells_memory", "memory_estimate", "CLI_OPTIONS",
+           "KEYWORDS"]

@@ -200,7 +200,7 @@ def simulate(scene: Scene, *, method=None, bounces=None, cell_m=None, rays=None,
     check_simulate_arguments(scene, scheduler, workers, threads)
     s = _resolve(scene, method=method, bounces=bounces, cell_m=cell_m, rays=rays, seed=seed,
                  time_resolution_ns=time_resolution_ns)
-    check_room_budget(scene, s)  # refused before any work when larger than this machine allows
+    check_room_budget(scene, s, workers=workers)  # refused before any work when too large
     t0 = time.perf_counter()
     _, mats = scene.material_list()
     dt = s["time_resolution_ns"] * 1e-9
