@@ -14,7 +14,6 @@ import os
 import shutil
 import subprocess
 import sys
-import time
 import tomllib
 from pathlib import Path
 
@@ -175,7 +174,6 @@ def _special(tmp_path: Path, kind: str, name: str) -> Path:
 @pytest.mark.parametrize("kind", ["fifo", "zero"])
 @pytest.mark.parametrize("role", ["table", "scene", "protocol", "checkpoint"])
 def test_special_files_as_inputs_are_refused_without_reading(tmp_path, kind, role):
-    t0 = time.perf_counter()
     if role == "table":
         argv = ["fit", _special(tmp_path, kind, "t.csv")]
     elif role == "scene":
@@ -189,7 +187,6 @@ def test_special_files_as_inputs_are_refused_without_reading(tmp_path, kind, rol
     expected = ("pipe (FIFO)" if kind == "fifo" else
                 "outside" if role == "checkpoint" else "a device")  # a link out of the folder
     assert expected in line
-    assert time.perf_counter() - t0 < 30
 
 
 def test_a_material_file_that_is_a_fifo_in_the_scene_folder_is_refused(office):
@@ -463,12 +460,10 @@ def test_scene_keys_are_checked_against_the_schema_and_each_other(office, path, 
     if path == ("box", 0, "min_m"):
         doc["box"][0]["max_m"] = [5.0, 5.0, 3.0]
         message = "the box fills the whole room"
-    t0 = time.perf_counter()
     with pytest.raises(IrreflectError) as info:
         scene_from_dict(doc, path=str(office))
     text = str(info.value)
     assert message in text and text.startswith(f"{office}: ") and "\n" not in text
-    assert time.perf_counter() - t0 < 10  # the 500 x 500 grid is refused before it is built
 
 
 def test_a_second_emitter_of_the_same_name_is_refused(office):
@@ -737,3 +732,26 @@ def test_a_protocol_of_more_points_than_a_protocol_lists_is_refused(tmp_path):
     m.to_frame().to_csv(tmp_path / "dense.csv", index=False)
     line = _one_error(["evaluate-protocol", tmp_path / "p.csv", tmp_path / "dense.csv"])
     assert "12000 points is more than a protocol may list (10000)" in line
+
+
+def test_a_link_planted_as_the_lock_file_truncates_nothing(tmp_path):
+    victim = tmp_path / "victim.txt"
+    victim.write_text("precious")
+    (tmp_path / ".p.csv.irreflect-lock").symlink_to(victim)
+    line = _one_error(["protocol", "--gammas", "-20", "-40", "-60", "--out", tmp_path / "p.csv"])
+    assert "cannot take the lock" in line
+    assert victim.read_text() == "precious" and not (tmp_path / "p.csv").exists()
+
+
+def test_a_fifo_planted_as_an_output_folders_manifest_does_not_hang(tmp_path):
+    out = tmp_path / "out"
+    assert _run(["compare", TERRAZZO, "--models", "phong", "--out", out])[0] == 0
+    manifest = out / ".irreflect-manifest.json"
+    manifest.unlink()
+    os.mkfifo(manifest)
+    # in a child process: a hang fails the test (TimeoutExpired) instead of the suite
+    proc = subprocess.run([sys.executable, "-m", "irreflect", "compare", str(TERRAZZO),
+                           "--models", "phong", "--out", str(out)],
+                          capture_output=True, text=True, timeout=120)
+    assert "Traceback" not in proc.stderr
+    assert proc.returncode in (0, 2), proc.stderr

@@ -34,6 +34,7 @@ import json
 import os
 import re
 import shutil
+import stat
 import tempfile
 import threading
 import time
@@ -86,7 +87,7 @@ class _Claim:
         if fcntl is None:  # pragma: no cover
             return
         for _attempt in range(20):
-            fd = os.open(self.lock_path, os.O_RDWR | os.O_CREAT, 0o644)
+            fd = self._open_lock()
             try:
                 fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
             except OSError:
@@ -111,6 +112,23 @@ class _Claim:
             os.close(fd)
         raise IrreflectError(f"{self.option} {self.path}: could not take the lock "  # pragma: no cover
                              f"{self.lock_path}: try again")
+
+    def _open_lock(self) -> int:
+        """The lock file, never through a link (a link planted there must not make the
+        run truncate its target) and only a regular file."""
+        try:
+            fd = os.open(self.lock_path, os.O_RDWR | os.O_CREAT | getattr(os, "O_NOFOLLOW", 0)
+                         | getattr(os, "O_NONBLOCK", 0), 0o644)
+        except OSError as exc:
+            raise IrreflectError(f"{self.option} {self.path}: cannot take the lock "
+                                 f"{self.lock_path} ({exc.strerror or exc}; a link or a "
+                                 "special file there?): remove it or choose another path"
+                                 ) from None
+        if not stat.S_ISREG(os.fstat(fd).st_mode):
+            os.close(fd)
+            raise IrreflectError(f"{self.option} {self.path}: {self.lock_path} is not a "
+                                 "regular file: remove it or choose another path")
+        return fd
 
     def release(self) -> None:
         if self.fd is not None:
@@ -320,11 +338,17 @@ def _swap_in(new: Path, path: Path) -> None:
 
 
 def _manifest_entries(path: Path) -> set[str]:
-    """Top-level names of the entries a previous run recorded in its manifest."""
+    """Top-level names of the entries a previous run recorded in its manifest (read only
+    when it is a regular file of reasonable size: a FIFO planted there must not hang)."""
+    manifest = path / MANIFEST
     try:
-        doc = json.loads((path / MANIFEST).read_text())
+        st = os.lstat(manifest)
+        if not stat.S_ISREG(st.st_mode) or st.st_size > 16 * 2**20:
+            return set()
+        with open(manifest, "rb") as fh:
+            doc = json.loads(fh.read(16 * 2**20).decode("utf-8"))
         return {str(f).split("/")[0] for f in doc.get("files", [])}
-    except (OSError, ValueError, AttributeError):
+    except (OSError, ValueError, AttributeError, TypeError, RecursionError):
         return set()
 
 

@@ -482,10 +482,10 @@ def check_output_path(path, kind: str = "file", option: str = "--out",
         if suffixes and path.suffix.lower() not in suffixes:
             raise IrreflectError(f"{option} {path}: expected a file name ending in "
                                  f"{', '.join(suffixes)}; found '{path.suffix or 'no suffix'}'")
-    elif path.exists() and not path.is_dir():
+    _check_special(path, noun, option)
+    if kind != "file" and path.exists() and not path.is_dir():
         raise IrreflectError(f"{option} {path}: is a file; expected a folder (give a new or "
                              "existing folder name)")
-    _check_special(path, noun, option)
     parent = path.absolute().parent
     ancestor = parent
     while not ancestor.exists():
