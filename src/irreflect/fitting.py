@@ -510,6 +510,14 @@ class FitResult:
         share = specular_share(self.values[0], self.values[1], np.cos(np.radians(g)))
         return g[share >= 1.0]
 
+    def verdict(self):
+        """What R^2 cannot say: per angle of incidence whether the specular lobe is resolved
+        and the shape reproduced, and the coefficients' checks
+        (:class:`irreflect.verdict.FitVerdict`)."""
+        from .verdict import fit_verdict
+
+        return fit_verdict(self)
+
     def polar_errors(self) -> dict[float, float]:
         """Relative polar-area error (section 5.3) per angle of incidence, in percent."""
         return metrics.polar_area_errors(
@@ -535,12 +543,16 @@ class FitResult:
             "ill_determined": list(self.ill_determined),
             "warnings": list(self.warnings),
             "retried": self.retried,
+            "verdict": self.verdict().to_dict(),
         }
 
     def report(self, warnings: bool = True) -> str:
-        """Readable fit report: coefficients with errors, quality, per-gamma polar error,
-        then (with ``warnings``) the warnings, one line each."""
+        """Readable fit report: the verdict first (:meth:`verdict`), then coefficients with
+        errors, quality, the verdict per angle of incidence, then (with ``warnings``) the
+        warnings, one line each."""
+        verdict = self.verdict()
         lines = [
+            verdict.summary(),
             f"model {self.model}: {self.n_points} points, {self.n_params} parameters, "
             f"{self.n_starts} starts, {self.nfev} evaluations, {self.fit_ms:.1f} ms",
             f"{self.message}",
@@ -557,8 +569,12 @@ class FitResult:
             lines.append(f"reduced chi^2 = {self.chi2_reduced:.4g} (weighted by 1/sigma^2)")
         errors = self.polar_errors()
         if errors:
-            lines.append("relative polar-area error per angle of incidence (section 5.3):")
+            lines.append("relative polar-area error per angle of incidence (section 5.3, the "
+                         "model at the measured receivers):")
             lines.append("  " + "  ".join(f"{g:g} deg: {e:.2f}%" for g, e in errors.items()))
+        lines.append("per angle of incidence (the model's continuous curve; lobe half width "
+                     "and the receivers within one and two half widths of the mirror):")
+        lines += ["  " + row for row in verdict.table()]
         if warnings:
             lines += [f"warning: {w}" for w in self.warnings]
         return "\n".join(lines)

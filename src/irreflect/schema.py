@@ -254,6 +254,16 @@ class Choice(Node):
 
 
 @dataclass(frozen=True)
+class Boolean(Node):
+    """true or false (never a number: 1 is not true)."""
+
+    def check(self, value, key, ctx):
+        if not isinstance(value, bool):
+            self.refuse(value, key, ctx, "true or false")
+        return value
+
+
+@dataclass(frozen=True)
 class Nullable(Node):
     """``inner`` or null (JSON ``null``, kept as None)."""
 
@@ -439,6 +449,6 @@ def validate(node: Node, value, source: str | None = None, style: str = "json",
     return node.check(value, (), Context(source, style, frozenset(arrays), error))
 
 
-__all__ = ["SchemaError", "Context", "Node", "Number", "Integer", "Text", "Name", "Choice",
+__all__ = ["SchemaError", "Context", "Node", "Number", "Integer", "Text", "Name", "Choice", "Boolean",
            "Nullable", "AnyOf", "Vector", "ListOf", "Table", "MapOf", "Document", "validate",
            "dotted", "found", "as_float", "NAME_PUNCTUATION"]

@@ -16,7 +16,8 @@ def _cmd_room(args) -> int:
 def _room(args) -> int:
     from pathlib import Path
 
-    from ..room.checks import CLI_OPTIONS, check_room_budget, resolve_settings
+    from ..data import resolve_scene
+    from ..room.checks import CLI_OPTIONS, check_room_budget, material_notes, resolve_settings
     from ..room.engine import simulate
     from ..room.scene import load_scene
 
@@ -25,7 +26,9 @@ def _room(args) -> int:
 
         check_scheduler_address(args.scheduler)
     out = Path(args.out)
-    scene = load_scene(args.scene, materials_dir=args.materials_dir)
+    scene = load_scene(resolve_scene(args.scene), materials_dir=args.materials_dir)
+    for line in material_notes(scene, allow_unphysical=args.allow_unphysical):
+        print(line)
     settings = resolve_settings(scene, {"method": args.method, "bounces": args.bounces,
                                         "cell_m": args.cell, "rays": args.rays,
                                         "time_resolution_ns": args.dt})
@@ -101,7 +104,7 @@ def register(sub) -> None:
                     "next-event estimation) for every emitter-receiver pair of a scene; writes "
                     "summary/bounces/impulse_response as CSV and Parquet, run.json and figures "
                     "to --out. Options override the scene's [simulation] table.")
-    p.add_argument("scene", metavar="SCENE.toml", help="scene file (see datasets/rooms/office.toml)")
+    p.add_argument("scene", metavar="SCENE.toml", help="scene file (TOML), or the name of a bundled scene (office; see 'irreflect datasets')")
     p.add_argument("--out", required=True, metavar="DIR", help="output folder")
     p.add_argument("--method", choices=("recursive", "montecarlo"), default=None,
                    help="reflections by Barry's recursive method or Monte Carlo (default: the "
@@ -124,6 +127,9 @@ def register(sub) -> None:
     p.add_argument("--materials-dir", default=None, metavar="DIR",
                    help="also read the scene's material files from DIR (default: only from "
                         "the scene's own folder)")
+    p.add_argument("--allow-unphysical", action="store_true",
+                   help="simulate a material whose model predicts negative power in the room "
+                        "(clipped to 0; default: refused)")
     p.add_argument("--no-figures", action="store_true", help="numbers only")
     p.add_argument("--quiet", action="store_true",
                    help="no progress display (a bar on a terminal, lines through a pipe)")

@@ -14,6 +14,16 @@ The size of a run is known before it starts:
 
 A run above a budget is refused with one line naming the option to change and the largest
 (or smallest) value this machine allows with the other settings as they are.
+
+And what a scene's materials say of themselves, before a simulation uses them.
+
+A material file written by ``irreflect fit --save`` carries its fit's verdict and warnings
+(:mod:`irreflect.verdict`): ``irreflect room`` and ``irreflect reproduce --scene`` print
+them for every material they use, so a floor fitted from a lobe seen by one receiver does
+not enter a room without a word. A material whose model predicts negative power anywhere
+in the room's range (:func:`irreflect.room.materials.negative_power`) is refused unless
+the caller allows it: the room would clip the negative part and simulate another curve
+than the one fitted.
 """
 
 from __future__ import annotations
@@ -21,8 +31,9 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping
 
-from ..errors import IrreflectError
+from ..errors import IrreflectError, SceneError
 from ..validation import check_budget, note_memory_option
+from .materials import fit_notes
 
 C_LIGHT = 299_792_458.0
 #: A cell pair of the recursive method costs this many Lambertian ones when some material is
@@ -239,6 +250,36 @@ def _round_up(x: float) -> float:
     return math.ceil(x / scale) * scale
 
 
+def used_materials(scene) -> list[str]:
+    """The names of the materials a scene's room faces and boxes use, in first-use order."""
+    names = list(scene.room_materials)
+    for box in scene.boxes:
+        names += list(box.materials)
+    return list(dict.fromkeys(names))
+
+
+def material_notes(scene, allow_unphysical: bool = False) -> list[str]:
+    """One block of lines per used material that has anything to say (its fit's verdict
+    and warnings, an unphysical model). Raises SceneError for an unphysical material
+    unless ``allow_unphysical`` (then it is a warning line)."""
+    lines, refused = [], []
+    for name in used_materials(scene):
+        mat = scene.materials[name]
+        notes = fit_notes(mat)
+        if not notes:
+            continue
+        lines.append(f"material '{name}' ({mat.source}):")
+        lines += [f"  {n}" for n in notes]
+        if (mat.metadata or {}).get("unphysical"):
+            refused.append(f"'{name}': {mat.metadata['unphysical']}")
+    if refused and not allow_unphysical:
+        raise SceneError(
+            f"{scene.path or scene.name}: material {refused[0]}: fit another model (the "
+            "two-lobe model's share saturates and never goes negative) or pass "
+            "--allow-unphysical to simulate it with the negative part clipped to 0")
+    return lines
+
+
 __all__ = ["check_simulate_arguments", "check_room_budget", "resolve_settings", "count_cells",
            "time_bins", "results_memory", "cells_memory", "memory_estimate", "CLI_OPTIONS",
-           "KEYWORDS"]
+           "KEYWORDS", "used_materials", "material_notes"]

@@ -249,9 +249,13 @@ def from_model(model, params: dict, reflectance, *, name: str = "material",
         scale, rho = "reflectance", _check_rho(reflectance, name)
         K = 1.0
     lobes, share = _lobes_for(model_obj.name, values)
+    metadata = dict(metadata or {})
+    unphysical = negative_power(model_obj, values, gmax)
+    if unphysical:
+        metadata["unphysical"] = unphysical
     base = dict(name=name, source=source or f"{spec} {values}", reflectance=rho, scale=scale,
                 model=spec, params=values, stderr=stderr, gamma_max_rad=float(gmax),
-                metadata=dict(metadata or {}))
+                metadata=metadata)
     if lobes is not None:
         S = lobe_hemisphere_integral(lobes, share, gmax, GAMMA_NODES)
         mat = Material(kind=KIND_LOBES, lobes=lobes, share=share, **base)
@@ -274,6 +278,45 @@ def _check_model_arguments(model_obj, params, gamma_max_deg, name) -> None:
         if x is None or not 0 <= x <= 90:
             raise IrreflectError(f"material '{name}': gamma_max_deg must be a number from 0 to "
                                  f"90 (degrees) or None; found {sc.found(gamma_max_deg)}")
+
+
+def negative_power(model_obj, values: dict, gamma_max: float) -> str | None:
+    """Where a model predicts negative power in the range a room uses it (in the plane of
+    incidence, ``|gamma| <= gamma_max`` radians, ``|theta| < 90`` deg): one line, or None.
+    A negative reflection is unphysical; the room would clip it to 0 and so simulate
+    another curve than the one fitted."""
+    params = np.array([values[k] for k in model_obj.param_names], float)
+    g = np.linspace(0.0, gamma_max, 60)
+    t = np.radians(np.linspace(-89.5, 89.5, 359))
+    G, T = np.meshgrid(g, t, indexing="ij")
+    with np.errstate(all="ignore"):
+        p = np.asarray(model_obj.predict(params, -G, T), float)
+    finite = np.isfinite(p)
+    if not finite.any():
+        return "it predicts no finite power in the room's range"
+    peak = np.max(np.abs(p[finite]))
+    low = np.where(finite, p, np.inf)
+    i = np.unravel_index(int(np.argmin(low)), low.shape)
+    if low[i] >= -1e-9 * peak:
+        return None
+    return (f"its model predicts negative power ({low[i]:.3g}, {abs(low[i]) / peak:.2%} of the "
+            f"peak) at gamma = {np.degrees(G[i]):.3g} deg, theta = {np.degrees(T[i]):.3g} deg; "
+            f"{int(np.sum(low < -1e-9 * peak))} of {low.size} in-plane directions are negative")
+
+
+def fit_notes(mat: Material) -> list[str]:
+    """What the fit behind a material said of itself (its material file's verdict and
+    warnings, see ``irreflect fit --save``) and whether its model predicts negative power
+    in the room: the lines ``irreflect room`` prints for every material it uses."""
+    meta = mat.metadata or {}
+    lines = []
+    verdict = meta.get("verdict")
+    if isinstance(verdict, dict) and verdict.get("summary"):
+        lines.append(str(verdict["summary"]))
+    lines += [f"warning: {w}" for w in (meta.get("warnings") or [])]
+    if meta.get("unphysical"):
+        lines.append(f"UNPHYSICAL: {meta['unphysical']}")
+    return lines
 
 
 def _with_scale(mat: Material, S: np.ndarray, K: float) -> Material:
@@ -421,6 +464,10 @@ def save_material(result, path, *, data_file=None, wavelength_nm=None, notes=Non
         "wavelength_nm": None if wavelength_nm is None else float(wavelength_nm),
         "notes": notes or "",
     }
+    verdict = result.verdict()
+    doc["trustworthy"] = verdict.trustworthy
+    doc["verdict"] = verdict.to_dict()
+    doc["warnings"] = list(result.warnings)
     if not np.all(np.isfinite(result.values)):
         raise IrreflectError(f"{path}: the fit has non-finite coefficients; nothing written")
     with atomic_path(path, "--save") as tmp:
@@ -437,8 +484,26 @@ REFLECTANCE = sc.AnyOf(
                                                                                   hi=1.0),
     expected='a number from 0 to 1 or "K"', whole=True)
 _PARAM_NAME = sc.Text(max_len=64, what="a parameter name")
-#: The declared schema of a material file (:func:`save_material` writes it; the fit's
-#: ``verdict`` and ``warnings`` are kept as written).
+_VERDICT_NUMBER = sc.Nullable(sc.Number())
+#: A fit's verdict as ``fit --save`` writes it (:meth:`irreflect.verdict.FitVerdict.to_dict`):
+#: ``irreflect room`` prints its summary, so it is checked like every other key.
+VERDICT_SCHEMA = sc.Table({
+    "trustworthy": sc.Boolean(),
+    "summary": sc.Text(max_len=10_000, multiline=True),
+    "problems": sc.ListOf(sc.Text(max_len=10_000, multiline=True), max_items=1_000),
+    "at_bound": sc.ListOf(sc.Text(max_len=100, what="a parameter name"), max_items=64),
+    "ill_determined": sc.ListOf(sc.Text(max_len=100, what="a parameter name"), max_items=64),
+    "converged": sc.Boolean(),
+    "saturated_gammas_deg": sc.ListOf(sc.Number(lo=-90.0, hi=90.0), max_items=10_000),
+    "angles": sc.ListOf(sc.Table({
+        "gamma_deg": sc.Number(lo=-90.0, hi=90.0), "n_points": sc.Integer(lo=0),
+        "polar_error_pct": _VERDICT_NUMBER, "polar_error_at_points_pct": _VERDICT_NUMBER,
+        "specular_share": _VERDICT_NUMBER, "lobe_half_width_deg": _VERDICT_NUMBER,
+        "lobe_points_1hw": sc.Integer(lo=0), "lobe_points_2hw": sc.Integer(lo=0),
+        "lobe_matters": sc.Boolean(), "lobe_resolved": sc.Boolean(), "ok": sc.Boolean(),
+    }, what="a verdict per angle of incidence"), max_items=10_000),
+}, what="a fit's verdict (as 'irreflect fit --save' writes it)")
+#: The declared schema of a material file (:func:`save_material` writes it).
 MATERIAL_FILE_SCHEMA = sc.Table({
     "format": sc.Choice(options=(MATERIAL_FORMAT,)),
     "format_version": sc.Integer(),
@@ -456,7 +521,8 @@ MATERIAL_FILE_SCHEMA = sc.Table({
     "reflectance": sc.Nullable(REFLECTANCE),
     "wavelength_nm": sc.Nullable(sc.Number(lo=0.0, hi=1e6, lo_open=True, unit="nm")),
     "notes": sc.Nullable(sc.Text(max_len=100_000, multiline=True)),
-    "verdict": sc.Nullable(sc.Document(max_depth=8)),
+    "trustworthy": sc.Nullable(sc.Boolean()),
+    "verdict": sc.Nullable(VERDICT_SCHEMA),
     "warnings": sc.Nullable(sc.ListOf(sc.Text(max_len=10_000, multiline=True),
                                       max_items=1_000, what="a list of text")),
 }, required=("format", "format_version", "model", "params"))
@@ -524,7 +590,8 @@ def load_material(path, *, name: str | None = None, reflectance=None) -> Materia
                           gamma_max_deg=None if grange is None else grange[1],
                           metadata={k: doc.get(k) for k in ("r2", "data_file", "wavelength_nm",
                                                             "notes", "gamma_range_deg",
-                                                            "verdict", "warnings")})
+                                                            "trustworthy", "verdict",
+                                                            "warnings")})
     except IrreflectError as exc:  # the file named in the one line
         text = str(exc).removeprefix(f"material '{label}': ")
         raise IrreflectError(f"material '{label}': {path}: {text}") from None
@@ -545,6 +612,6 @@ def parse_lambertian(text: str):
 
 
 __all__ = ["Material", "lambertian", "from_model", "load_material", "save_material",
-           "check_params", "MATERIAL_FILE_SCHEMA", "REFLECTANCE",
+           "check_params", "MATERIAL_FILE_SCHEMA", "REFLECTANCE", "fit_notes", "negative_power",
            "lobe_fraction_above", "lobe_hemisphere_integral", "parse_lambertian",
            "MATERIAL_FORMAT", "MATERIAL_FORMAT_VERSION"]
