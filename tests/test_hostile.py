@@ -755,3 +755,41 @@ def test_a_fifo_planted_as_an_output_folders_manifest_does_not_hang(tmp_path):
                           capture_output=True, text=True, timeout=120)
     assert "Traceback" not in proc.stderr
     assert proc.returncode in (0, 2), proc.stderr
+
+
+# ----------------------------------------------------------------------------- next, campaign
+@pytest.mark.parametrize("argv, words", [
+    (["next", "{data}", "--out", ""], "--out must name a file"),
+    (["campaign", "{data}", "--out", ""], "--out must name a folder"),
+    (["next", "{data}", "--out", "{data}"], "is the input table"),
+    (["next", "{data}", "--theta-step", "1e-9"], "pass --theta-step 0.002 or more"),
+    (["campaign", "{data}", "--n-max", "1000000000"], "pass --n-max 2000 or less"),
+    (["campaign", "{data}", "--generations", "1000000000"], "pass --generations 50000 or less"),
+])
+def test_next_and_campaign_refuse_empty_outputs_inputs_as_outputs_and_runs_above_budget(
+        data, argv, words):
+    before = _digest(data)
+    line = _one_error([a.format(data=data) for a in argv])
+    assert words in line
+    assert _digest(data) == before
+
+
+def test_an_output_never_replaces_a_bundled_table_read_by_name(tmp_path):
+    bundled = bundled_dir() / "terrazzo.csv"
+    before = _digest(bundled)
+    for argv in (["next", "terrazzo", "--out", bundled],
+                 ["protocol", "--lobe-from", "terrazzo", "--out", bundled],
+                 ["diagnose", "terrazzo", "--separate-out", bundled]):
+        line = _one_error(argv)
+        assert "would be replaced by this run's output" in line
+    assert _digest(bundled) == before
+
+
+def test_a_material_files_verdict_is_checked_like_every_other_key(tmp_path):
+    from irreflect.room import load_material
+
+    doc = json.loads((ROOMS / "terrazzo.json").read_text())
+    doc["verdict"]["summary"] = False
+    (tmp_path / "m.json").write_text(json.dumps(doc))
+    with pytest.raises(IrreflectError, match=r"verdict.summary must be text"):
+        load_material(tmp_path / "m.json", reflectance=0.3)
