@@ -390,6 +390,9 @@ def option_case(rng, folder: Path) -> Case:
         ["protocol", "--design-from", data, "--pop-size", big()],
         ["compare", data, "--models", ""], ["diagnose", data, "--extensions", ","],
         ["fit", data, "--save", ""], ["compare", data, "--out", ""],
+        ["next", data, "--theta-step", tiny()], ["campaign", data, "--n-max", big()],
+        ["campaign", data, "--generations", big()], ["next", data, "--out", ""],
+        ["campaign", data, "--out", ""], ["diagnose", data, "--separate-out", ""],
     ]
     argv = cases[int(rng.integers(len(cases)))]
     return Case("option", " ".join(map(str, argv[2:] if argv[0] == "room" else argv[1:]))[-60:],
@@ -398,7 +401,7 @@ def option_case(rng, folder: Path) -> Case:
 
 def output_case(rng, folder: Path) -> Case:
     data = _copy_table(folder)
-    kind = int(rng.integers(6))
+    kind = int(rng.integers(9))
     out = folder / "out.csv"
     if kind == 0:
         argv, what = ["protocol", "--lobe-from", data, "--out", data], "--out = input"
@@ -419,9 +422,16 @@ def output_case(rng, folder: Path) -> Case:
         (folder / "here" / "out").symlink_to(elsewhere)
         argv, what = ["compare", data, "--models", "phong", "--out", folder / "here" / "out"], \
             "link out of the folder"
-    else:
+    elif kind == 5:
         argv, what = ["select", data, *TINY, "--checkpoint", data, "--out", folder / "s"], \
             "--checkpoint = input"
+    elif kind == 6:
+        argv, what = ["next", data, "--out", data], "next --out = input"
+    elif kind == 7:
+        argv, what = ["diagnose", data, "--separate-out", data], "diagnose --separate-out = input"
+    else:
+        os.mkfifo(out)
+        argv, what = ["next", data, "--out", out], "next --out FIFO"
     return Case("output", what, argv, "refuse")
 
 

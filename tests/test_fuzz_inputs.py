@@ -267,8 +267,13 @@ def _check_material(mat) -> None:
     from irreflect.models import get_model
 
     model = get_model(mat.model)
-    for p in model.params:
-        assert p.lower - 1e-6 <= mat.params[p.name] <= p.upper + 1e-6, p.name
+    outside = [p.name for p in model.params
+               if not p.lower - 1e-6 <= mat.params[p.name] <= p.upper + 1e-6]
+    # a coefficient outside its bounds is kept only when it makes the model predict negative
+    # power: the material is then marked unphysical (irreflect room refuses it unless
+    # --allow-unphysical)
+    assert not outside or "predicts negative power" in mat.metadata.get("unphysical", ""), \
+        outside
     assert np.all(np.isfinite(mat.rho_table)) and np.all((mat.rho_table >= 0)
                                                           & (mat.rho_table <= 1 + 1e-9))
     assert np.all(np.isfinite(mat.norm_table))

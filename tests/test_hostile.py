@@ -356,7 +356,7 @@ def _material_doc() -> dict:
     ({"gamma_range_deg": [70, 10]}, "min <= max"),
     ({"reflectence": 0.5}, "did you mean 'reflectance'"),
     ({"warnings": "one"}, "warnings must be a list of text"),
-    ({"verdict": [1, 2]}, "verdict must be a table"),
+    ({"verdict": [1, 2]}, "verdict must be a fit's verdict"),
     ({"format_version": 7}, "format_version 7"),
 ])
 def test_material_files_are_checked_against_their_schema(tmp_path, patch, message):
@@ -378,13 +378,17 @@ def test_material_files_are_checked_against_their_schema(tmp_path, patch, messag
 def test_a_fits_verdict_and_warnings_are_kept_in_a_material_file(tmp_path):
     from irreflect.room import load_material
 
-    doc = _material_doc() | {"verdict": {"state": "usable", "checks": {"r2": 0.99}},
-                             "warnings": ["ill-determined: v_nd"]}
+    verdict = json.loads((ROOMS / "terrazzo.json").read_text())["verdict"]
+    doc = _material_doc() | {"verdict": verdict, "warnings": ["ill-determined: v_nd"]}
     path = tmp_path / "m.json"
     path.write_text(json.dumps(doc))
     mat = load_material(path, reflectance=0.5)
-    assert mat.metadata["verdict"]["state"] == "usable"
+    assert mat.metadata["verdict"]["summary"] == verdict["summary"]
     assert mat.metadata["warnings"] == ["ill-determined: v_nd"]
+    doc["verdict"] = {"state": "usable"}  # not a verdict fit --save writes
+    path.write_text(json.dumps(doc))
+    with pytest.raises(IrreflectError, match="verdict: unknown key 'state'"):
+        load_material(path, reflectance=0.5)
 
 
 @pytest.mark.parametrize("kind", ["json", "toml"])

@@ -50,6 +50,7 @@ from __future__ import annotations
 
 import json
 import math
+import numbers
 import re
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -222,7 +223,7 @@ def from_model(model, params: dict, reflectance, *, name: str = "material",
     """
 
     model_obj = get_model(model)
-    _check_model_arguments(model_obj, params, gamma_max_deg, name)
+    outside = _check_model_arguments(model_obj, params, gamma_max_deg, name)
     spec = model if isinstance(model, str) else model_obj.name
     names = tuple(model_obj.param_names)
     missing = [p for p in names if p not in params]
@@ -251,8 +252,11 @@ def from_model(model, params: dict, reflectance, *, name: str = "material",
     lobes, share = _lobes_for(model_obj.name, values)
     metadata = dict(metadata or {})
     unphysical = negative_power(model_obj, values, gmax)
+    if outside is not None and unphysical is None:
+        raise IrreflectError(outside)
     if unphysical:
-        metadata["unphysical"] = unphysical
+        metadata["unphysical"] = unphysical if outside is None else (
+            f"{unphysical} ({outside.removeprefix(f'material {name!r}: ')})")
     base = dict(name=name, source=source or f"{spec} {values}", reflectance=rho, scale=scale,
                 model=spec, params=values, stderr=stderr, gamma_max_rad=float(gmax),
                 metadata=metadata)
@@ -263,21 +267,37 @@ def from_model(model, params: dict, reflectance, *, name: str = "material",
         table = _plane_table(model_obj, values, gmax)
         mat = Material(kind=KIND_TABLE, table=table, **base)
         S = table_hemisphere_integral(mat)
-    return _with_scale(mat, S, K)
+    mat = _with_scale(mat, S, K)
+    if outside is not None and not (np.all(np.isfinite(mat.rho_table))
+                                    and np.all(np.isfinite(mat.norm_table))):
+        raise IrreflectError(outside)  # unphysical and not even simulable
+    return mat
 
 
-def _check_model_arguments(model_obj, params, gamma_max_deg, name) -> None:
-    """:func:`from_model`'s arguments: params a table of numbers within the model's bounds,
-    gamma_max_deg None or in (0, 90]."""
+def _check_model_arguments(model_obj, params, gamma_max_deg, name) -> str | None:
+    """:func:`from_model`'s arguments: params a table of finite numbers, gamma_max_deg None
+    or in (0, 90]. Returns the message of a coefficient outside the model's bounds (None
+    when all lie within): :func:`from_model` refuses it, unless the model then predicts
+    negative power, which makes the material unphysical (refused by ``irreflect room``
+    unless ``--allow-unphysical``, :func:`irreflect.room.checks.material_notes`)."""
     if not isinstance(params, dict):
         raise IrreflectError(f"material '{name}': params must be a table NAME: VALUE of the "
                              f"parameters of {model_obj.name}; found {sc.found(params)}")
-    check_params(model_obj, params, f"material '{name}'")
+    outside = None
+    try:
+        check_params(model_obj, params, f"material '{name}'")
+    except IrreflectError as exc:
+        if any(not isinstance(v, numbers.Real) or isinstance(v, bool)
+               or sc.as_float(v) is None or not math.isfinite(sc.as_float(v))
+               for v in params.values()):
+            raise
+        outside = str(exc)
     if gamma_max_deg is not None:
         x = sc.as_float(gamma_max_deg)
         if x is None or not 0 <= x <= 90:
             raise IrreflectError(f"material '{name}': gamma_max_deg must be a number from 0 to "
                                  f"90 (degrees) or None; found {sc.found(gamma_max_deg)}")
+    return outside
 
 
 def negative_power(model_obj, values: dict, gamma_max: float) -> str | None:
@@ -566,7 +586,7 @@ def load_material(path, *, name: str | None = None, reflectance=None) -> Materia
             raise IrreflectError(f"{path} has format_version {sc.found(version)}; this "
                                  f"irreflect reads version {MATERIAL_FORMAT_VERSION}")
         doc = sc.validate(MATERIAL_FILE_SCHEMA, doc, str(path))
-        check_params(doc["model"], doc["params"], str(path))
+        get_model(doc["model"])  # the bounds of its coefficients: from_model
         extra = sorted(set(doc.get("stderr") or {}) - set(doc["params"]))
         if extra:
             raise IrreflectError(f"{path}: stderr has '{extra[0]}', which is not one of the "
