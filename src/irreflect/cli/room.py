@@ -27,12 +27,12 @@ def _room(args) -> int:
         check_scheduler_address(args.scheduler)
     out = Path(args.out)
     scene = load_scene(resolve_scene(args.scene), materials_dir=args.materials_dir)
-    for line in material_notes(scene, allow_unphysical=args.allow_unphysical):
-        print(line)
     settings = resolve_settings(scene, {"method": args.method, "bounces": args.bounces,
                                         "cell_m": args.cell, "rays": args.rays,
                                         "time_resolution_ns": args.dt})
     check_room_budget(scene, settings, CLI_OPTIONS, args.workers)  # before any work
+    for line in material_notes(scene, allow_unphysical=args.allow_unphysical):
+        print(line)
     result = simulate(scene, method=args.method, bounces=args.bounces, cell_m=args.cell,
                       rays=args.rays, seed=args.seed, time_resolution_ns=args.dt,
                       scheduler=args.scheduler, workers=args.workers, progress=not args.quiet)
