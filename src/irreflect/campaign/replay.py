@@ -39,12 +39,14 @@ from ..data import Measurements, as_measurements
 from ..errors import FitError, FitWarning, IrreflectError, unknown_name
 from ..fitting import FitResult, fit
 from ..models import get_model
-from ..validation import check_int, check_number, check_seed
+from ..validation import check_int, check_number, check_search_budget, check_seed
 from .core import Campaign
 from .design import DEFAULT_RULE, DesignRule
 from .instrument import Instrument
 
 STRATEGIES = ("adaptive", "paper", "glossy", "random", "hindsight")
+#: The most readings a replayed campaign takes (``next`` reads at most as many).
+MAX_REPLAY_READINGS = 2000
 METHODS = ("nearest", "interpolate")
 #: How close to the all-points fit's R^2 a strategy must come (and stay) to count.
 TOLERANCE = 0.01
@@ -361,9 +363,16 @@ def replay(dense, strategies=STRATEGIES, *, n_max: int = 25, model="two-lobe", s
     """
     dense = as_measurements(dense)
     n_max = check_int(n_max, "n_max", 9)
+    if n_max > MAX_REPLAY_READINGS:
+        raise IrreflectError(f"n_max (--n-max) {n_max}: a replayed campaign takes at most "
+                             f"{MAX_REPLAY_READINGS} readings (one fit each): pass --n-max "
+                             f"{MAX_REPLAY_READINGS} or less")
     for s in strategies:
         if s not in STRATEGIES:
             raise unknown_name("campaign strategy", s, STRATEGIES)
+    if "hindsight" in strategies:  # before any work: the hindsight bound is a selection
+        check_search_budget(100, check_int(generations, "generations", 1), dense.n_points,
+                            pop_option="population", gen_option="--generations")
     model_obj = get_model(model)
     source = DenseInstrument(dense, method=method, tolerance_deg=tolerance_deg,
                              theta_step=theta_step, noise=noise,

@@ -37,6 +37,7 @@ import numpy as np
 from .._progress import progress as progress_display
 from ..errors import IrreflectError
 from . import kernels as K
+from .checks import check_room_budget, check_simulate_arguments
 from .geometry import (
     Cells,
     boxes_array,
@@ -196,8 +197,10 @@ def simulate(scene: Scene, *, method=None, bounces=None, cell_m=None, rays=None,
     progress : bool
         Show a progress bar on stderr.
     """
+    check_simulate_arguments(scene, scheduler, workers, threads)
     s = _resolve(scene, method=method, bounces=bounces, cell_m=cell_m, rays=rays, seed=seed,
                  time_resolution_ns=time_resolution_ns)
+    check_room_budget(scene, s, workers=workers)  # refused before any work when too large
     t0 = time.perf_counter()
     _, mats = scene.material_list()
     dt = s["time_resolution_ns"] * 1e-9
