@@ -474,7 +474,7 @@ class Campaign:
         elif not stability <= self.stop_tolerance:
             reasons.append(f"the last {STOP_HOLD + 1} readings moved the predicted curve by "
                            f"{min(stability, 9.99):.2%} of its variance (stop below "
-                           f"{self.stop_tolerance:.1%})")
+                           f"{100 * self.stop_tolerance:.2g}%)")
 
         mags = np.abs(meas.gamma_deg)
         outside = [g for g in self.instrument.gammas
@@ -484,7 +484,7 @@ class Campaign:
                            + short_list([f"{g:g}" for g in outside], 4))
         why = tuple(reasons) or (
             f"the last {STOP_HOLD + 1} readings moved the predicted curve by {stability:.2%} "
-            f"of its variance (below {self.stop_tolerance:.1%})",)
+            f"of its variance (below {100 * self.stop_tolerance:.2g}%)",)
         return Verdict(not reasons, n, (float(r2_lo), float(r2_hi)), stability,
                        tuple(res.ill_determined), tuple(res.at_bound), why)
 
