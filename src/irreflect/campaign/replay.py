@@ -239,23 +239,27 @@ def replay_adaptive(source: DenseInstrument, n_max: int = 25, *, model="two-lobe
                     seed: int = 0, rule: DesignRule = DEFAULT_RULE, batch: int = 1,
                     instrument_options: dict | None = None, progress=None):
     """The adaptive campaign against the dense table, ``batch`` readings per proposal,
-    up to ``n_max`` readings: (curve, verdicts per N, seconds per proposal)."""
+    up to ``n_max`` readings: (curve, verdicts per N, seconds per proposal, each with the
+    verdict on the readings before it: the work ``irreflect next`` does per call)."""
     dense = source.dense
     rng = np.random.default_rng([check_seed(seed), 11])
     tool = source.instrument(**(instrument_options or {}))
     campaign = Campaign(tool, model=model, seed=seed, rule=rule, name=dense.name)
     r2, verdicts, times = {}, {}, []
     t0 = time.perf_counter()
+    judged = 0.0  # the verdict's time, counted with the proposal after it (they share work)
     while campaign.n_measured < n_max:
         start = time.perf_counter()
         proposal = campaign.propose(min(batch, n_max - campaign.n_measured))
-        times.append(time.perf_counter() - start)
+        times.append(time.perf_counter() - start + judged)
         if not len(proposal):
             break
         power = source.read(proposal["gamma_deg"], proposal["theta_deg"], rng)
         campaign.add(proposal[["gamma_deg", "theta_deg"]].assign(power=power))
         n = campaign.n_measured
+        start = time.perf_counter()
         v = campaign.verdict()
+        judged = time.perf_counter() - start
         verdicts[n] = v
         if campaign.fit is not None:
             r2[n] = campaign.r2_against(dense)
