@@ -22,7 +22,15 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import IrreflectError
-from .materials import Material, from_model, lambertian, load_material, parse_lambertian
+from .materials import (
+    BRDFS,
+    Material,
+    from_model,
+    lambertian,
+    load_material,
+    parse_lambertian,
+    with_brdf,
+)
 
 ROOM_FACES = ("wall_x0", "wall_x1", "wall_y0", "wall_y1", "floor", "ceiling")
 BOX_FACES = ("x0", "x1", "y0", "y1", "bottom", "top")
@@ -117,6 +125,13 @@ class Scene:
         return self.with_materials(
             {k: lambertian(m.reflectance if m.reflectance is not None else m.diffuse_reflectance)
              for k, m in self.materials.items()}, name=f"{self.name} (Lambertian)")
+
+    def with_brdf(self, brdf: str) -> Scene:
+        """The same scene with every fitted material in surface model ``brdf``
+        ("reciprocal" or "paper", see :mod:`.materials`)."""
+        mats = {k: with_brdf(m, brdf) for k, m in self.materials.items()}
+        settings = {k: v for k, v in self.settings.items() if k != "brdf"}
+        return replace(self, materials=mats, settings=settings)
 
     def with_receivers(self, receivers, grids=()) -> Scene:
         return replace(self, receivers=tuple(receivers), grids=tuple(grids))
@@ -449,12 +464,16 @@ def _material(ctx, name, spec) -> Material:
 def _settings(ctx, sim) -> dict:
     where = "[simulation]"
     _check_keys(ctx, where, sim, ("method", "bounces", "cell_m", "rays", "seed",
-                                  "time_resolution_ns"))
+                                  "time_resolution_ns", "brdf"))
     out = {}
     if "method" in sim:
         if sim["method"] not in METHODS:
             ctx.fail(where, f"method must be one of {', '.join(METHODS)}; found {sim['method']!r}")
         out["method"] = sim["method"]
+    if "brdf" in sim:
+        if sim["brdf"] not in BRDFS:
+            ctx.fail(where, f"brdf must be one of {', '.join(BRDFS)}; found {sim['brdf']!r}")
+        out["brdf"] = sim["brdf"]
     for key, lo in (("bounces", 0), ("rays", 1), ("seed", 0)):
         if key in sim:
             v = sim[key]
