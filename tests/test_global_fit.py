@@ -51,8 +51,14 @@ def test_scale_of_power_does_not_change_the_shape(seed):
     fits = [fit(dataclasses.replace(case.measurements, power=case.measurements.power * s))
             for s in (1e-6, 1.0, 1e6)]
     shape = [np.delete(f.values, 6) for f in fits]  # all but K
-    np.testing.assert_allclose(shape[0], shape[1], rtol=1e-6)
-    np.testing.assert_allclose(shape[2], shape[1], rtol=1e-6)
+    # the same optimum to rounding; along a direction the data do not determine (an
+    # ill-determined coefficient) the search may stop a hair apart: within 1e-4 of the
+    # coefficient's own standard error there
+    tol = np.maximum(1e-6 * np.abs(shape[1]), 1e-4 * np.delete(fits[1].stderr, 6))
+    assert np.all(np.abs(shape[0] - shape[1]) <= tol)
+    assert np.all(np.abs(shape[2] - shape[1]) <= tol)
+    assert max(f.cost / s**2 for f, s in zip(fits, (1e-6, 1.0, 1e6), strict=True)) \
+        <= min(f.cost / s**2 for f, s in zip(fits, (1e-6, 1.0, 1e6), strict=True)) * (1 + 1e-9)
     np.testing.assert_allclose([f.values[6] for f in fits], fits[1].values[6] * np.array(
         [1e-6, 1.0, 1e6]), rtol=1e-5)
     assert max(f.r2 for f in fits) - min(f.r2 for f in fits) < 1e-9
@@ -279,9 +285,9 @@ def test_every_model_beats_50_least_squares_starts_on_real_data(real_dir, datase
 
 
 @pytest.mark.real
-@pytest.mark.parametrize("path", ["cornell/cornell_krylon_blue.csv",
-                                  "rgl_epfl/rgl_cc_ibiza_sunset.csv"])
-def test_small_table_search_finds_one_optimum_of_a_12_point_protocol(real_dir, path):
+@pytest.mark.parametrize("path,missed", [("cornell/cornell_krylon_blue.csv", True),
+                                         ("rgl_epfl/rgl_cc_ibiza_sunset.csv", False)])
+def test_small_table_search_finds_one_optimum_of_a_12_point_protocol(real_dir, path, missed):
     """The paper's 12 points of a real set: 7 coefficients on 12 points leave many basins.
     fit() searches small tables harder (SMALL_TABLE_SEARCH): every seed reaches the same
     cost, never above what the large-table search reaches with that seed (which stops up
@@ -304,7 +310,9 @@ def test_small_table_search_finds_one_optimum_of_a_12_point_protocol(real_dir, p
                               retry=False).cost for s in range(4)])
     assert np.ptp(small) <= 1e-6 * small.min()
     assert np.all(small <= large * (1 + 1e-9))
-    assert np.any(small < large * (1 - 1e-3))  # the large-table search misses it here
+    # on Krylon the large-table search misses it (on Ibiza it no longer does since the
+    # specular share saturates: the unbounded share's extra basins are gone)
+    assert np.any(small < large * (1 - 1e-3)) == missed
 
 
 # ----------------------------------------------------------------------------- second search
@@ -326,11 +334,12 @@ def test_tables_unlike_the_tuning_set_are_fitted_globally():
     assert not above, f"fits above the generating coefficients' cost: {above}"
 
 
-@pytest.mark.parametrize("seed", [36, 41, 468, 636])
+@pytest.mark.parametrize("seed", [36, 41, 212, 636])
 def test_a_result_that_looks_local_is_searched_again_and_reaches_the_optimum(seed):
     """Glossy and mirror-like tables, weighted and not, where the first search stops in a
     local optimum (up to 5e4 times the generating coefficients' cost), flagged by a
-    coefficient at a bound, an ill-determined one, a low R^2 or a large reduced chi^2:
+    coefficient at a bound, an ill-determined one, a low R^2, a large reduced chi^2 or a
+    specular share saturated where the truth's is not (212: at 78 deg, 1.44x):
     fit() searches again and reaches the optimum, and says that it did."""
     import warnings
 

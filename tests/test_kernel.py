@@ -125,16 +125,19 @@ def test_the_kernels_exp_is_within_one_ulp_of_the_library():
     assert edge[4] == 0 and edge[5] == 0 and edge[6] == np.inf
 
 
-@pytest.mark.parametrize("kind", ["glossy", "matte"])
+@pytest.mark.parametrize("kind", ["glossy", "matte", "saturating"])
 def test_compiled_finish_equals_the_numpy_covariance(kind):
     """fit()'s compiled finish of the two-lobe model (natural parameters, fitted curve, R^2,
-    covariance, near-singular directions) against the numpy functions it replaces."""
+    covariance, near-singular directions) against the numpy functions it replaces, also
+    where the specular share saturates (the saturated rows' Jacobian)."""
     from irreflect import _kernel, metrics
     from irreflect.fitting import _covariance, _fitted_and_jacobian, _kernel_geometry
+    from irreflect.synthetic import saturating_material
 
     model = get_model("two-lobe")
-    tables = [load_bundled("terrazzo")] + [synthetic_material(s, kind).measurements
-                                           for s in range(6)]
+    tables = [load_bundled("terrazzo")] + [
+        (saturating_material(s) if kind == "saturating" else synthetic_material(s, kind))
+        .measurements for s in range(6)]
     for meas in tables:
         res = fit(meas)
         z, alpha = (a[0] for a in model.from_natural(res.values[None]))

@@ -30,6 +30,8 @@ from llvmlite import ir
 from numba import njit, types
 from numba.extending import intrinsic
 
+from .models.base import cap_share
+
 TWO_PI = 2.0 * math.pi
 RIDGE = 1e-12
 EXTREME = 1e8
@@ -61,6 +63,28 @@ def model_code(model) -> np.ndarray | None:
             return None
         codes.append(EXT_CODES[name])
     return np.array(codes, np.int64)
+
+
+#: The specular share's rule (models.base.cap_share: it saturates at 1), compiled from the
+#: very function the numpy code calls.
+_cap_share = njit(cache=True)(cap_share)
+
+
+@njit(cache=True)
+def _saturates(u, s, strict):
+    """Whether the share ``u s`` saturates (:data:`_cap_share`); ``strict``: a point
+    exactly at its threshold (the same curve either way) counts as unsaturated, the side
+    whose derivative sees ``u``."""
+    if strict:
+        return u * s > 1.0 + 1e-9
+    return _cap_share(u * s) >= 1.0
+
+
+@njit(cache=True)
+def _share_at_normal(alpha):
+    """``u_as = alpha_1 / (alpha_0 + alpha_1)`` (0 without power)."""
+    k = alpha[0] + alpha[1]
+    return alpha[1] / k if k > 0.0 else 0.0
 
 
 # ----------------------------------------------------------------------------- exp
@@ -470,25 +494,6 @@ def _solve_small(a, b, x):
 
 
 @njit(cache=True)
-def _solve_linear(bw, yw, nonneg, residual, alpha, free, inv):
-    """Weighted non-negative linear least squares of one problem (fitting._solve_linear)."""
-    n, ll = bw.shape
-    g = np.zeros((ll, ll))
-    rhs = np.zeros(ll)
-    for j in range(n):
-        for i in range(ll):
-            bi = bw[j, i]
-            rhs[i] += bi * yw[j]
-            for k in range(i, ll):
-                g[i, k] += bi * bw[j, k]
-    for i in range(ll):
-        for k in range(i + 1, ll):
-            g[k, i] = g[i, k]
-    scale = np.empty(ll)
-    _solve_gram(g, rhs, nonneg, residual, alpha, free, inv, scale)
-
-
-@njit(cache=True)
 def _solve_gram(g, rhs, nonneg, residual, alpha, free, inv, scale):
     """:func:`_solve_linear` from the Gram matrix ``g`` (symmetric) and ``rhs`` (``scale``:
     scratch of length L)."""
@@ -544,9 +549,16 @@ def _apply(inv, rhs, free, alpha):
 
 
 @njit(cache=True)
-def _evaluate(codes, nonneg, residual, z, geo, sw, yw, deriv, bw, dbw, alpha, free, inv,
-              resid, b, db, bp, dbp, gval):
-    """Basis (weighted, fixed columns zeroed), linear coefficients, residuals and cost."""
+def _evaluate(codes, nonneg, residual, z, table, deriv, st, sc):
+    """Basis (weighted, fixed columns zeroed), linear coefficients, residuals and cost at
+    ``z``. ``table``: (geometry, log cos of the angles of incidence, sqrt(weights),
+    weighted power); ``st``: the evaluation's state (:func:`_gen_state`), written;
+    ``sc``: scratch (:func:`_gen_scratch`). The linear step is the saturating share's
+    (:func:`_capped_solve`): the state's ``alpha`` are the effective basis' coefficients
+    (for the Jacobian), its ``alpha_true`` the model's."""
+    geo, glcg, sw, yw = table
+    bw, dbw, alpha, free, inv, resid, alpha_true, share = st
+    b, db, bp, dbp, gval, sums, cw = sc
     n, ll = bw.shape
     p = z.size
     _group_values(z, gval[0], gval[1])
@@ -561,7 +573,20 @@ def _evaluate(codes, nonneg, residual, z, geo, sw, yw, deriv, bw, dbw, alpha, fr
                 if deriv:
                     for q in range(p):
                         dbw[j, col, q] = db[col, q]
-    _solve_linear(bw, yw, nonneg, residual, alpha, free, inv)
+    tau_g = cw[9]
+    for g in range(glcg.size):
+        sg = gval[1][g, 0]
+        tau_g[g] = 1.0 / sg if sg > 1.0 else math.inf
+    yy = 0.0
+    for j in range(n):
+        yy += yw[j] * yw[j]
+    _group_grams(bw, yw, geo[7], tau_g, sums)
+    cost, lower, tau = _capped_solve(sums, tau_g, yy, nonneg, residual, cw,
+                                     (alpha, alpha_true, free, inv))
+    share[0] = lower
+    share[1] = tau
+    if lower > 0.0 or tau >= 0.0:
+        _saturate_basis(z, geo, glcg, sw, tau_g, lower, tau, deriv, bw, dbw)
     cost = 0.0
     for j in range(n):
         acc = yw[j]
@@ -577,6 +602,232 @@ def _evaluate(codes, nonneg, residual, z, geo, sw, yw, deriv, bw, dbw, alpha, fr
             for j in range(n):
                 bw[j, col] = 0.0
     return cost
+
+
+@njit(cache=True)
+def _gen_state(n, ll, p):
+    """One evaluation's state of the generic path: weighted basis (n, L), its derivative
+    (n, L, P), the effective coefficients, free columns, the free block's inverse,
+    residuals, the model's coefficients, and (the saturation level, the threshold or -1)."""
+    return (np.empty((n, ll)), np.empty((n, ll, p)), np.empty(ll), np.empty(ll, np.bool_),
+            np.empty((ll, ll)), np.empty(n), np.empty(ll), np.zeros(2))
+
+
+@njit(cache=True)
+def _gen_scratch(ll, p, n_groups, glcg):
+    """Scratch of the generic path's evaluations: one point's basis and derivative (and
+    their copies for the central differences), the per-angle values, the per-angle Gram
+    sums (:func:`_group_grams`) and the linear step's workspace (:func:`_capped_work`)."""
+    gval = (glcg, np.empty((n_groups, 3)))
+    return (np.empty(ll), np.empty((ll, p)), np.empty(ll), np.empty((ll, p)), gval,
+            _group_sums(n_groups, ll), _capped_work(n_groups, ll))
+
+
+@njit(cache=True)
+def _group_sums(n_groups, ll):
+    """Per angle of incidence: the Gram matrix and right-hand side of the basis as it is,
+    and with the share's two columns saturated (see :func:`_group_grams`)."""
+    return (np.zeros((n_groups, ll, ll)), np.zeros((n_groups, ll)),
+            np.zeros((n_groups, ll, ll)), np.zeros((n_groups, ll)))
+
+
+@njit(cache=True)
+def _capped_work(n_groups, ll):
+    """Workspace of :func:`_capped_solve`: a Gram matrix and right-hand side being summed,
+    a transformed pair, the candidate's coefficients, free columns, inverse, column
+    scales, the saturable angles in threshold order, the thresholds (set by the caller)."""
+    return (np.empty((ll, ll)), np.empty(ll), np.empty((ll, ll)), np.empty(ll), np.empty(ll),
+            np.empty(ll, np.bool_), np.empty((ll, ll)), np.empty(ll),
+            np.empty(n_groups, np.int64), np.empty(n_groups))
+
+
+@njit(cache=True, error_model="numpy")
+def _group_grams(bw, yw, group, tau_g, sums):
+    """Per angle of incidence ``g``: ``gu[g] = B'B`` and ``ru[g] = B'y`` of the weighted
+    basis rows at that angle, and ``gs``, ``rs`` the same with the share's two columns
+    replaced by the saturated column ``b0 + (b1 - b0) / s`` (``s = 1 / tau_g``; the
+    curve where the share is 1, see models.base.saturated_column); angles that cannot
+    saturate (``tau_g`` infinite) keep ``gs = gu``."""
+    gu, ru, gs, rs = sums
+    n, ll = bw.shape
+    gu[:] = 0.0
+    ru[:] = 0.0
+    gs[:] = 0.0
+    rs[:] = 0.0
+    for j in range(n):
+        g = group[j]
+        y = yw[j]
+        t = tau_g[g]
+        sat = bw[j, 0] + (bw[j, 1] - bw[j, 0]) * t if t < math.inf else 0.0
+        for a in range(ll):
+            ba = bw[j, a]
+            sa = ba if (a >= 2 or t == math.inf) else sat
+            ru[g, a] += ba * y
+            rs[g, a] += sa * y
+            for c in range(a, ll):
+                bc = bw[j, c]
+                scv = bc if (c >= 2 or t == math.inf) else sat
+                gu[g, a, c] += ba * bc
+                gs[g, a, c] += sa * scv
+    for g in range(gu.shape[0]):
+        for a in range(ll):
+            for c in range(a + 1, ll):
+                gu[g, c, a] = gu[g, a, c]
+                gs[g, c, a] = gs[g, a, c]
+
+
+@njit(cache=True)
+def _gram_candidate(g, r, yy, nonneg, residual, cw):
+    """Non-negative least squares from a Gram matrix (:func:`_solve_gram`, into the
+    workspace's coefficients, free columns and inverse); returns its cost
+    ``0.5 (y'y - 2 a'r + a'G a)``."""
+    alpha, free, inv, scale = cw[4], cw[5], cw[6], cw[7]
+    _solve_gram(g, r, nonneg, residual, alpha, free, inv, scale)
+    ll = r.size
+    cost = yy
+    for i in range(ll):
+        cost -= 2.0 * alpha[i] * r[i]
+        for k in range(ll):
+            cost += alpha[i] * g[i, k] * alpha[k]
+    cost *= 0.5
+    return cost if math.isfinite(cost) else math.inf
+
+
+@njit(cache=True)
+def _keep_candidate(cw, out, tau):
+    """Copy the workspace's candidate into ``out`` (effective coefficients, the model's
+    coefficients, free columns, inverse); at a threshold ``tau`` (>= 0) the one column
+    ``(1 - tau) b0 + tau b1`` carries ``K``: the model's are ``(K (1 - tau), K tau)``."""
+    alpha, free, inv = cw[4], cw[5], cw[6]
+    a_eff, a_true, f_eff, i_eff = out
+    a_eff[:] = alpha
+    a_true[:] = alpha
+    f_eff[:] = free
+    i_eff[:, :] = inv
+    if tau >= 0.0:
+        a_true[0] = alpha[0] * (1.0 - tau)
+        a_true[1] = alpha[0] * tau
+
+
+@njit(cache=True, error_model="numpy")
+def _capped_solve(sums, tau_g, yy, nonneg, residual, cw, out):
+    """The linear step of a model whose specular share saturates (fitting._linear_step,
+    here from per-angle Gram sums): between consecutive thresholds ``tau`` (``1 /
+    cos^v_as(gamma)`` of the angles where that exceeds 1) the model is linear in ``(K (1 -
+    u), K u)`` with the angles past the interval saturated; each interval's
+    non-negative least squares is kept when its ``u`` lies in it, each threshold's
+    (``u = tau``, one column) always; the lowest cost wins. ``out``: (effective
+    coefficients, the model's, free columns, inverse), written. Returns (cost from the
+    Gram sums, the saturation level: angles with ``tau_g <= level`` saturate, the
+    threshold of a solution on one or -1)."""
+    gu, ru, gs, rs = sums
+    gk, rk, gt, rt, alpha, order = cw[0], cw[1], cw[2], cw[3], cw[4], cw[8]
+    n_groups, ll = ru.shape
+    gk[:, :] = 0.0
+    rk[:] = 0.0
+    count = 0
+    for g in range(n_groups):
+        for a in range(ll):
+            rk[a] += ru[g, a]
+            for c in range(ll):
+                gk[a, c] += gu[g, a, c]
+        if tau_g[g] < 1.0:  # insertion in threshold order
+            i = count
+            while i > 0 and tau_g[order[i - 1]] > tau_g[g]:
+                order[i] = order[i - 1]
+                i -= 1
+            order[i] = g
+            count += 1
+    best = math.inf
+    best_lower = 0.0
+    best_tau = -1.0
+    lower = 0.0
+    i = 0
+    while True:
+        upper = tau_g[order[i]] if i < count else 1.0
+        cost = _gram_candidate(gk, rk, yy, nonneg, residual, cw)
+        k = alpha[0] + alpha[1]
+        u = alpha[1] / k if k > 0.0 else lower
+        if cost < best and u >= lower and u <= upper:
+            best = cost
+            best_lower = lower
+            best_tau = -1.0
+            _keep_candidate(cw, out, -1.0)
+        if i >= count:
+            break
+        t = upper  # past it, every angle with this threshold saturates
+        while i < count and tau_g[order[i]] == t:
+            g = order[i]
+            for a in range(ll):
+                rk[a] += rs[g, a] - ru[g, a]
+                for c in range(ll):
+                    gk[a, c] += gs[g, a, c] - gu[g, a, c]
+            i += 1
+        lower = t
+        # the threshold itself: u = t, the one column (1 - t) b0 + t b1
+        for a in range(ll):
+            for c in range(ll):
+                gt[a, c] = gk[a, c]
+            rt[a] = rk[a]
+        gt[0, 0] = ((1.0 - t) * (1.0 - t) * gk[0, 0] + 2.0 * t * (1.0 - t) * gk[0, 1]
+                    + t * t * gk[1, 1])
+        rt[0] = (1.0 - t) * rk[0] + t * rk[1]
+        for c in range(2, ll):
+            gt[0, c] = (1.0 - t) * gk[0, c] + t * gk[1, c]
+            gt[c, 0] = gt[0, c]
+        for c in range(ll):
+            gt[1, c] = 0.0
+            gt[c, 1] = 0.0
+        rt[1] = 0.0
+        cost = _gram_candidate(gt, rt, yy, nonneg, residual, cw)
+        if cost < best:
+            best = cost
+            best_lower = t
+            best_tau = t
+            _keep_candidate(cw, out, t)
+    return best, best_lower, best_tau
+
+
+@njit(cache=True, error_model="numpy")
+def _saturate_basis(z, geo, glcg, sw, tau_g, lower, tau, deriv, bw, dbw):
+    """The effective basis the linear step chose (:func:`_capped_solve`): rows at angles
+    with ``tau_g <= lower`` take the saturated column in both share columns (and its
+    derivative); at a threshold ``tau >= 0`` column 0 becomes ``(1 - tau) b0 + tau b1``
+    (column 1 is then fixed at 0), whose derivative along ``v_as`` has the threshold's
+    own: ``d tau / d v_as = -tau ln cos gamma* = tau ln(tau) / v_as``."""
+    n, ll = bw.shape
+    p = z.size
+    group = geo[7]
+    lcg_all = geo[2]
+    dtau = tau * math.log(tau) / z[0] if tau > 0.0 else 0.0
+    for j in range(n):
+        t = tau_g[group[j]]
+        w = sw[j]
+        b0 = bw[j, 0]
+        b1 = bw[j, 1]
+        if t <= lower:
+            sat = b0 + (b1 - b0) * t
+            if deriv:
+                inv_w = 1.0 / w if w > 0.0 else 0.0
+                for q in range(p):
+                    d = dbw[j, 0, q] + (dbw[j, 1, q] - dbw[j, 0, q]) * t
+                    dbw[j, 0, q] = d
+                    dbw[j, 1, q] = d
+                dbw[j, 0, 0] -= (b1 - b0) * inv_w * t * lcg_all[j]
+                dbw[j, 1, 0] = dbw[j, 0, 0]
+            b0 = sat
+            b1 = sat
+            bw[j, 0] = sat
+            bw[j, 1] = sat
+        if tau >= 0.0:
+            bw[j, 0] = (1.0 - tau) * b0 + tau * b1
+            bw[j, 1] = 0.0
+            if deriv:
+                inv_w = 1.0 / w if w > 0.0 else 0.0
+                for q in range(p):
+                    dbw[j, 0, q] = (1.0 - tau) * dbw[j, 0, q] + tau * dbw[j, 1, q]
+                    dbw[j, 1, q] = 0.0
+                dbw[j, 0, 0] += (b1 - b0) * inv_w * dtau
 
 
 @njit(cache=True)
@@ -651,42 +902,31 @@ def _jacobian(bw, dbw, alpha, inv, sw, jac, jm, t, coef):
 
 
 @njit(cache=True)
-def _lm(codes, nonneg, residual, z0, lo, hi, geo, glcg, sw, yw, max_iter, ftol, xtol, z_out,
-        alpha_out):
+def _lm(codes, nonneg, residual, z0, bounds, table, stop, z_out, alpha_out):
     """Bounded Levenberg-Marquardt from one start (fitting._lm_loop for one problem).
-    Returns (cost, reason, nfev); writes z_out, alpha_out."""
+    ``bounds``: (lower, upper); ``table``: as :func:`_evaluate`; ``stop``: (max_iter,
+    ftol, xtol). Returns (cost, reason, nfev); writes z_out and alpha_out (the model's
+    coefficients)."""
+    lo, hi = bounds
+    max_iter, ftol, xtol = stop
+    geo, glcg, sw, yw = table
     n = sw.size
     p = z0.size
     pp, ll = _sizes(codes, codes.size)
-    gval = (glcg, np.empty((glcg.size, 3)))
-    bw = np.empty((n, ll))
-    dbw = np.empty((n, ll, p))
-    alpha = np.empty(ll)
-    free = np.empty(ll, np.bool_)
-    inv = np.empty((ll, ll))
-    resid = np.empty(n)
-    b = np.empty(ll)
-    db = np.empty((ll, p))
-    bp = np.empty(ll)
-    dbp = np.empty((ll, p))
-    tbw = np.empty((n, ll))
-    tdbw = np.empty((n, ll, p))
-    talpha = np.empty(ll)
-    tfree = np.empty(ll, np.bool_)
-    tinv = np.empty((ll, ll))
-    tresid = np.empty(n)
+    cur = _gen_state(n, ll, p)
+    trial = _gen_state(n, ll, p)
+    sc = _gen_scratch(ll, p, glcg.size, glcg)
     jac = np.empty((n, p))
     z = np.empty(p)
     zt = np.empty(p)
     for q in range(p):
         z[q] = min(max(z0[q], lo[q]), hi[q])
-    cost = _evaluate(codes, nonneg, residual, z, geo, sw, yw, True, bw, dbw, alpha, free, inv,
-                     resid, b, db, bp, dbp, gval)
+    cost = _evaluate(codes, nonneg, residual, z, table, True, cur, sc)
     nfev = 1
     lam = 1e-3
     if not math.isfinite(cost):
         z_out[:] = z
-        alpha_out[:] = alpha
+        alpha_out[:] = cur[6]
         return math.inf, STOP_NONFINITE, nfev
     reason = STOP_MAXITER
     grad = np.empty(p)
@@ -699,6 +939,7 @@ def _lm(codes, nonneg, residual, z0, lo, hi, geo, glcg, sw, yw, max_iter, ftol, 
     rhs = np.empty(p)
     step = np.empty(p)
     for _ in range(max_iter):
+        bw, dbw, alpha, inv, resid = cur[0], cur[1], cur[2], cur[4], cur[5]
         _jacobian(bw, dbw, alpha, inv, sw, jac, jm, tt, coef)
         for q in range(p):
             acc = 0.0
@@ -712,48 +953,33 @@ def _lm(codes, nonneg, residual, z0, lo, hi, geo, glcg, sw, yw, max_iter, ftol, 
                 hess[q, r] = acc
                 hess[r, q] = acc
         _lm_step(z, lo, hi, lam, grad, hess, pinned, a, rhs, step, zt)
-        tcost = _evaluate(codes, nonneg, residual, zt, geo, sw, yw, True, tbw, tdbw, talpha,
-                          tfree, tinv, tresid, b, db, bp, dbp, gval)
-        better, lam, stop = _lm_verdict(z, zt, cost, tcost, lam, xtol, ftol)
+        tcost = _evaluate(codes, nonneg, residual, zt, table, True, trial, sc)
+        better, lam, stop_now = _lm_verdict(z, zt, cost, tcost, lam, xtol, ftol)
         nfev += 1
         if better:
             z[:] = zt
             cost = tcost
-            bw, tbw = tbw, bw
-            dbw, tdbw = tdbw, dbw
-            alpha, talpha = talpha, alpha
-            free, tfree = tfree, free
-            inv, tinv = tinv, inv
-            resid, tresid = tresid, resid
-        if stop:
-            reason = stop
+            cur, trial = trial, cur
+        if stop_now:
+            reason = stop_now
             break
     z_out[:] = z
-    alpha_out[:] = alpha
+    alpha_out[:] = cur[6]
     return cost, reason, nfev
 
 
 @njit(cache=True)
-def _costs(codes, nonneg, residual, cands, geo, glcg, sw, yw):
+def _costs(codes, nonneg, residual, cands, table):
     """Projected cost of every candidate row (no derivatives)."""
     m, p = cands.shape
+    glcg, sw = table[1], table[2]
     n = sw.size
-    gval = (glcg, np.empty((glcg.size, 3)))
     pp, ll = _sizes(codes, codes.size)
-    bw = np.empty((n, ll))
-    dbw = np.empty((1, ll, p))
-    alpha = np.empty(ll)
-    free = np.empty(ll, np.bool_)
-    inv = np.empty((ll, ll))
-    resid = np.empty(n)
-    b = np.empty(ll)
-    db = np.empty((ll, p))
-    bp = np.empty(ll)
-    dbp = np.empty((ll, p))
+    st = _gen_state(n, ll, 1)
+    sc = _gen_scratch(ll, p, glcg.size, glcg)
     out = np.empty(m)
     for i in range(m):
-        out[i] = _evaluate(codes, nonneg, residual, cands[i], geo, sw, yw, False, bw, dbw,
-                           alpha, free, inv, resid, b, db, bp, dbp, gval)
+        out[i] = _evaluate(codes, nonneg, residual, cands[i], table, False, st, sc)
     return out
 
 
@@ -1059,14 +1285,21 @@ def _tl_group_values(z, glcg, gval):
 # Rows of the fast path's per-point scratch ``vec`` (see tl_work): two slots (the current
 # point of a Levenberg-Marquardt run and its trial), slot k at rows _SLOT * k:
 #   +0, +1  the lobes' powers cos^n_d theta, cos^n_s phi
-#   +2, +3  the weighted basis x0, x1 (a fixed column's row is not zeroed: the linear
-#           step's ``free`` says which are)
+#   +2, +3  the weighted effective basis x0, x1 (a fixed column's row is not zeroed: the
+#           linear step's ``free`` says which are; where the share saturates both are
+#           the specular lobe, at a threshold x0 is (1 - tau) x0 + tau x1)
 #   +4      the residuals
 #   +5..+9  the block values at every point: n_d, n_s, cos^v_as, (n_d + 1)/2pi, (n_s + 1)/2pi
+#   +10     1 where the share saturates, else 0
 # then rows _JM.._JM + 4: the Jacobian's columns before projection, dB/dz alpha (weighted).
-_SLOT = 10
-_JM = 20
-_TL_VEC = 25
+_SLOT = 11
+_JM = 22
+_TL_VEC = 27
+# Columns of a slot's linear step (``lin[k]``, see _tl_eval): the effective coefficients,
+# free columns (1.0/0.0), the free block's inverse (i00, i01, i11), the model's
+# coefficients, ln cos of a threshold's angle of incidence (0 unless the solution lies on
+# one), the saturation level.
+_LIN = 11
 
 
 @njit(cache=True, error_model="numpy")
@@ -1121,18 +1354,15 @@ _SUMS = {"reassoc", "contract"}
 
 
 @njit(cache=True, error_model="numpy", fastmath=_SUMS)
-def _tl_fill(z, pts, gstart, glcg, vec, k, gbuf):
-    """The lobes and the weighted basis at ``z`` into slot ``k`` of ``vec`` and, in the same
-    pass, the Gram matrix and right-hand side of the linear step: (g00, g01, g11, r0, r1).
-    Rows of 2-D arrays are indexed in place, not taken as views: a view costs a reference
-    count, as much as a dozen points."""
+def _tl_fill(z, pts, gstart, glcg, vec, k, gbuf, gsum):
+    """The lobes and the weighted (unsaturated) basis at ``z`` into slot ``k`` of ``vec``
+    and per angle of incidence the sums of the linear step (:func:`_capped2`):
+    ``gsum[g, :5]`` = (x0'x0, x0'x1, x1'x1, x0'y, x1'y) of the angle's points
+    (:func:`_tl_sums`). After it ``gbuf[:G]`` holds the angles' ``cos^v_as``. Rows of 2-D
+    arrays are indexed in place, not taken as views: a view costs a reference count, as
+    much as a dozen points; the loop over every point (not per angle) vectorises."""
     o = _SLOT * k
     _tl_broadcast(z, gstart, glcg, vec, o + 5, gbuf)
-    g00 = 0.0
-    g01 = 0.0
-    g11 = 0.0
-    r0 = 0.0
-    r1 = 0.0
     for j in range(gstart[glcg.size]):
         a = lexp(vec[o + 5, j] * pts[0, j]) * pts[1, j]
         b = lexp(vec[o + 6, j] * pts[2, j]) * pts[3, j]
@@ -1141,20 +1371,211 @@ def _tl_fill(z, pts, gstart, glcg, vec, k, gbuf):
         ld = vec[o + 8, j] * a
         ls = vec[o + 9, j] * b
         w = pts[5, j]
-        x0 = ld * w
-        x1 = (ld + vec[o + 7, j] * (ls - ld)) * w
-        vec[o + 2, j] = x0
-        vec[o + 3, j] = x1
-        y = pts[6, j]
-        g00 += x0 * x0
-        g01 += x0 * x1
-        g11 += x1 * x1
-        r0 += x0 * y
-        r1 += x1 * y
-    return g00, g01, g11, r0, r1
+        vec[o + 2, j] = ld * w
+        vec[o + 3, j] = (ld + vec[o + 7, j] * (ls - ld)) * w
+    _tl_sums(pts, gstart, vec, o, gsum)
 
 
 @njit(cache=True, error_model="numpy", fastmath=_SUMS)
+def _tl_sums(pts, gstart, vec, o, gsum):
+    """Per angle of incidence the Gram sums of the weighted basis in rows ``o + 2``,
+    ``o + 3`` of ``vec`` and the weighted power: ``gsum[g, :5]``."""
+    for g in range(gsum.shape[0]):
+        g00 = 0.0
+        g01 = 0.0
+        g11 = 0.0
+        r0 = 0.0
+        r1 = 0.0
+        for j in range(np.uint64(gstart[g]), np.uint64(gstart[g + 1])):
+            x0 = vec[o + 2, j]
+            x1 = vec[o + 3, j]
+            y = pts[6, j]
+            g00 += x0 * x0
+            g01 += x0 * x1
+            g11 += x1 * x1
+            r0 += x0 * y
+            r1 += x1 * y
+        _put_sums(gsum, g, g00, g01, g11, r0, r1)
+
+
+@njit(cache=True, inline="always")
+def _put_sums(gsum, g, g00, g01, g11, r0, r1):
+    gsum[g, 0] = g00
+    gsum[g, 1] = g01
+    gsum[g, 2] = g11
+    gsum[g, 3] = r0
+    gsum[g, 4] = r1
+
+
+@njit(cache=True, error_model="numpy")
+def _tl_set_yy(pts, gstart, gsum):
+    """Column 5 of the per-angle sums: y'y of each angle's points (the table's: set once)."""
+    for g in range(gsum.shape[0]):
+        yy = 0.0
+        for j in range(gstart[g], gstart[g + 1]):
+            yy += pts[6, j] * pts[6, j]
+        gsum[g, 5] = yy
+
+
+@njit(cache=True)
+def _tl_cap_work(n_groups):
+    """The fast path's scratch of its linear step: per-angle sums (G, 6; see _tl_fill and
+    _tl_set_yy), the thresholds, the saturable angles in threshold order, a linear-step
+    row (_LIN) for the scores that keep no slot, the angles' ``cos^v_as``."""
+    return (np.zeros((n_groups, 6)), np.empty(n_groups), np.empty(n_groups, np.int64),
+            np.zeros(_LIN), np.empty(n_groups))
+
+
+@njit(cache=True, inline="always")
+def _profile_cost(u, a, b, c, d, e, yy):
+    """The cost ``0.5 (y'y - (a + b u)^2 / (c + 2 d u + e u^2))`` of the best ``K >= 0`` at
+    share ``u`` of one saturation pattern (see :func:`_capped2`), and that ``K``."""
+    num = a + b * u
+    den = c + (2.0 * d + e * u) * u
+    if num > 0.0 and den > 0.0:
+        k = num / den
+        return 0.5 * (yy - num * k), k
+    return 0.5 * yy, 0.0
+
+
+@njit(cache=True, error_model="numpy")
+def _capped2(gsum, s_g, v_as, cap, lin, k):
+    """The linear step of the plain two-lobe model (two columns) with its saturating share,
+    in closed form: :func:`_capped_solve`'s solution as a profile over the share ``u``.
+    With ``c = K (1 - u, u)`` the curve of one saturation pattern is ``K B(u)``, ``B``
+    affine in ``u``, so the best ``K >= 0`` leaves ``y'y - (a + b u)^2 / (c + 2 d u + e u^2)``
+    (``a``.. ``e`` from the pattern's Gram sums), whose one stationary point is
+    ``u* = (a d - b c) / (b d - a e)``. Per interval between thresholds the minimum is at
+    ``u*`` or an end: a few flops per pattern, no iteration. The patterns are visited by
+    growing saturation, and each saturated angle costs at least what its own best
+    ``K L_s`` leaves: once that floor exceeds the best cost no later pattern can win (on a
+    matte material one saturated angle ends the search). A saturated angle's sums follow
+    from its unsaturated ones: ``x_s = x0 + (x1 - x0) / s``.
+
+    ``gsum``: per-angle sums (see _tl_fill); ``s_g``: each angle's ``cos^v_as``; ``cap``:
+    (_, thresholds, order, ...) of :func:`_tl_cap_work`; the solution goes into
+    ``lin[k]`` (see _LIN: a threshold's one column ``(1 - tau) x0 + tau x1`` carries
+    ``K``; u = 0 and u = 1 are thresholds too). Returns (cost from the sums, y'y, the
+    threshold of a solution on one or -1)."""
+    tau_g, order = cap[1], cap[2]
+    n_groups = s_g.size
+    g00 = 0.0
+    g01 = 0.0
+    g11 = 0.0
+    r0 = 0.0
+    r1 = 0.0
+    yy = 0.0
+    count = 0
+    for g in range(n_groups):
+        g00 += gsum[g, 0]
+        g01 += gsum[g, 1]
+        g11 += gsum[g, 2]
+        r0 += gsum[g, 3]
+        r1 += gsum[g, 4]
+        yy += gsum[g, 5]
+        sg = s_g[g]
+        t = 1.0 / sg if sg > 1.0 else math.inf
+        tau_g[g] = t
+        if t < 1.0:  # insertion in threshold order
+            i = count
+            while i > 0 and tau_g[order[i - 1]] > t:
+                order[i] = order[i - 1]
+                i -= 1
+            order[i] = g
+            count += 1
+    best = math.inf
+    bu = 0.0
+    bk = 0.0
+    blower = 0.0
+    bend = True
+    b00 = g00
+    b01 = g01
+    b11 = g11
+    lo = 0.0
+    i = 0
+    floor = 0.0  # a lower bound of the cost of every pattern from here on
+    while True:
+        hi = tau_g[order[i]] if i < count else 1.0
+        c = g00
+        d = g01 - g00
+        e = g00 - 2.0 * g01 + g11
+        a = r0
+        b = r1 - r0
+        cost, kk = _profile_cost(lo, a, b, c, d, e, yy)
+        if cost < best:
+            best, bu, bk, blower, bend = cost, lo, kk, lo, True
+            b00, b01, b11 = g00, g01, g11
+        den = b * d - a * e
+        if den != 0.0:
+            u = (a * d - b * c) / den
+            if u > lo and u < hi:
+                cost, kk = _profile_cost(u, a, b, c, d, e, yy)
+                if cost < best:
+                    best, bu, bk, blower, bend = cost, u, kk, lo, False
+                    b00, b01, b11 = g00, g01, g11
+        if i >= count:
+            cost, kk = _profile_cost(1.0, a, b, c, d, e, yy)
+            if cost < best:
+                best, bu, bk, blower, bend = cost, 1.0, kk, 1.0, True
+                b00, b01, b11 = g00, g01, g11
+            break
+        while i < count and tau_g[order[i]] == hi:  # past hi these angles saturate
+            g = order[i]
+            t = tau_g[g]
+            x00, x01, x11, y0, y1 = gsum[g, 0], gsum[g, 1], gsum[g, 2], gsum[g, 3], gsum[g, 4]
+            gss = x00 + (2.0 * (x01 - x00) + (x00 - 2.0 * x01 + x11) * t) * t
+            rs = y0 + (y1 - y0) * t
+            g00 += gss - x00
+            g01 += gss - x01
+            g11 += gss - x11
+            r0 += rs - y0
+            r1 += rs - y1
+            # a saturated angle's curve is K L_s: it costs at least what its own best
+            # K >= 0 leaves, whatever the other angles do
+            floor += 0.5 * (gsum[g, 5] - (rs * rs / gss if rs > 0.0 and gss > 0.0 else 0.0))
+            i += 1
+        if floor >= best:  # every later pattern saturates these angles too
+            break
+        lo = hi
+    row = lin[k]
+    row[7] = bk * (1.0 - bu)
+    row[8] = bk * bu
+    row[10] = blower
+    if bend:  # the one column (1 - u) x0 + u x1 at a threshold u
+        cc = (1.0 - bu) * (1.0 - bu) * b00 + 2.0 * bu * (1.0 - bu) * b01 + bu * bu * b11
+        row[0] = bk
+        row[1] = 0.0
+        row[2] = 1.0 if bk > 0.0 else 0.0
+        row[3] = 0.0
+        row[4] = 1.0 / (cc * (1.0 + RIDGE)) if bk > 0.0 and cc > 0.0 else 0.0
+        row[5] = 0.0
+        row[6] = 0.0
+        row[9] = -math.log(bu) / v_as if (bu > 0.0 and bu < 1.0) else 0.0
+    else:
+        a00 = b00 * (1.0 + RIDGE)
+        a11 = b11 * (1.0 + RIDGE)
+        det = a00 * a11 - b01 * b01
+        row[0] = row[7]
+        row[1] = row[8]
+        row[2] = 1.0
+        row[3] = 1.0
+        row[4] = a11 / det
+        row[5] = -b01 / det
+        row[6] = a00 / det
+        row[9] = 0.0
+    return best, yy, bu if bend else -1.0
+
+
+@njit(cache=True, error_model="numpy")
+def _tl_capped(s_g, v_as, cap):
+    """:func:`_capped2` of the sums in ``cap[0]`` into ``cap``'s own row, for a score
+    (cost from the sums, y'y)."""
+    row = cap[3]
+    cost, yy, _ = _capped2(cap[0], s_g, v_as, cap, row.reshape((1, row.size)), 0)
+    return cost, yy
+
+
+@njit(cache=True, error_model="numpy")
 def _tl_residual(vec, k, pts, m, a0, a1):
     """Residuals (row ``+4`` of slot ``k``) and cost of the basis in the slot."""
     o = _SLOT * k
@@ -1169,123 +1590,56 @@ def _tl_residual(vec, k, pts, m, a0, a1):
     return cost
 
 
-@njit(cache=True, inline="always")
-def _tl_solve2(g00, g01, g11, r0, r1, nn0, nn1, residual):
-    """_solve_gram of two columns on scalars (the same steps): (alpha0, alpha1, free0,
-    free1, and the free block's inverse: i00, i01, i11)."""
-    sc0 = max(g00, 1e-300)
-    sc1 = max(g11, 1e-300)
-    f0 = g00 > 0.0
-    f1 = g11 > 0.0
-    a0 = 0.0
-    a1 = 0.0
-    i00 = 0.0
-    i01 = 0.0
-    i11 = 0.0
-    for it in range(3):
-        b00 = g00 + RIDGE * sc0 if f0 else 1.0
-        b11 = g11 + RIDGE * sc1 if f1 else 1.0
-        b01 = g01 if (f0 and f1) else 0.0
-        det = b00 * b11 - b01 * b01
-        i00 = b11 / det if f0 else 0.0
-        i11 = b00 / det if f1 else 0.0
-        i01 = -b01 / det if (f0 and f1) else 0.0
-        a0 = 0.0
-        a1 = 0.0
-        if f0:
-            a0 += i00 * r0
-            a1 += i01 * r0
-        if f1:
-            a0 += i01 * r1
-            a1 += i11 * r1
-        if it == 2:
-            break
-        worst = -1
-        worst_value = 0.0
-        total = 0.0
-        largest = -1
-        largest_value = -1.0
-        if f0:
-            if nn0 and a0 < 0.0:
-                worst = 0
-                worst_value = a0 * math.sqrt(sc0)
-            total += abs(a0)
-            largest = 0
-            largest_value = abs(a0)
-        if f1:
-            if nn1 and a1 < 0.0:
-                if worst < 0 or a1 * math.sqrt(sc1) < worst_value:
-                    worst = 1
-            total += abs(a1)
-            if abs(a1) > largest_value:
-                largest = 1
-        drop = worst
-        if drop < 0 and (residual == 0 and f0 or residual == 1 and f1):
-            r = abs(a0) if residual == 0 else abs(a1)
-            if r > 0.0 and r < total / EXTREME:
-                drop = largest
-        if drop < 0:
-            break
-        if drop == 0:
-            f0 = False
-        else:
-            f1 = False
-    if not f0:
-        a0 = 0.0
-    if not f1:
-        a1 = 0.0
-    return a0, a1, f0, f1, i00, i01, i11
+@njit(cache=True, error_model="numpy")
+def _tl_saturate(vec, k, pts, gstart, tau_g, lower, tau):
+    """The effective basis of slot ``k`` (see the rows above) for a saturation level
+    ``lower`` and a threshold ``tau`` (-1: none) of the linear step, and the slot's
+    saturation flags (left alone by _tl_fill: _tl_eval clears them when nothing
+    saturates)."""
+    o = _SLOT * k
+    for g in range(tau_g.size):
+        sat = tau_g[g] <= lower
+        for j in range(np.uint64(gstart[g]), np.uint64(gstart[g + 1])):
+            vec[o + 10, j] = 1.0 if sat else 0.0
+            if sat:
+                xs = vec[o + 9, j] * vec[o + 1, j] * pts[5, j]
+                vec[o + 2, j] = xs
+                vec[o + 3, j] = xs
+    if tau >= 0.0:
+        for j in range(gstart[tau_g.size]):
+            vec[o + 2, j] = (1.0 - tau) * vec[o + 2, j] + tau * vec[o + 3, j]
 
 
 @njit(cache=True, error_model="numpy")
-def _tl_eval(z, pts, gstart, glcg, vec, k, nonneg, residual, lin, gbuf):
-    """Lobes, basis, linear step (``lin[k]``: alpha0, alpha1, free0, free1 as 1.0/0.0, the
-    inverse i00, i01, i11) and residuals at ``z`` in slot ``k``; returns the cost (as
-    _evaluate)."""
-    g00, g01, g11, r0, r1 = _tl_fill(z, pts, gstart, glcg, vec, k, gbuf)
-    a0, a1, f0, f1, i00, i01, i11 = _tl_solve2(g00, g01, g11, r0, r1, nonneg[0], nonneg[1],
-                                               residual)
-    lin[k, 0] = a0
-    lin[k, 1] = a1
-    lin[k, 2] = 1.0 if f0 else 0.0
-    lin[k, 3] = 1.0 if f1 else 0.0
-    lin[k, 4] = i00
-    lin[k, 5] = i01
-    lin[k, 6] = i11
-    return _tl_residual(vec, k, pts, gstart[glcg.size], a0, a1)
-
-
-#: Below this fraction of y'y a cost from the Gram matrix (:func:`_gram_cost`) keeps too
-#: few digits (it is the small difference of numbers of the size of y'y: about 1e-16 y'y
-#: of rounding): the residuals are then summed instead.
-GRAM_DIGITS = 1e-5
-
-
-@njit(cache=True, inline="always")
-def _gram_cost(g00, g01, g11, r0, r1, yy, nn0, nn1, residual):
-    """The projected cost from the Gram matrix, right-hand side and y'y (the residual's
-    norm expanded: 0.5 (y'y - 2 a'r + a'G a)); the second value: whether cancellation
-    leaves it too few digits (then the caller takes the residuals themselves)."""
-    a0, a1, f0, f1, i00, i01, i11 = _tl_solve2(g00, g01, g11, r0, r1, nn0, nn1, residual)
-    cost = 0.5 * (yy - 2.0 * (a0 * r0 + a1 * r1) + a0 * a0 * g00 + 2.0 * a0 * a1 * g01
-                  + a1 * a1 * g11)
-    if not math.isfinite(cost):
-        return math.inf, False
-    return cost, cost < GRAM_DIGITS * yy
+def _tl_eval(z, pts, gstart, glcg, vec, k, lin, gbuf, cap):
+    """Lobes, basis, the saturating share's linear step (``lin[k]``, see _LIN) and
+    residuals at ``z`` in slot ``k``; returns the cost (as _evaluate)."""
+    flagged = lin[k, 10] > 0.0  # the slot's saturation flags are set (see _tl_saturate)
+    _tl_fill(z, pts, gstart, glcg, vec, k, gbuf, cap[0])
+    _, _, tau = _capped2(cap[0], gbuf[:glcg.size], z[0], cap, lin, k)
+    lower = lin[k, 10]
+    if lower > 0.0 or tau >= 0.0:
+        _tl_saturate(vec, k, pts, gstart, cap[1], lower, tau)
+    elif flagged:
+        vec[_SLOT * k + 10, :gstart[glcg.size]] = 0.0
+    return _tl_residual(vec, k, pts, gstart[glcg.size], lin[k, 0], lin[k, 1])
 
 
 @njit(cache=True, error_model="numpy", fastmath=_SUMS)
 def _tl_normal(pts, m, vec, k, lin, coef, grad, hess):
     """Kaufman's Jacobian of the projected residual at the point in slot ``k`` (its lobes,
-    block values, basis and residuals) and the normal equations' gradient ``J'r`` and
+    block values, effective basis, saturation flags and residuals; along ``v_as`` a
+    solution on a threshold moves with the threshold, ``ln cos gamma - ln cos gamma*``)
+    and the normal equations' gradient ``J'r`` and
     matrix ``J'J`` (as _jacobian and _lm): one pass for the Jacobian's columns before
     projection and their products with the basis, one for the projected columns and
     every sum of the normal equations."""
     o = _SLOT * k
-    a0 = lin[k, 0]
-    a1 = lin[k, 1]
+    a0 = lin[k, 7]  # the model's coefficients: the unsaturated rows' derivative
+    a1 = lin[k, 8]
     f0 = lin[k, 2]
     f1 = lin[k, 3]
+    lstar = lin[k, 9]  # ln cos gamma of a threshold the solution lies on (else 0)
     t00 = 0.0
     t01 = 0.0
     t02 = 0.0
@@ -1309,10 +1663,12 @@ def _tl_normal(pts, m, vec, k, lin, coef, grad, hess):
         ds = ns * (b / TWO_PI + ls * pts[2, j])
         oms = 1.0 - s
         w = pts[5, j]
-        j0 = s * (ls - ld) * lcg * a1 * w
-        j1 = (dd * a0 + oms * dd * a1) * w
+        sat = vec[o + 10, j]  # saturated: K L_s, only the specular lobe moves
+        un = 1.0 - sat
+        j0 = un * s * (ls - ld) * (lcg - lstar) * a1 * w
+        j1 = un * (dd * a0 + oms * dd * a1) * w
         j2 = j1 * lcg
-        j3 = s * ds * a1 * w
+        j3 = (un * s * a1 + sat * (a0 + a1)) * ds * w
         j4 = j3 * lcg
         vec[_JM, j] = j0
         vec[_JM + 1, j] = j1
@@ -1421,160 +1777,164 @@ def _tl_normal(pts, m, vec, k, lin, coef, grad, hess):
 
 
 @njit(cache=True)
-def tl_work(n):
-    """Scratch of the fast path for up to ``n`` points: the per-point rows (_TL_VEC, n; see
-    _SLOT), the linear steps of the two slots (2, 7; see _tl_eval), the projection's
-    coefficients (2, 5), gradient, normal matrix, the damped system and its right-hand
-    side, the step, the current and trial coordinates, the pinned ones, the blocks'
-    exponentials (_tl_broadcast; at most ``n`` blocks)."""
-    return (np.empty((_TL_VEC, n)), np.empty((2, 7)), np.empty((2, 5)), np.empty(5),
+def tl_work(n, n_groups):
+    """Scratch of the fast path for up to ``n`` points at ``n_groups`` angles of incidence:
+    the per-point rows (_TL_VEC, n; see _SLOT), the linear steps of the two slots (2,
+    _LIN; see _tl_eval), the projection's coefficients (2, 5), gradient, normal matrix,
+    the damped system and its right-hand side, the step, the current and trial
+    coordinates, the pinned ones, the blocks' exponentials (_tl_broadcast; at most ``n``
+    blocks), the linear step's scratch (:func:`_tl_cap_work`)."""
+    return (np.zeros((_TL_VEC, n)), np.zeros((2, _LIN)), np.empty((2, 5)), np.empty(5),
             np.empty((5, 5)), np.empty((5, 5)), np.empty(5), np.empty(5), np.empty(5),
-            np.empty(5), np.empty(5, np.bool_), np.zeros(3 * n + 8))
+            np.empty(5), np.empty(5, np.bool_), np.zeros(3 * n + 8), _tl_cap_work(n_groups))
 
 
 @njit(cache=True)
 def _tl_costs(cands, pts, gstart, glcg, nonneg, residual, ws):
     """:func:`_costs` of the plain two-lobe model."""
-    vec, lin, gbuf = ws[0], ws[1], ws[11]
+    vec, lin, gbuf, cap = ws[0], ws[1], ws[11], ws[12]
     out = np.empty(cands.shape[0])
     for i in range(cands.shape[0]):
-        out[i] = _tl_eval(cands[i], pts, gstart, glcg, vec, 0, nonneg, residual, lin, gbuf)
+        out[i] = _tl_eval(cands[i], pts, gstart, glcg, vec, 0, lin, gbuf, cap)
     return out
 
 
 @njit(cache=True)
-def _tl_lm(nonneg, residual, z0, lo, hi, pts, gstart, glcg, max_iter, ftol, xtol, z_out,
-           alpha_out, ws):
+def _tl_lm(nonneg, residual, z0, bounds, table, stop, z_out, alpha_out, ws):
     """:func:`_lm` of the plain two-lobe model (the same steps and stopping rules): the
     trial points are evaluated without derivatives, the Jacobian is formed only at
-    accepted points, from the lobes kept there."""
+    accepted points, from the lobes kept there. ``table``: (points, block starts, log
+    cos of the angles of incidence)."""
     p = 5
-    vec, lin, coef, grad, hess, a, rhs, step, z, zt, pinned, gbuf = ws
+    lo, hi = bounds
+    pts, gstart, glcg = table
+    max_iter, ftol, xtol = stop
+    vec, lin, coef, grad, hess, a, rhs, step, z, zt, pinned, gbuf, cap = ws
     m = gstart[glcg.size]
     for q in range(p):
         z[q] = min(max(z0[q], lo[q]), hi[q])
     cur = 0
-    cost = _tl_eval(z, pts, gstart, glcg, vec, 0, nonneg, residual, lin, gbuf)
+    cost = _tl_eval(z, pts, gstart, glcg, vec, 0, lin, gbuf, cap)
     nfev = 1
     lam = 1e-3
     if not math.isfinite(cost):
         z_out[:] = z
-        alpha_out[0] = lin[cur, 0]
-        alpha_out[1] = lin[cur, 1]
+        alpha_out[0] = lin[cur, 7]
+        alpha_out[1] = lin[cur, 8]
         return math.inf, STOP_NONFINITE, nfev
     reason = STOP_MAXITER
     for _ in range(max_iter):
         _tl_normal(pts, m, vec, cur, lin, coef, grad, hess)
         _lm_step(z, lo, hi, lam, grad, hess, pinned, a, rhs, step, zt)
         tri = 1 - cur
-        tcost = _tl_eval(zt, pts, gstart, glcg, vec, tri, nonneg, residual, lin, gbuf)
-        better, lam, stop = _lm_verdict(z, zt, cost, tcost, lam, xtol, ftol)
+        tcost = _tl_eval(zt, pts, gstart, glcg, vec, tri, lin, gbuf, cap)
+        better, lam, stop_now = _lm_verdict(z, zt, cost, tcost, lam, xtol, ftol)
         nfev += 1
         if better:
             z[:] = zt
             cost = tcost
             cur = tri
-        if stop:
-            reason = stop
+        if stop_now:
+            reason = stop_now
             break
     z_out[:] = z
-    alpha_out[0] = lin[cur, 0]
-    alpha_out[1] = lin[cur, 1]
+    alpha_out[0] = lin[cur, 7]
+    alpha_out[1] = lin[cur, 8]
     return cost, reason, nfev
 
 
-@njit(cache=True, error_model="numpy", fastmath=_SUMS, inline="always")
-def _gram_add(ld, ls, vec, pts, j, g00, g01, g11, r0, r1):
-    w = pts[5, j]
-    x0 = ld * w
-    x1 = (ld + vec[7, j] * (ls - ld)) * w
-    y = pts[6, j]
-    return g00 + x0 * x0, g01 + x0 * x1, g11 + x1 * x1, r0 + x0 * y, r1 + x1 * y
-
-
 @njit(cache=True, error_model="numpy", fastmath=_SUMS)
-def _tl_gram(pts, m, vec, q):
-    """The Gram matrix and right-hand side of the linear step (g00, g01, g11, r0, r1) of the
-    basis whose block values are in rows 5..9 of ``vec``, in one pass without stores.
-    ``q``: -1, both lobes from their exponentials; 1 or 2 (3 or 4), the diffuse
-    (specular) lobe from its exponential, the other from row 1 (row 0): the lobes at the
-    centre of a scan, times their block factors (along the diffuse (specular) coordinates
-    only the diffuse (specular) lobe changes). One loop per case: a branch inside the
-    loop would keep it from vectorising."""
-    g00 = 0.0
-    g01 = 0.0
-    g11 = 0.0
-    r0 = 0.0
-    r1 = 0.0
+def _tl_gram(pts, gstart, vec, q, gsum):
+    """Per angle of incidence the sums of the linear step (``gsum``, see _tl_fill) of the
+    basis whose block values are in rows 5..9 of ``vec`` (the basis itself goes to rows
+    2, 3: scratch here). ``q``: -1, both lobes from their exponentials; 1 or 2 (3 or 4),
+    the diffuse (specular) lobe from its exponential, the other from row 1 (row 0): the
+    lobes at the centre of a scan, times their block factors (along the diffuse
+    (specular) coordinates only the diffuse (specular) lobe changes). One loop per case:
+    a branch inside the loop would keep it from vectorising."""
+    m = gstart[gsum.shape[0]]
     if q < 0:
         for j in range(m):
             ld = vec[8, j] * (lexp(vec[5, j] * pts[0, j]) * pts[1, j])
             ls = vec[9, j] * (lexp(vec[6, j] * pts[2, j]) * pts[3, j])
-            g00, g01, g11, r0, r1 = _gram_add(ld, ls, vec, pts, j, g00, g01, g11, r0, r1)
+            w = pts[5, j]
+            vec[2, j] = ld * w
+            vec[3, j] = (ld + vec[7, j] * (ls - ld)) * w
     elif q <= 2:
         for j in range(m):
             ld = vec[8, j] * (lexp(vec[5, j] * pts[0, j]) * pts[1, j])
-            g00, g01, g11, r0, r1 = _gram_add(ld, vec[1, j], vec, pts, j, g00, g01, g11, r0,
-                                              r1)
+            ls = vec[1, j]
+            w = pts[5, j]
+            vec[2, j] = ld * w
+            vec[3, j] = (ld + vec[7, j] * (ls - ld)) * w
     else:
         for j in range(m):
+            ld = vec[0, j]
             ls = vec[9, j] * (lexp(vec[6, j] * pts[2, j]) * pts[3, j])
-            g00, g01, g11, r0, r1 = _gram_add(vec[0, j], ls, vec, pts, j, g00, g01, g11, r0,
-                                              r1)
-    return g00, g01, g11, r0, r1
+            w = pts[5, j]
+            vec[2, j] = ld * w
+            vec[3, j] = (ld + vec[7, j] * (ls - ld)) * w
+    _tl_sums(pts, gstart, vec, 0, gsum)
 
 
-@njit(cache=True, error_model="numpy", fastmath=_SUMS)
-def _tl_yy(pts, m):
-    """y'y of the weighted power."""
-    yy = 0.0
-    for j in range(m):
-        yy += pts[6, j] * pts[6, j]
-    return yy
+#: Below this fraction of y'y a cost from the Gram sums keeps too few digits (it is the
+#: small difference of numbers of the size of y'y: about 1e-16 y'y of rounding): the
+#: residuals are then summed instead.
+GRAM_DIGITS = 1e-5
 
 
 @njit(cache=True, error_model="numpy")
-def _tl_cost(z, pts, gstart, glcg, nonneg, residual, ws, yy):
-    """The projected cost at ``z`` (as :func:`_tl_eval`) from the Gram matrix, in one pass;
-    from the residuals where that keeps too few digits (GRAM_DIGITS)."""
-    vec = ws[0]
-    gbuf = ws[11]
-    _tl_broadcast(z, gstart, glcg, vec, 5, gbuf)
-    g00, g01, g11, r0, r1 = _tl_gram(pts, gstart[glcg.size], vec, -1)
-    cost, few = _gram_cost(g00, g01, g11, r0, r1, yy, nonneg[0], nonneg[1], residual)
-    if few:
-        cost = _tl_eval(z, pts, gstart, glcg, vec, 0, nonneg, residual, ws[1], gbuf)
+def _tl_gram_cost(z, s_g, pts, gstart, glcg, ws):
+    """The projected cost at ``z`` from the per-angle sums now in ``ws``'s linear-step
+    scratch (:func:`_tl_capped`; ``s_g``: the angles' ``cos^v_as`` at ``z``), from the
+    residuals (:func:`_tl_eval`, which overwrites slot 0 of ``ws``) where the sums keep
+    too few digits (GRAM_DIGITS)."""
+    cost, yy = _tl_capped(s_g, z[0], ws[12])
+    if cost < GRAM_DIGITS * yy:
+        cost = _tl_eval(z, pts, gstart, glcg, ws[0], 0, ws[1], ws[11], ws[12])
     return cost
+
+
+@njit(cache=True, error_model="numpy")
+def _tl_cost(z, pts, gstart, glcg, nonneg, residual, ws):
+    """The projected cost at ``z`` (as :func:`_tl_eval`) from the per-angle sums, in one
+    pass over the points."""
+    vec = ws[0]
+    _tl_broadcast(z, gstart, glcg, vec, 5, ws[11])
+    _tl_gram(pts, gstart, vec, -1, ws[12][0])
+    return _tl_gram_cost(z, ws[11][:glcg.size], pts, gstart, glcg, ws)
 
 
 @njit(cache=True)
 def _tl_screen_costs(cands, pts, gstart, glcg, nonneg, residual, ws):
     """:func:`_tl_costs` of many candidates (:func:`_tl_cost`)."""
-    yy = _tl_yy(pts, gstart[glcg.size])
     out = np.empty(cands.shape[0])
     for i in range(cands.shape[0]):
-        out[i] = _tl_cost(cands[i], pts, gstart, glcg, nonneg, residual, ws, yy)
+        out[i] = _tl_cost(cands[i], pts, gstart, glcg, nonneg, residual, ws)
     return out
+
+
+@njit(cache=True, error_model="numpy")
+def _tl_centre(z, pts, gstart, glcg, vec, gbuf):
+    """Block values and the lobes at ``z`` into rows 5..9 and 0, 1 of ``vec``."""
+    _tl_broadcast(z, gstart, glcg, vec, 5, gbuf)
+    for j in range(gstart[glcg.size]):
+        vec[0, j] = vec[8, j] * (lexp(vec[5, j] * pts[0, j]) * pts[1, j])
+        vec[1, j] = vec[9, j] * (lexp(vec[6, j] * pts[2, j]) * pts[3, j])
 
 
 @njit(cache=True, error_model="numpy")
 def _tl_scan_costs(z, axes, pts, gstart, glcg, nonneg, residual, ws):
     """Projected costs of the one-coordinate scans through ``z`` (the numbers of
-    :func:`_tl_costs` of :func:`_scan_candidates`, from the Gram matrices as
-    :func:`_tl_cost`). Along v_as only the blocks' shares cos^v_as change: the Gram
-    matrix is then a sum over blocks of the lobes' products at ``z``, without a pass over
-    the points."""
+    :func:`_tl_costs` of :func:`_scan_candidates`, from the per-angle sums as
+    :func:`_tl_cost`). Along v_as only the blocks' shares cos^v_as change: the sums are
+    then those of the lobes' products at ``z``, without a pass over the points."""
     p, n_axis = axes.shape
     vec = ws[0]
-    lin = ws[1]
     gbuf = ws[11]
-    m = gstart[glcg.size]
+    gsum = ws[12][0]
     n_groups = glcg.size
-    yy = _tl_yy(pts, m)
-    _tl_broadcast(z, gstart, glcg, vec, 5, gbuf)
-    for j in range(m):  # rows 0, 1: the lobes at z
-        vec[0, j] = vec[8, j] * (lexp(vec[5, j] * pts[0, j]) * pts[1, j])
-        vec[1, j] = vec[9, j] * (lexp(vec[6, j] * pts[2, j]) * pts[3, j])
+    _tl_centre(z, pts, gstart, glcg, vec, gbuf)
     # per block: sums of the weighted lobes' products at z
     blk = np.zeros((n_groups, 5))
     for g in range(n_groups):
@@ -1588,6 +1948,8 @@ def _tl_scan_costs(z, axes, pts, gstart, glcg, nonneg, residual, ws):
             blk[g, 2] += xs * xs
             blk[g, 3] += xd * y
             blk[g, 4] += xs * y
+    s_z = gbuf[:n_groups].copy()  # the angles' cos^v_as at z
+    s_g = ws[12][4]
     out = np.empty(p * n_axis)
     zc = z.copy()
     for q in range(p):
@@ -1595,30 +1957,22 @@ def _tl_scan_costs(z, axes, pts, gstart, glcg, nonneg, residual, ws):
             zc[:] = z
             zc[q] = axes[q, i]
             if q == 0:
-                g00 = 0.0
-                g01 = 0.0
-                g11 = 0.0
-                r0 = 0.0
-                r1 = 0.0
                 for g in range(n_groups):
                     sh = fexp(zc[0] * glcg[g])
+                    s_g[g] = sh
                     om = 1.0 - sh
                     a_, b_, c_, d_, e_ = blk[g, 0], blk[g, 1], blk[g, 2], blk[g, 3], blk[g, 4]
-                    g00 += a_
-                    g01 += om * a_ + sh * b_
-                    g11 += om * om * a_ + 2.0 * sh * om * b_ + sh * sh * c_
-                    r0 += d_
-                    r1 += om * d_ + sh * e_
+                    _put_sums(gsum, g, a_, om * a_ + sh * b_,
+                              om * om * a_ + 2.0 * sh * om * b_ + sh * sh * c_, d_,
+                              om * d_ + sh * e_)
             else:  # only the scanned lobe's block values change
+                s_g[:] = s_z
                 _tl_broadcast_lobe(zc, gstart, glcg, vec, 5 if q <= 2 else 6, q >= 3)
-                g00, g01, g11, r0, r1 = _tl_gram(pts, m, vec, q)
-            cost, few = _gram_cost(g00, g01, g11, r0, r1, yy, nonneg[0], nonneg[1], residual)
-            if few:
-                cost = _tl_eval(zc, pts, gstart, glcg, vec, 0, nonneg, residual, lin, gbuf)
-                _tl_broadcast(z, gstart, glcg, vec, 5, gbuf)
-                for j in range(m):
-                    vec[0, j] = vec[8, j] * (lexp(vec[5, j] * pts[0, j]) * pts[1, j])
-                    vec[1, j] = vec[9, j] * (lexp(vec[6, j] * pts[2, j]) * pts[3, j])
+                _tl_gram(pts, gstart, vec, q, gsum)
+            cost, yy = _tl_capped(s_g, zc[0], ws[12])
+            if cost < GRAM_DIGITS * yy:
+                cost = _tl_eval(zc, pts, gstart, glcg, vec, 0, ws[1], gbuf, ws[12])
+                _tl_centre(z, pts, gstart, glcg, vec, gbuf)
             out[q * n_axis + i] = cost
     return out
 
@@ -1876,7 +2230,8 @@ def global_search(codes, nonneg, residual, geo, glcg, power, weights, levels, gr
     lgroup = np.empty(n, np.int64)
     tl_points(geo, glcg.size, sw, yw, np.ones(n), power, np.ones(n, np.bool_), pts, gstart,
               lgroup, group)
-    ws = tl_work(n)
+    ws = tl_work(n, glcg.size)
+    _tl_set_yy(pts, gstart, ws[12][0])
     prof, ok = _tl_profile(pts, n, lgroup, levels.size, nd_grid, ns_grid)
     own = _own_starts(prof, ok, levels, jitter, zlo, zhi, ext_start, extra)
     n_own = own.shape[0]
@@ -1889,7 +2244,7 @@ def global_search(codes, nonneg, residual, geo, glcg, power, weights, levels, gr
     if fast:
         costs = _tl_screen_costs(cands, pts, gstart, glcg, nonneg, residual, ws)
     else:
-        costs = _costs(codes, nonneg, residual, cands, geo, glcg, sw, yw)
+        costs = _costs(codes, nonneg, residual, cands, (geo, glcg, sw, yw))
     n_evals = m
     first = _diverse(own, costs[:n_own], n_data_starts, lo, hi, 1e-9)
     others = _diverse(cands, costs, n_keep, lo, hi, 0.08)
@@ -1905,11 +2260,11 @@ def global_search(codes, nonneg, residual, geo, glcg, power, weights, levels, gr
     n_starts = picks.size
     for i in picks:
         if fast:
-            c, r, nf = _tl_lm(nonneg, residual, cands[i], zlo, zhi, pts, gstart, glcg,
-                              max_iter, 1e-10, 1e-9, zt, at, ws)
+            c, r, nf = _tl_lm(nonneg, residual, cands[i], (zlo, zhi), (pts, gstart, glcg),
+                              (max_iter, 1e-10, 1e-9), zt, at, ws)
         else:
-            c, r, nf = _lm(codes, nonneg, residual, cands[i], zlo, zhi, geo, glcg, sw, yw,
-                           max_iter, 1e-10, 1e-9, zt, at)
+            c, r, nf = _lm(codes, nonneg, residual, cands[i], (zlo, zhi),
+                           (geo, glcg, sw, yw), (max_iter, 1e-10, 1e-9), zt, at)
         n_evals += nf
         if c < cb:
             cb = c
@@ -1927,7 +2282,7 @@ def global_search(codes, nonneg, residual, geo, glcg, power, weights, levels, gr
         if fast:
             sc = _tl_scan_costs(zb, axes, pts, gstart, glcg, nonneg, residual, ws)
         else:
-            sc = _costs(codes, nonneg, residual, scan, geo, glcg, sw, yw)
+            sc = _costs(codes, nonneg, residual, scan, (geo, glcg, sw, yw))
         n_evals += scan.shape[0]
         n_axis = axes.shape[1]
         extra = np.empty((p + n_hops, p))
@@ -1951,11 +2306,11 @@ def global_search(codes, nonneg, residual, geo, glcg, power, weights, levels, gr
             for q in range(p):
                 extra[i, q] = min(max(extra[i, q], zlo[q]), zhi[q])
             if fast:
-                c, r, nf = _tl_lm(nonneg, residual, extra[i], zlo, zhi, pts, gstart, glcg,
-                                  max_iter, 1e-10, 1e-9, zt, at, ws)
+                c, r, nf = _tl_lm(nonneg, residual, extra[i], (zlo, zhi),
+                                  (pts, gstart, glcg), (max_iter, 1e-10, 1e-9), zt, at, ws)
             else:
-                c, r, nf = _lm(codes, nonneg, residual, extra[i], zlo, zhi, geo, glcg, sw,
-                               yw, max_iter, 1e-10, 1e-9, zt, at)
+                c, r, nf = _lm(codes, nonneg, residual, extra[i], (zlo, zhi),
+                               (geo, glcg, sw, yw), (max_iter, 1e-10, 1e-9), zt, at)
             n_evals += nf
             n_starts += 1
             if c < best_c:
@@ -1974,7 +2329,9 @@ def global_search(codes, nonneg, residual, geo, glcg, power, weights, levels, gr
 
 @njit(cache=True)
 def jacobian_full(codes, z, alpha, geo, glcg, sw):
-    """The Jacobian in (z, alpha) of the weighted model, for the covariance: (n, P + L)."""
+    """The Jacobian in (z, alpha) of the weighted model, for the covariance: (n, P + L).
+    Where the share saturates both share columns are the specular lobe (a point exactly
+    at its threshold counts as unsaturated: there the derivative sees ``u_as``)."""
     n = sw.size
     p = z.size
     pp, ll = _sizes(codes, codes.size)
@@ -1984,9 +2341,13 @@ def jacobian_full(codes, z, alpha, geo, glcg, sw):
     dbp = np.empty((ll, p))
     gval = np.empty((glcg.size, 3))
     _group_values(z, glcg, gval)
+    u = _share_at_normal(alpha)
     out = np.empty((n, p + ll))
     for j in range(n):
         _point(codes, z, j, geo, gval, True, b, db, bp, dbp)
+        s = gval[geo[7][j], 0]
+        if _saturates(u, s, True):
+            _saturate_point(b, db, s, geo[2][j], True)
         for q in range(p):
             acc = 0.0
             for col in range(ll):
@@ -1998,8 +2359,28 @@ def jacobian_full(codes, z, alpha, geo, glcg, sw):
 
 
 @njit(cache=True)
+def _saturate_point(b, db, s, lcg, deriv):
+    """One point's basis (and derivative) where the share saturates: both share columns
+    ``b0 + (b1 - b0) / s`` (models.base.saturated_column), whose derivative along
+    ``v_as`` loses the share's own (``s = cos^v_as gamma``, ``lcg = ln cos gamma``)."""
+    t = 1.0 / s
+    diff = b[1] - b[0]
+    sat = b[0] + diff * t
+    b[0] = sat
+    b[1] = sat
+    if deriv:
+        for q in range(db.shape[1]):
+            d = db[0, q] + (db[1, q] - db[0, q]) * t
+            db[0, q] = d
+            db[1, q] = d
+        db[0, 0] -= diff * t * lcg
+        db[1, 0] = db[0, 0]
+
+
+@njit(cache=True)
 def predict(codes, z, alpha, geo, glcg):
-    """The model (unweighted) at every point of ``geo``."""
+    """The model (unweighted) at every point of ``geo``, the share saturated where
+    ``u_as cos^v_as(gamma) >= 1``."""
     n = geo[0].size
     p = z.size
     pp, ll = _sizes(codes, codes.size)
@@ -2007,9 +2388,13 @@ def predict(codes, z, alpha, geo, glcg):
     db = np.empty((ll, p))
     gval = np.empty((glcg.size, 3))
     _group_values(z, glcg, gval)
+    u = _share_at_normal(alpha)
     out = np.empty(n)
     for j in range(n):
         _point(codes, z, j, geo, gval, False, b, db, b, db)
+        s = gval[geo[7][j], 0]
+        if _saturates(u, s, False):
+            _saturate_point(b, db, s, 0.0, False)
         acc = 0.0
         for col in range(ll):
             acc += b[col] * alpha[col]
@@ -2043,21 +2428,27 @@ def _profile_table(geo, weights, power, nd_grid, ns_grid):
     return out
 
 
+#: Products per point and shared candidate (:func:`_shared_products`): x0 x0, x0 x1, x1 x1,
+#: x0 y, x1 y (the sums of _tl_fill).
+_SHARED = 5
+
+
 @njit(cache=True, error_model="numpy", fastmath=_SUMS)
 def _shared_products(cands, geo, glcg, sw, yw):
     """For every point (table order) and candidate row of the plain two-lobe model, the
-    products whose sums over a subset's points are its Gram matrix and right-hand side:
-    x0 x0, x0 x1, x1 x1, x0 y, x1 y (x: the weighted basis, y: the weighted power), as
-    (n, 5 * candidates). Shared candidates are then scored on any subset without an
-    exponential."""
+    products whose sums over a subset's points at each angle of incidence are that
+    angle's sums of the linear step (see _tl_fill; x: the weighted basis, y: the
+    weighted power), as (n, _SHARED * candidates). Shared candidates are then scored on
+    any subset without an exponential."""
     n = sw.size
     c_count = cands.shape[0]
-    out = np.empty((n, 5 * c_count))
+    out = np.empty((n, _SHARED * c_count))
     gval = np.empty((glcg.size, 5))
     lct_all, pt_all, lcp_all, pp_all, group = geo[3], geo[4], geo[5], geo[6], geo[7]
     for c in range(c_count):
         z = cands[c]
         _tl_group_values(z, glcg, gval)
+        o = _SHARED * c
         for j in range(n):
             g = group[j]
             a = lexp(gval[g, 1] * lct_all[j]) * (1.0 if pt_all[j] else 0.0)
@@ -2068,35 +2459,37 @@ def _shared_products(cands, geo, glcg, sw, yw):
             x0 = ld * w
             x1 = (ld + gval[g, 0] * (ls - ld)) * w
             y = yw[j]
-            out[j, 5 * c] = x0 * x0
-            out[j, 5 * c + 1] = x0 * x1
-            out[j, 5 * c + 2] = x1 * x1
-            out[j, 5 * c + 3] = x0 * y
-            out[j, 5 * c + 4] = x1 * y
+            out[j, o] = x0 * x0
+            out[j, o + 1] = x0 * x1
+            out[j, o + 2] = x1 * x1
+            out[j, o + 3] = x0 * y
+            out[j, o + 4] = x1 * y
     return out
 
 
 @njit(cache=True, error_model="numpy")
-def _subset_sums(mask, weights, yw, pgroup, qtab, shared, sums, gsums):
+def _subset_sums(mask, weights, groups, tables, out):
     """A subset's sums of its points' rows: the per-angle decomposition's products per
-    level (points of positive weight, ``sums``) and the shared candidates' (``gsums``);
-    returns the subset's y'y (weighted)."""
+    level (points of positive weight, ``out[0]``; ``groups[0]``: each point's level) and
+    the shared candidates' per angle of incidence (``out[1]``, (G, _SHARED *
+    candidates); ``groups[1]``: each point's angle). ``tables``: the batch's
+    (:func:`_profile_table`, :func:`_shared_products`)."""
+    pgroup, egroup = groups
+    qtab, shared = tables
+    sums, gsums = out
     sums[:, :] = 0.0
-    gsums[:] = 0.0
+    gsums[:, :] = 0.0
     width = sums.shape[1]
-    n_shared = gsums.size
-    yy = 0.0
+    n_shared = gsums.shape[1]
     for j in range(mask.size):
         if mask[j]:
-            y = yw[j]
-            yy += y * y
+            g = egroup[j]
             for i in range(n_shared):
-                gsums[i] += shared[j, i]
+                gsums[g, i] += shared[j, i]
             if weights[j] > 0.0:
                 gi = pgroup[j]
                 for i in range(width):
                     sums[gi, i] += qtab[j, i]
-    return yy
 
 
 @njit(cache=True)
@@ -2129,7 +2522,7 @@ def subset_search(codes, nonneg, residual, geo, glcg, power, weights, masks, lev
     pts = np.empty((_TL_ROWS, n))
     gstart = np.empty(glcg.size + 1, np.int64)
     lgroup = np.empty(n, np.int64)
-    ws = tl_work(n)
+    ws = tl_work(n, glcg.size)
     if codes.size == 0:
         # the plain two-lobe model: every point's products of the per-angle decomposition
         # and of the shared candidates, once for the whole batch
@@ -2138,13 +2531,13 @@ def subset_search(codes, nonneg, residual, geo, glcg, power, weights, masks, lev
     else:
         qtab = np.zeros((0, 0))
         shared = np.zeros((0, 0))
-    sums = np.empty((levels.size, _profile_width(nd_grid.size, ns_grid.size)))
-    gsums = np.empty(5 * n_screen)
+    sums = (np.empty((levels.size, _profile_width(nd_grid.size, ns_grid.size))),
+            np.empty((glcg.size, _SHARED * n_screen)))
     for bi in range(b_count):
         _one_subset(codes, nonneg, residual, geo, glcg, power, weights, sw, yw, masks[bi],
                     levels, group, nd_grid, ns_grid, ext_first, clipped, zlo, zhi, n_keep,
                     n_data_starts, max_iter, ftol, z_out[bi], a_out[bi], c_out, conv,
-                    nfev_each, bi, pts, gstart, lgroup, ws, qtab, shared, sums, gsums)
+                    nfev_each, bi, pts, gstart, lgroup, ws, qtab, shared, sums)
     return z_out, a_out, c_out, conv, nfev_each.sum()
 
 
@@ -2152,20 +2545,20 @@ def subset_search(codes, nonneg, residual, geo, glcg, power, weights, masks, lev
 def _one_subset(codes, nonneg, residual, geo, glcg, power, weights, sw_all, yw_all, mask,
                 levels, group, nd_grid, ns_grid, ext_first, clipped, zlo, zhi, n_keep,
                 n_data_starts, max_iter, ftol, z_row, a_row, c_out, conv, nfev_each, bi, pts,
-                gstart, lgroup, ws, qtab, shared, sums, gsums):
+                gstart, lgroup, ws, qtab, shared, sums):
     p = zlo.size
     pp, ll = _sizes(codes, codes.size)
     fast = codes.size == 0
     count = tl_points(geo, glcg.size, sw_all, yw_all, weights, power, mask, pts, gstart,
                       lgroup, group)
-    yy = 0.0
+    _tl_set_yy(pts, gstart, ws[12][0])
     if fast:  # sums of the subset's rows of the batch's tables
-        yy = _subset_sums(mask, weights, yw_all, group, qtab, shared, sums, gsums)
+        _subset_sums(mask, weights, (group, geo[7]), (qtab, shared), sums)
         counts = np.zeros(levels.size, np.int64)
         for j in range(mask.size):
             if mask[j] and weights[j] > 0.0:
                 counts[group[j]] += 1
-        prof, ok = _profile_pick(sums, counts, nd_grid, ns_grid)
+        prof, ok = _profile_pick(sums[0], counts, nd_grid, ns_grid)
     else:
         prof, ok = _tl_profile(pts, count, lgroup, levels.size, nd_grid, ns_grid)
     data = _profile_starts(levels, prof, ok)
@@ -2180,13 +2573,16 @@ def _one_subset(codes, nonneg, residual, geo, glcg, power, weights, sw_all, yw_a
     if fast:
         costs = np.empty(cands.shape[0])
         costs[:n_data] = _tl_costs(cands[:n_data], pts, gstart, glcg, nonneg, residual, ws)
+        gsums = sums[1]
+        gsum = ws[12][0]
+        s_g = ws[12][4]
         for i in range(n_screen):
-            o = 5 * i
-            c, few = _gram_cost(gsums[o], gsums[o + 1], gsums[o + 2], gsums[o + 3],
-                                gsums[o + 4], yy, nonneg[0], nonneg[1], residual)
-            if few:  # a near-perfect candidate: its residuals themselves
-                c = _tl_costs(clipped[i:i + 1], pts, gstart, glcg, nonneg, residual, ws)[0]
-            costs[n_data + i] = c
+            o = _SHARED * i
+            for g in range(glcg.size):
+                for c in range(_SHARED):
+                    gsum[g, c] = gsums[g, o + c]
+                s_g[g] = fexp(clipped[i, 0] * glcg[g])
+            costs[n_data + i] = _tl_gram_cost(clipped[i], s_g, pts, gstart, glcg, ws)
         sub = geo
         sw = sw_all
         yw = yw_all
@@ -2200,7 +2596,7 @@ def _one_subset(codes, nonneg, residual, geo, glcg, power, weights, sw_all, yw_a
         sub = _take(geo, idx)
         sw = sw_all[idx]
         yw = yw_all[idx]
-        costs = _costs(codes, nonneg, residual, cands, sub, glcg, sw, yw)
+        costs = _costs(codes, nonneg, residual, cands, (sub, glcg, sw, yw))
     nfev = cands.shape[0]
     order = _stable_order(costs)
     data_order = _stable_order(costs[:n_data])
@@ -2219,11 +2615,11 @@ def _one_subset(codes, nonneg, residual, geo, glcg, power, weights, sw_all, yw_a
         if again:
             continue
         if fast:
-            c, r, nf = _tl_lm(nonneg, residual, cands[s], zlo, zhi, pts, gstart, glcg,
-                              max_iter, ftol, 1e-9, zt, at, ws)
+            c, r, nf = _tl_lm(nonneg, residual, cands[s], (zlo, zhi), (pts, gstart, glcg),
+                              (max_iter, ftol, 1e-9), zt, at, ws)
         else:
-            c, r, nf = _lm(codes, nonneg, residual, cands[s], zlo, zhi, sub, glcg, sw, yw,
-                           max_iter, ftol, 1e-9, zt, at)
+            c, r, nf = _lm(codes, nonneg, residual, cands[s], (zlo, zhi), (sub, glcg, sw, yw),
+                           (max_iter, ftol, 1e-9), zt, at)
         nfev += nf
         if c < best:
             best = c
@@ -2326,6 +2722,7 @@ def tl_finish(z, alpha, geo, glcg, weights, power, absolute_sigma, cost, n_param
     _tl_group_values(z, glcg, gval)
     lcg_all, lct_all, pt_all, lcp_all, pp_all, group = geo[2], geo[3], geo[4], geo[5], \
         geo[6], geo[7]
+    u = _share_at_normal(alpha)
     for j in range(n):
         g = group[j]
         s = gval[g, 0]
@@ -2341,6 +2738,16 @@ def tl_finish(z, alpha, geo, glcg, weights, power, absolute_sigma, cost, n_param
         ds = ns * (b / TWO_PI + ls * lcp_all[j])
         oms = 1.0 - s
         w = math.sqrt(weights[j])
+        if _saturates(u, s, True):  # a_s = 1: K L_s (jacobian_full's saturated rows)
+            fitted[j] = ls * (a0 + a1)
+            jfull[j, 0] = 0.0
+            jfull[j, 1] = 0.0
+            jfull[j, 2] = 0.0
+            jfull[j, 3] = ds * (a0 + a1) * w
+            jfull[j, 4] = ds * lcg * (a0 + a1) * w
+            jfull[j, 5] = ls * w
+            jfull[j, 6] = ls * w
+            continue
         b1 = ld + s * diff
         fitted[j] = ld * a0 + b1 * a1
         jfull[j, 0] = (0.0 * a0 + s * diff * lcg * a1) * w
@@ -2520,8 +2927,8 @@ def tl_fit(gamma_deg, theta_deg, power, sigma, use_sigma, n_params, nonneg, resi
     units of power (tl_finish). Returns (status, z, alpha and cost (search units), the
     scale, reason, n_starts, n_evals, the exact angles of incidence, finished, values, round_trip_ok,
     fitted, r2, rmse, mse, covariance, singular, standard errors, residuals, all values
-    finite, the largest specular share at the angles of incidence, whether judge() would
-    flag anything: a value at a bound ``plo``/``phi`` or ill-determined)."""
+    finite, whether judge() would flag anything: a value at a bound ``plo``/``phi`` or
+    ill-determined)."""
     n = power.size
     p = zlo.size
     status = 0
@@ -2590,9 +2997,8 @@ def tl_fit(gamma_deg, theta_deg, power, sigma, use_sigma, n_params, nonneg, resi
         cov = np.full((k, k), np.nan)
         singular = np.zeros(k, np.bool_)
     # what fit() reports besides: standard errors, residuals, whether every value is
-    # finite, the largest specular share u_as cos^v_as(gamma) at the angles of incidence,
-    # and whether judge() has anything to say of the values (its tests, on the same
-    # numbers)
+    # finite, and whether judge() has anything to say of the values (its tests, on the
+    # same numbers)
     stderr = np.empty(k)
     finite = True
     flagged = False
@@ -2611,12 +3017,8 @@ def tl_fit(gamma_deg, theta_deg, power, sigma, use_sigma, n_params, nonneg, resi
         if not math.isfinite(e) or e > abs(x) or singular[q]:
             flagged = True
     resid = power - fitted
-    share = -math.inf
-    for g in range(exact.size):
-        v = values[0] * math.cos(abs(exact[g])) ** values[1]
-        share = max(share, v) if v == v else math.inf
     return (status, z, alpha, cost, scale, reason, n_starts, n_evals, exact, finished, values,
-            ok, fitted, r2, rmse, mse, cov, singular, stderr, resid, finite, share, flagged)
+            ok, fitted, r2, rmse, mse, cov, singular, stderr, resid, finite, flagged)
 
 
 def warm() -> None:
@@ -2645,15 +3047,22 @@ def warm() -> None:
         fit_subsets(g, t, p, masks, engine="compiled")
 
 
-@njit(cache=True, error_model="numpy", fastmath=_SUMS)
+@njit(cache=True, error_model="numpy")
 def _tl_ss(pts, m, vec, a0, a1):
     """Sum of squared differences between the power (row 8 of ``pts``) and the plain
-    two-lobe model whose block values are in rows 5..9 of ``vec``."""
+    two-lobe model whose block values are in rows 5..9 of ``vec`` (the share saturated
+    where ``u_as cos^v_as(gamma) >= 1``)."""
     ss = 0.0
+    k = a0 + a1
+    u = a1 / k if k > 0.0 else 0.0
     for j in range(m):
         ld = vec[8, j] * (lexp(vec[5, j] * pts[0, j]) * pts[1, j])
         ls = vec[9, j] * (lexp(vec[6, j] * pts[2, j]) * pts[3, j])
-        r = pts[8, j] - (ld * a0 + (ld + vec[7, j] * (ls - ld)) * a1)
+        s = vec[7, j]
+        if _saturates(u, s, False):
+            r = pts[8, j] - ls * k
+        else:
+            r = pts[8, j] - (ld * a0 + (ld + s * (ls - ld)) * a1)
         ss += r * r
     return ss
 

@@ -18,6 +18,10 @@ class DataError(IrreflectError):
     """A measurement table that cannot be used as it is."""
 
 
+class SceneError(IrreflectError):
+    """A room scene or material file that cannot be used as it is."""
+
+
 class UnknownNameError(IrreflectError):
     """A model, selector, extension or other registry name that does not exist."""
 

@@ -35,8 +35,9 @@ from .models import (
     get_model,
     parse_spec,
 )
+from .models.base import saturate_rows, saturated_column, share_factor
 from .models.extensions import Extension, _start_rows
-from .models.paper import _two_lobe_validity
+from .models.paper import specular_share
 from .validation import check_angles_deg, check_seed, check_subset_inputs, short_list
 
 # ----------------------------------------------------------------------------- core solver
@@ -127,22 +128,144 @@ def _solve_linear(bw, yw, nonneg, residual=None):
 def _evaluate(model, geom, z, sw, yw):
     """Basis, optimal linear coefficients, residuals and cost for a batch of ``z``."""
     basis, dbasis = model.basis(geom, z, True)
-    bw = basis * sw[:, :, None]
+    factor = share_factor(z, geom) if model.share_cap else None
+    state = _linear_step(model, basis, sw, yw, factor)
+    if factor is not None:
+        state["v_as"] = np.array(np.broadcast_to(np.asarray(z, float)[:, 0],
+                                                 state["cost"].shape))
+        dbasis = _capped_dbasis(basis, dbasis, factor, geom, state)
+    state["dbasis"] = dbasis
+    return state
+
+
+def _plain_step(model, bw, yw):
+    """The linear step without a share cap: ``(alpha, free, inv, resid, cost)``."""
     alpha, free, inv = _solve_linear(bw, yw, model.alpha_nonneg,
                                      model.options.get("residual_column"))
     resid = yw - (bw @ alpha[:, :, None])[:, :, 0]
     cost = 0.5 * np.einsum("ij,ij->i", resid, resid)
     cost[~np.isfinite(cost)] = np.inf
-    if not free.all():
-        bw = bw * free[:, None, :]
-    return {"dbasis": dbasis, "bw": bw, "alpha": alpha, "inv": inv, "resid": resid, "cost": cost}
+    return alpha, free, inv, resid, cost
+
+
+def _linear_step(model, basis, sw, yw, factor=None):
+    """The optimal linear coefficients of a batch of bases ``(M, n, L)`` (unweighted; ``sw``
+    the square roots of the weights), as a state: ``alpha`` (the model's coefficients),
+    ``alpha_j`` (those of the effective basis, for the Jacobian), ``bw`` (the effective
+    weighted basis, fixed columns zeroed), ``inv``, ``resid``, ``cost``.
+
+    A model whose specular share saturates (``share_cap``; ``factor`` = ``cos^v_as(gamma)``
+    per point, ``(M, n)``) is piecewise linear in its first two coefficients ``(K (1 - u),
+    K u)``: the rows where ``u factor >= 1`` take the saturated column
+    (:func:`~irreflect.models.base.saturated_column`) in both. Which rows those are is set
+    by ``u`` alone, through the thresholds ``tau = 1 / factor`` of the angles of incidence
+    with ``factor > 1``: between two consecutive thresholds the model is linear, so the
+    step solves each interval's problem (non-negative least squares, kept when its ``u``
+    lies in the interval) and each threshold's (``u = tau``: one column
+    ``(1 - tau) b0 + tau b1``) and keeps the lowest cost. The cost over ``(K, u)`` is
+    piecewise quadratic and need not be convex, hence every interval; an optimum at a
+    threshold (the share exactly 1 at a measured angle) is found as one."""
+    bw = basis * sw[:, :, None]
+    if factor is None:
+        alpha, free, inv, resid, cost = _plain_step(model, bw, yw)
+        return {"bw": np.where(free[:, None, :], bw, 0.0) if not free.all() else bw,
+                "alpha": alpha, "alpha_j": alpha, "inv": inv, "resid": resid, "cost": cost}
+    m, n, n_lin = bw.shape
+    factor = np.broadcast_to(factor, (m, n))
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+        tau = np.where(factor > 1.0, 1.0 / factor, np.inf)
+    thresholds = np.sort(tau, axis=1)
+    repeat = np.zeros_like(thresholds, bool)
+    repeat[:, 1:] = thresholds[:, 1:] == thresholds[:, :-1]
+    thresholds = np.sort(np.where(repeat, np.inf, thresholds), axis=1)
+    count = np.isfinite(thresholds).sum(axis=1)
+    k_max = int(count.max()) if m else 0
+    thresholds = np.concatenate([thresholds[:, :k_max], np.full((m, 1), np.inf)], axis=1)
+    sat_col = saturated_column(bw, factor)
+    best = {"cost": np.full(m, np.inf), "alpha": np.zeros((m, n_lin)),
+            "alpha_j": np.zeros((m, n_lin)), "free": np.zeros((m, n_lin), bool),
+            "inv": np.zeros((m, n_lin, n_lin)), "resid": np.array(yw, float, copy=True),
+            "bw": np.zeros_like(bw), "tau": np.full(m, np.nan), "lower": np.zeros(m)}
+
+    def keep(rows, ok, cost, alpha, alpha_j, free, inv, resid, bwe, tau, lower):
+        better = ok & (cost < best["cost"][rows])
+        if not better.any():
+            return
+        r = rows[better]
+        for key, value in (("cost", cost), ("alpha", alpha), ("alpha_j", alpha_j),
+                           ("free", free), ("inv", inv), ("resid", resid), ("bw", bwe),
+                           ("tau", tau), ("lower", lower)):
+            best[key][r] = value[better]
+
+    for k in range(k_max + 1):
+        rows = np.flatnonzero(count >= k)
+        lower = thresholds[rows, k - 1] if k else np.zeros(rows.size)
+        upper = np.minimum(thresholds[rows, k], 1.0)
+        sat = tau[rows] <= lower[:, None]
+        bk = bw[rows].copy()
+        col = np.where(sat, sat_col[rows], 0.0)
+        bk[..., 0] = np.where(sat, col, bk[..., 0])
+        bk[..., 1] = np.where(sat, col, bk[..., 1])
+        alpha, free, inv, resid, cost = _plain_step(model, bk, yw[rows])
+        total = alpha[:, 0] + alpha[:, 1]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            u = np.where(total > 0, alpha[:, 1] / np.where(total > 0, total, 1.0), lower)
+        inside = (u >= lower) & (u <= upper)
+        keep(rows, inside, cost, alpha, alpha, free, inv, resid, bk * free[:, None, :],
+             np.full(rows.size, np.nan), lower)
+        if k == 0:
+            continue
+        # the threshold itself: u = lower, one column (1 - u) b0 + u b1
+        br = bk.copy()
+        br[..., 0] = (1.0 - lower)[:, None] * bk[..., 0] + lower[:, None] * bk[..., 1]
+        br[..., 1] = 0.0
+        alpha_r, free_r, inv_r, resid_r, cost_r = _plain_step(model, br, yw[rows])
+        alpha_t = alpha_r.copy()
+        alpha_t[:, 0] = alpha_r[:, 0] * (1.0 - lower)
+        alpha_t[:, 1] = alpha_r[:, 0] * lower
+        keep(rows, np.ones(rows.size, bool), cost_r, alpha_t, alpha_r, free_r, inv_r, resid_r,
+             br * free_r[:, None, :], lower, lower)
+    return best
+
+
+def _capped_dbasis(basis, dbasis, factor, geom, state):
+    """The derivative (unweighted, ``(M, n, L, P)``) of the effective basis the linear step
+    of a saturating share chose (:func:`_linear_step`): saturated rows carry the
+    saturated column's derivative in both share columns; at a threshold ``tau = 1 /
+    cos^v_as(gamma*)`` the one column ``(1 - tau) b0 + tau b1`` moves with ``v_as``
+    through ``tau`` too: ``d tau / d v_as = -tau ln cos gamma* = tau ln(tau) / v_as``."""
+    shape = basis.shape[:2]
+    factor = np.broadcast_to(factor, shape)
+    with np.errstate(divide="ignore"):
+        tau_pt = np.where(factor > 1.0, 1.0 / np.where(factor > 1.0, factor, 1.0), np.inf)
+    sat = tau_pt <= state["lower"][:, None]
+    ray = np.flatnonzero(np.isfinite(state["tau"]))
+    if not sat.any() and not ray.size:
+        return dbasis
+    lcg = np.broadcast_to(geom.log_cos_gamma, shape)
+    out = np.array(np.broadcast_to(dbasis, basis.shape + dbasis.shape[-1:]), copy=True)
+    safe = np.where(factor > 0, factor, 1.0)
+    d_sat = out[..., 0, :] + (out[..., 1, :] - out[..., 0, :]) / safe[..., None]
+    d_sat[..., 0] -= (basis[..., 1] - basis[..., 0]) / safe * lcg
+    out[..., 0, :] = np.where(sat[..., None], d_sat, out[..., 0, :])
+    out[..., 1, :] = np.where(sat[..., None], d_sat, out[..., 1, :])
+    if ray.size:
+        t = state["tau"][ray][:, None]
+        b0 = np.where(sat[ray], saturated_column(basis[ray], factor[ray]), basis[ray, :, 0])
+        b1 = np.where(sat[ray], b0, basis[ray, :, 1])
+        comb = (1.0 - t[..., None]) * out[ray, :, 0, :] + t[..., None] * out[ray, :, 1, :]
+        comb[..., 0] += (b1 - b0) * (t * np.log(t) / state["v_as"][ray][:, None])
+        out[ray, :, 0, :] = comb
+        out[ray, :, 1, :] = 0.0
+    return out
 
 
 def _kaufman_jacobian(state, sw):
     """Jacobian of the projected residual with respect to ``z`` (Kaufman 1975):
-    ``-(I - P_B) dB/dz alpha``, with ``P_B`` the projection on the free basis columns."""
+    ``-(I - P_B) dB/dz alpha``, with ``P_B`` the projection on the free basis columns (of
+    the effective basis: see :func:`_linear_step`)."""
     bw = state["bw"]
-    dbasis, alpha = state["dbasis"], state["alpha"]
+    dbasis, alpha = state["dbasis"], state["alpha_j"]
     jm = dbasis[:, :, 0, :] * alpha[:, None, 0:1]
     for col in range(1, alpha.shape[1]):
         jm += dbasis[:, :, col, :] * alpha[:, None, col : col + 1]
@@ -368,6 +491,26 @@ class FitResult:
         gamma_deg, theta_deg = check_angles_deg(gamma_deg, theta_deg)
         return model.predict_deg(self.values, gamma_deg, theta_deg)
 
+    @property
+    def saturated_gammas_deg(self) -> np.ndarray:
+        """The measured angles of incidence (|gamma|, degrees) where the fitted specular
+        share is 1 (:func:`irreflect.models.paper.specular_share`): there the reflection
+        is all specular. Empty for a model without a saturating share."""
+        model = self.model_object or get_model(self.model)
+        if not model.share_cap:
+            return np.empty(0)
+        g = np.unique(np.abs(self.gamma_deg))
+        share = specular_share(self.values[0], self.values[1], np.cos(np.radians(g)))
+        return g[share >= 1.0]
+
+    def verdict(self):
+        """What R^2 cannot say: per angle of incidence whether the specular lobe is resolved
+        and the shape reproduced, and the coefficients' checks
+        (:class:`irreflect.verdict.FitVerdict`)."""
+        from .verdict import fit_verdict
+
+        return fit_verdict(self)
+
     def polar_errors(self) -> dict[float, float]:
         """Relative polar-area error (section 5.3) per angle of incidence, in percent."""
         return metrics.polar_area_errors(
@@ -393,12 +536,16 @@ class FitResult:
             "ill_determined": list(self.ill_determined),
             "warnings": list(self.warnings),
             "retried": self.retried,
+            "verdict": self.verdict().to_dict(),
         }
 
     def report(self, warnings: bool = True) -> str:
-        """Readable fit report: coefficients with errors, quality, per-gamma polar error,
-        then (with ``warnings``) the warnings, one line each."""
+        """Readable fit report: the verdict first (:meth:`verdict`), then coefficients with
+        errors, quality, the verdict per angle of incidence, then (with ``warnings``) the
+        warnings, one line each."""
+        verdict = self.verdict()
         lines = [
+            verdict.summary(),
             f"model {self.model}: {self.n_points} points, {self.n_params} parameters, "
             f"{self.n_starts} starts, {self.nfev} evaluations, {self.fit_ms:.1f} ms",
             f"{self.message}",
@@ -415,8 +562,12 @@ class FitResult:
             lines.append(f"reduced chi^2 = {self.chi2_reduced:.4g} (weighted by 1/sigma^2)")
         errors = self.polar_errors()
         if errors:
-            lines.append("relative polar-area error per angle of incidence (section 5.3):")
+            lines.append("relative polar-area error per angle of incidence (section 5.3, the "
+                         "model at the measured receivers):")
             lines.append("  " + "  ".join(f"{g:g} deg: {e:.2f}%" for g, e in errors.items()))
+        lines.append("per angle of incidence (the model's continuous curve; lobe half width "
+                     "and the receivers within one and two half widths of the mirror):")
+        lines += ["  " + row for row in verdict.table()]
         if warnings:
             lines += [f"warning: {w}" for w in self.warnings]
         return "\n".join(lines)
@@ -432,10 +583,28 @@ def _fitted_and_jacobian(model, z, alpha, gamma, theta, weights, engine=None, kg
         geo, glcg = (kgeo if kgeo is not None else _kernel_geometry(gamma, theta))[:2]
         return (_kernel.predict(codes, _w(z), _w(alpha), geo, glcg),
                 _kernel.jacobian_full(codes, _w(z), _w(alpha), geo, glcg, _w(np.sqrt(weights))))
+    geom = Geometry.of(gamma[None], theta[None])
     with np.errstate(over="ignore", under="ignore", invalid="ignore", divide="ignore"):
-        basis, dbasis = model.basis(Geometry.of(gamma[None], theta[None]), z[None], True)
+        basis, dbasis = model.basis(geom, z[None], True)
+        if model.share_cap:  # the saturated rows' basis and derivative (the unsaturated
+            # side of a threshold: there both sides give the same curve)
+            factor = share_factor(z[None], geom)
+            sat = saturate_rows(basis, factor, alpha[None], strict=True)
+            state = {"lower": np.atleast_1d(_saturation_level(alpha, strict=True)),
+                     "tau": np.full(1, np.nan)}
+            dbasis = _capped_dbasis(basis, dbasis, factor, geom, state)
+            basis = sat
     jz = np.einsum("mnlp,ml->mnp", dbasis, alpha[None])[0]
     return basis[0] @ alpha, np.concatenate([jz, basis[0]], axis=1) * np.sqrt(weights)[:, None]
+
+
+def _saturation_level(alpha, strict: bool = False) -> float:
+    """The largest threshold ``tau`` the share at ``alpha`` has passed: rows with
+    ``1 / cos^v_as(gamma) <= u`` saturate, so the share at normal incidence ``u``
+    (slightly less with ``strict``: a row exactly at its threshold counts as below it)."""
+    k = alpha[0] + alpha[1]
+    u = alpha[1] / k if k > 0 else 0.0
+    return u * (1.0 - 1e-9) if strict else u
 
 
 def _covariance(model, z, alpha, jfull, absolute_sigma, cost, n_points):
@@ -572,19 +741,15 @@ def _screen_costs(model, geom, z, sw, yw):
 def _screen_piece(model, geom, z, sw, yw):
     with np.errstate(over="ignore", under="ignore", invalid="ignore", divide="ignore"):
         basis, _ = model.basis(geom, z, False)
-    return _projected_cost(model, basis, sw, yw)
+    return _projected_cost(model, basis, sw, yw,
+                           share_factor(z, geom) if model.share_cap else None)
 
 
-def _projected_cost(model, basis, sw, yw):
-    """Cost after eliminating the linear coefficients, for basis values ``(M, n, L)``."""
+def _projected_cost(model, basis, sw, yw, factor=None):
+    """Cost after eliminating the linear coefficients, for basis values ``(M, n, L)``
+    (``factor``: the share's ``cos^v_as(gamma)`` per point when it saturates)."""
     with np.errstate(over="ignore", under="ignore", invalid="ignore", divide="ignore"):
-        bw = basis * sw[:, :, None]
-        alpha, _, _ = _solve_linear(bw, yw, model.alpha_nonneg,
-                                    model.options.get("residual_column"))
-        resid = yw - (bw @ alpha[:, :, None])[:, :, 0]
-        cost = 0.5 * np.einsum("ij,ij->i", resid, resid)
-    cost[~np.isfinite(cost)] = np.inf
-    return cost
+        return _linear_step(model, basis, sw, yw, factor)["cost"]
 
 
 def _diverse_best(z, cost, k, lo, hi, min_distance=0.08):
@@ -1289,6 +1454,13 @@ def retry_reasons(result) -> tuple[str, ...]:
         reasons.append(f"R^2 {result.r2:.4g} < {RETRY_R2:g}")
     if result.sigma is not None and result.chi2_reduced > RETRY_CHI2:
         reasons.append(f"reduced chi^2 {result.chi2_reduced:.4g} > {RETRY_CHI2:g}")
+    saturated = result.saturated_gammas_deg
+    if saturated.size:
+        # where the share is 1 the curve no longer sees u_as and v_as: the landscape has
+        # basins the unsaturated law has not (wild_material seeds 212, 1811: a grazing
+        # angle saturated at 1.4x the generating coefficients' cost, no other sign)
+        reasons.append("the specular share saturates at |gamma| = "
+                       + ", ".join(f"{g:g}" for g in saturated) + " deg")
     return tuple(reasons)
 
 
@@ -1379,12 +1551,10 @@ def _fit_search(meas, model, t0, *, seed, n_random_starts, n_screen, n_keep,
             kgeo = _kernel_geometry(gamma, theta)
             finish = (*_kernel.tl_finish(_w(zb), _w(ab), kgeo[0], kgeo[1], _w(weights),
                                          _w(power), sigma is not None, cb, model_obj.n_params),
-                      None, None, None, math.inf)
-        (values, round_trip, fitted, r2, rmse, mse, cov, singular, stderr, resid, finite,
-         share) = finish
-        # the two-lobe model's check (a specular share above 1) cannot warn below 1
-        validity = not (share <= 1.0 and model_obj.options.get("validity") is
-                        _two_lobe_validity)
+                      None, None, None)
+        (values, round_trip, fitted, r2, rmse, mse, cov, singular, stderr, resid,
+         finite) = finish
+        validity = "validity" in model_obj.options
     else:
         values = model_obj.to_natural(zb[None], ab[None])[0]
         round_trip = None
@@ -1571,8 +1741,13 @@ def fit_subsets(gamma_deg, theta_deg, power, masks, model="two-lobe", *, sigma=N
         gathered = basis_all[:, order, :].transpose(1, 0, 2, 3)  # (B, C, n_max, L)
         k = len(cands)
         rep_k = lambda a: np.repeat(a, k, axis=0)  # noqa: E731
+        factor = None
+        if model_obj.share_cap:  # (B, C, n_max): each candidate's v_as at each subset's gammas
+            with np.errstate(over="ignore", under="ignore"):
+                factor = np.exp(cands[None, :, :1] * np.log(np.cos(g))[:, None, :])
+            factor = factor.reshape(b * k, n_max)
         cost_shared = _projected_cost(model_obj, gathered.reshape(b * k, n_max, -1), rep_k(sw),
-                                      rep_k(sw * y)).reshape(b, k)
+                                      rep_k(sw * y), factor).reshape(b, k)
         parts_z.append(np.broadcast_to(cands, (b,) + cands.shape))
         parts_cost.append(cost_shared)
     all_cands = np.concatenate(parts_z, axis=1)

@@ -247,3 +247,44 @@ def wild_material(seed: int) -> SyntheticTable:
     meas = Measurements(gamma_deg=g, theta_deg=t, power=power,
                         sigma=s if with_sigma else None, name=f"wild-{kind}-{seed}")
     return SyntheticTable(meas, "two-lobe", params, clean, kind, "wild", seed)
+
+
+def saturating_material(seed: int, noise: float = 0.01) -> SyntheticTable:
+    """A glossy two-lobe table whose specular share saturates: ``a_s = min(1, u_as
+    cos^v_as(gamma))`` reaches 1 at one or more of its angles of incidence (a share of the
+    reflected power cannot exceed it; beyond, the reflection is all specular). The draws
+    of issue 22: ``u_as`` 0.02 to 0.6, ``v_as`` -2.5 to 0.5 (redrawn until the share
+    saturates at a measured angle), 3 to 6 angles of incidence of 5 to 70 deg, the
+    largest at least 55 deg; lobe index ``u_ns`` 150 to 6000 (log-uniform), ``v_ns`` -1 to
+    1; a sparse grid: receivers every 5 to 15 deg with a random offset, plus, on half the
+    tables, one point within 1.5 deg of the mirror; 1 % proportional noise. Neither
+    :func:`synthetic_material` nor :func:`wild_material` saturates: their share is kept
+    below 0.9 and 0.95."""
+    seed = check_seed(seed)
+    rng = np.random.default_rng(20_000 + seed)
+    n_gamma = int(rng.integers(3, 7))
+    gammas = np.sort(rng.choice(np.arange(5.0, 71.0, 1.0), n_gamma - 1, replace=False))
+    gammas = -np.unique(np.r_[gammas, rng.uniform(55.0, 70.0)].round(1))
+    for _ in range(1000):
+        u_as, v_as = rng.uniform(0.02, 0.6), rng.uniform(-2.5, 0.5)
+        if np.max(u_as * np.cos(np.radians(gammas)) ** v_as) > 1.0:
+            break
+    step = float(rng.uniform(5.0, 15.0))
+    near = rng.random() < 0.5
+    g_all, t_all = [], []
+    for gamma in gammas:
+        theta = np.arange(-85.0, 85.1, step) + rng.uniform(0, step)
+        theta = theta[np.abs(theta) <= 85.0]
+        if near:
+            theta = np.r_[theta, -gamma + rng.uniform(-1.5, 1.5)]
+        theta = np.unique(np.round(theta, 2))
+        g_all.append(np.full(theta.size, gamma))
+        t_all.append(theta)
+    g, t = np.concatenate(g_all), np.concatenate(t_all)
+    params = np.array([u_as, v_as, 10 ** rng.uniform(-0.3, 0.5), rng.uniform(-1.0, 2.0),
+                       10 ** rng.uniform(np.log10(150.0), np.log10(6000.0)),
+                       rng.uniform(-1.0, 1.0), 10 ** rng.uniform(-2, 2)])
+    clean = two_lobe_power(np.radians(g), np.radians(t), *params)
+    meas = Measurements(gamma_deg=g, theta_deg=t, power=_noisy(clean, rng, noise),
+                        name=f"saturating-{seed}")
+    return SyntheticTable(meas, "two-lobe", params, clean, "saturating", "sparse", seed)

@@ -24,10 +24,15 @@ def _room(args) -> int:
 
         check_scheduler_address(args.scheduler)
     out = Path(args.out)
-    scene = load_scene(args.scene)
+    from ..data import resolve_scene
+    from ..room.checks import material_notes
+
+    scene = load_scene(resolve_scene(args.scene))
     brdf = args.brdf or scene.settings.get("brdf")
     if brdf is not None:
         scene = scene.with_brdf(brdf)
+    for line in material_notes(scene, allow_unphysical=args.allow_unphysical):
+        print(line)
     _warn_materials(scene)
     result = simulate(scene, method=args.method, bounces=args.bounces, cell_m=args.cell,
                       rays=args.rays, seed=args.seed, time_resolution_ns=args.dt,
@@ -105,7 +110,7 @@ def register(sub) -> None:
                     "next-event estimation) for every emitter-receiver pair of a scene; writes "
                     "summary/bounces/impulse_response as CSV and Parquet, run.json and figures "
                     "to --out. Options override the scene's [simulation] table.")
-    p.add_argument("scene", metavar="SCENE.toml", help="scene file (see datasets/rooms/office.toml)")
+    p.add_argument("scene", metavar="SCENE.toml", help="scene file (TOML), or the name of a bundled scene (office; see 'irreflect datasets')")
     p.add_argument("--out", required=True, metavar="DIR", help="output folder")
     p.add_argument("--method", choices=("recursive", "montecarlo"), default=None,
                    help="reflections by Barry's recursive method or Monte Carlo (default: the "
@@ -129,6 +134,9 @@ def register(sub) -> None:
                         "(default: local)")
     p.add_argument("--workers", type=POSITIVE_INT, default=None,
                    help="local worker processes for the receivers (default 1)")
+    p.add_argument("--allow-unphysical", action="store_true",
+                   help="simulate a material whose model predicts negative power in the room "
+                        "(clipped to 0; default: refused)")
     p.add_argument("--no-figures", action="store_true", help="numbers only")
     p.add_argument("--quiet", action="store_true",
                    help="no progress display (a bar on a terminal, lines through a pipe)")

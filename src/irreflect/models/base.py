@@ -99,6 +99,12 @@ class ReflectionModel:
     #: bounds, clipped to [-15, 15] on each coordinate).
     screen_lower: np.ndarray | None = None
     screen_upper: np.ndarray | None = None
+    #: The paper's specular share saturates (:func:`irreflect.models.paper.specular_share`):
+    #: the first two linear coefficients are ``K (1 - u)`` and ``K u`` of a share
+    #: ``a = min(1, u s)`` with ``s = cos^z[0](gamma)``, and where ``u s >= 1`` both
+    #: columns of the basis become the specular lobe alone (:func:`saturate_rows`). The
+    #: fitter then solves the linear step over the share's saturation patterns.
+    share_cap: bool = False
 
     def screen_box(self) -> tuple[np.ndarray, np.ndarray]:
         lo = self.screen_lower if self.screen_lower is not None else np.maximum(self.z_lower, -15.0)
@@ -132,9 +138,18 @@ class ReflectionModel:
         g = np.broadcast_to(gamma, shape).reshape(1, -1)
         t = np.broadcast_to(theta, shape).reshape(1, -1)
         z, alpha = self.from_natural(np.atleast_2d(params))
-        basis, _ = self.basis(Geometry.of(g, t), z, False)
+        basis = self.curve_basis(Geometry.of(g, t), z, alpha)
         out = np.einsum("bnl,bl->bn", basis, alpha)
         return out[0].reshape(shape) if single else out
+
+    def curve_basis(self, geom, z, alpha) -> np.ndarray:
+        """The basis ``(B, n, L)`` whose product with ``alpha`` is the model's curve: the
+        separable basis, with the saturated rows of a saturating share
+        (:func:`saturate_rows`) where the model has one."""
+        basis, _ = self.basis(geom, z, False)
+        if self.share_cap:
+            basis = saturate_rows(basis, share_factor(z, geom), alpha)
+        return basis
 
     def predict_deg(self, params, gamma_deg, theta_deg) -> np.ndarray:
         """Same as :meth:`predict` with angles in degrees."""
@@ -151,6 +166,55 @@ class ReflectionModel:
         rows = [f"{self.name}: {self.formula}"]
         rows += [f"  {p.name:<8} [{p.unit}] {p.description}" for p in self.params]
         return "\n".join(rows)
+
+
+def cap_share(share):
+    """The rule of the specular share everywhere in irreflect: it saturates at 1,
+    ``min(share, 1)`` (a share of the reflected power cannot exceed it; below 1 the
+    paper's law, Eq. 15, unchanged). The fitter's linear step, its compiled kernel, the
+    models' predictions, the protocol designs, the diagnosis and the room all go through
+    it (the kernel compiles this very function)."""
+    return np.minimum(share, 1.0)
+
+
+def share_factor(z, geom) -> np.ndarray:
+    """``s = cos^v_as(gamma)`` at every point of ``geom`` for every row of ``z`` (its first
+    coordinate is ``v_as``): the factor of the specular share ``a_s = min(1, u_as s)``,
+    ``(B, n)``."""
+    with np.errstate(over="ignore", under="ignore", invalid="ignore"):
+        return np.exp(np.asarray(z, float)[:, :1] * geom.log_cos_gamma)
+
+
+def saturated_column(basis, s):
+    """The value both share columns take where the share saturates: from the unsaturated
+    columns ``b0 = L_d`` and ``b1 = L_d + s (L_s - L_d)`` (times whatever factor an
+    extension applies to both), ``b0 + (b1 - b0) / s = L_s``. ``basis`` (..., n, L), ``s``
+    (..., n) with ``s > 0`` wherever the share can saturate (``s > 1``)."""
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return basis[..., 0] + (basis[..., 1] - basis[..., 0]) / np.where(s > 0, s, 1.0)
+
+
+def saturate_rows(basis, s, alpha, strict: bool = False):
+    """The basis of a model with a saturating share (:attr:`ReflectionModel.share_cap`)
+    at the linear coefficients ``alpha`` (B, L): where ``u s >= 1`` (``u = alpha_1 /
+    (alpha_0 + alpha_1)``, the share at normal incidence), both share columns are the
+    specular lobe, so the curve is ``K L_s`` there (Eq. 19 with ``a_s = 1``). With
+    ``strict``, a row exactly at its threshold (``u s = 1``, the same curve either way)
+    keeps the unsaturated columns: the side whose derivative sees ``u``."""
+    alpha = np.asarray(alpha, float)
+    k = alpha[:, 0] + alpha[:, 1]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        u = np.where(k > 0, alpha[:, 1] / np.where(k > 0, k, 1.0), 0.0)
+    sat = cap_share(u[:, None] * s) >= 1.0
+    if strict:
+        sat &= u[:, None] * s > 1.0 + 1e-9
+    if not sat.any():
+        return basis
+    basis = np.array(basis, float, copy=True)
+    col = saturated_column(basis, s)
+    basis[..., 0] = np.where(sat, col, basis[..., 0])
+    basis[..., 1] = np.where(sat, col, basis[..., 1])
+    return basis
 
 
 def _col(z, k):

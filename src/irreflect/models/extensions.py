@@ -224,6 +224,7 @@ def apply_extension(base: ReflectionModel, ext: Extension) -> ReflectionModel:
                                      np.maximum(np.asarray(ext.z_lower, float), -15.0)]),
         screen_upper=np.concatenate([base.screen_box()[1],
                                      np.minimum(np.asarray(ext.z_upper, float), 15.0)]),
+        share_cap=base.share_cap,
     )
 
 

@@ -50,12 +50,15 @@ class ReportContext:
     out_dir : the report folder; write figures with :meth:`figure_path`
     quick : small budgets (tests); sections must finish in seconds when set
     seed : seed for everything random
-    paper_dir : ``../shared/paper/tables`` when present, else None
+    paper_dir : the paper's published tables (:func:`irreflect.paper.paper_tables_dir`,
+        shipped with the package); None leaves the paper's columns out
     progress : callable(str) that advances the run's progress display
     reconstructions : names of the datasets that are the bundled reconstructions (the
         paper's Table 3 model plus Gaussian noise); every other dataset was measured
     scene : a room scene (TOML) for the sections of :data:`~irreflect.report.sections.SCENE_SECTIONS`
         (``irreflect reproduce --scene``), else None
+    allow_unphysical : simulate a scene material whose model predicts negative power
+        (else refused, :func:`irreflect.room.checks.material_notes`)
     """
 
     datasets: dict[str, Measurements]
@@ -67,6 +70,7 @@ class ReportContext:
     progress: Callable[[str], None] = lambda message: None
     reconstructions: frozenset = frozenset()
     scene: Path | str | None = None
+    allow_unphysical: bool = False
 
     def is_reconstruction(self, name: str) -> bool:
         """True for a bundled reconstruction, False for a measured table."""

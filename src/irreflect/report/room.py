@@ -18,6 +18,7 @@ import pandas as pd
 from ..fitting import fit
 from ..paper import real_data_dir
 from ..plots.room import plot_bounce_gains, plot_impulse_response, plot_map, plot_material_3d, save
+from ..room.checks import material_notes
 from ..room.engine import simulate
 from ..room.materials import from_model
 from ..room.results import safe_name, summary_table
@@ -86,6 +87,11 @@ def section(ctx: ReportContext) -> Section:
     rays = 1500 if ctx.quick else int(scene.settings.get("rays", 20000))
     bounces = int(scene.settings.get("bounces", 3))
     tables, figures, md = {}, {}, []
+    notes = material_notes(scene, ctx.allow_unphysical)
+    if notes:  # what the materials' own fits said of them
+        md.append("What the scene's materials say of their own fits (their material files' "
+                  "verdicts and warnings, `irreflect fit --save`):\n\n```\n"
+                  + "\n".join(notes) + "\n```\n")
 
     # the scene
     rows = [{"surface": face, "material": name, "source": scene.materials[name].source,
@@ -127,7 +133,7 @@ def section(ctx: ReportContext) -> Section:
     variants, glossy_note = _variants(scene, ctx.quick)
     results = []
     for label, variant in variants:
-        ctx.progress(f"room: {label[:30]}")
+        ctx.progress(f"room: {label}")  # whole: a line per step through a pipe
         res = simulate(variant, method="montecarlo", bounces=bounces, rays=rays, seed=ctx.seed)
         results.append((label, res, summary_table(res)))
     rows = []

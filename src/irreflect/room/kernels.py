@@ -40,6 +40,8 @@ from collections import namedtuple
 import numpy as np
 from numba import njit
 
+from ..models.base import cap_share
+
 #: nodes of the per-gamma tables (albedo, normalisation) over [0, 90] deg
 N_GAMMA = 257
 GAMMA_NODES = np.linspace(0.0, np.pi / 2, N_GAMMA)
@@ -355,11 +357,17 @@ def _tangent(d, n, cos_g):
     return (0.0, 0.0, 0.0)
 
 
+#: the specular share's one rule (:func:`irreflect.models.base.cap_share`: it saturates at 1),
+#: compiled from the very function the models and the fitter call
+_cap_share = hot(cap_share)
+
+
 @hot
 def paper_share(mats, m, lcg):
-    """The two-lobe specular share ``min(1, u_as cos^v_as(gamma))`` (0 below)."""
+    """The two-lobe specular share ``min(1, u_as cos^v_as(gamma))`` (0 below), by
+    :func:`~irreflect.models.base.cap_share`."""
     a = mats.share[m, 0] * math.exp(mats.share[m, 1] * lcg)
-    return min(max(a, 0.0), 1.0)
+    return _cap_share(max(a, 0.0))
 
 
 @hot

@@ -42,7 +42,8 @@ the total reflectance times the incident power, ``f = rho(gamma) s / S(gamma)`` 
 integral of ``s`` over the hemisphere (or ``f = K s``, ``rho(gamma) = K S(gamma)``); in the
 plane of incidence it is exactly the fitted curve up to that per-gamma scale. The fitted
 share and index laws are used up to the largest measured angle of incidence and held
-constant beyond it; the specular share saturates at 1.
+constant beyond it; the specular share saturates at 1 by irreflect's one rule,
+:func:`irreflect.models.base.cap_share` (the kernels compile the same function).
 
 Both forms reflect nothing below the surface, and in both the reciprocal family's fit and
 the paper's laws use ``min(1, u_as cos^v_as(gamma))`` for the two-lobe share.
@@ -62,6 +63,7 @@ import numpy as np
 from .._atomic import atomic_path
 from ..errors import IrreflectError
 from ..models import get_model
+from ..models.base import cap_share
 from . import reciprocal as _recip
 from .kernels import (  # noqa: F401  (the table constants are re-exported)
     GAMMA_NODES,
@@ -326,9 +328,13 @@ def from_model(model, params: dict, reflectance, *, name: str = "material",
         requested = rho
         K = 1.0
     lobes, share = _lobes_for(model_obj.name, values)
+    metadata = dict(metadata or {})
+    unphysical = negative_power(model_obj, values, gmax)
+    if unphysical:
+        metadata["unphysical"] = unphysical
     base = dict(name=name, source=source or f"{spec} {values}", reflectance=rho, scale=scale,
                 model=spec, params=values, stderr=stderr, gamma_max_rad=float(gmax),
-                metadata=dict(metadata or {}), requested=requested)
+                metadata=metadata, requested=requested)
     if lobes is not None:
         paper = Material(kind=KIND_LOBES, lobes=lobes, share=share, brdf="paper", **base)
         S = lobe_hemisphere_integral(lobes, share, gmax, GAMMA_NODES)
@@ -340,6 +346,45 @@ def from_model(model, params: dict, reflectance, *, name: str = "material",
     if brdf == "paper":
         return _with_scale(paper, S, K)
     return _reciprocal(paper, K)
+
+
+def negative_power(model_obj, values: dict, gamma_max: float) -> str | None:
+    """Where a model predicts negative power in the range a room uses it (in the plane of
+    incidence, ``|gamma| <= gamma_max`` radians, ``|theta| < 90`` deg): one line, or None.
+    A negative reflection is unphysical; the room would clip it to 0 and so simulate
+    another curve than the one fitted."""
+    params = np.array([values[k] for k in model_obj.param_names], float)
+    g = np.linspace(0.0, gamma_max, 60)
+    t = np.radians(np.linspace(-89.5, 89.5, 359))
+    G, T = np.meshgrid(g, t, indexing="ij")
+    with np.errstate(all="ignore"):
+        p = np.asarray(model_obj.predict(params, -G, T), float)
+    finite = np.isfinite(p)
+    if not finite.any():
+        return "it predicts no finite power in the room's range"
+    peak = np.max(np.abs(p[finite]))
+    low = np.where(finite, p, np.inf)
+    i = np.unravel_index(int(np.argmin(low)), low.shape)
+    if low[i] >= -1e-9 * peak:
+        return None
+    return (f"its model predicts negative power ({low[i]:.3g}, {abs(low[i]) / peak:.2%} of the "
+            f"peak) at gamma = {np.degrees(G[i]):.3g} deg, theta = {np.degrees(T[i]):.3g} deg; "
+            f"{int(np.sum(low < -1e-9 * peak))} of {low.size} in-plane directions are negative")
+
+
+def fit_notes(mat: Material) -> list[str]:
+    """What the fit behind a material said of itself (its material file's verdict and
+    warnings, see ``irreflect fit --save``) and whether its model predicts negative power
+    in the room: the lines ``irreflect room`` prints for every material it uses."""
+    meta = mat.metadata or {}
+    lines = []
+    verdict = meta.get("verdict")
+    if isinstance(verdict, dict) and verdict.get("summary"):
+        lines.append(str(verdict["summary"]))
+    lines += [f"warning: {w}" for w in (meta.get("warnings") or [])]
+    if meta.get("unphysical"):
+        lines.append(f"UNPHYSICAL: {meta['unphysical']}")
+    return lines
 
 
 def _check_reflects(mat: Material, S: np.ndarray) -> None:
@@ -656,7 +701,7 @@ def lobe_law_values(lobes, share, gamma_max, gamma):
     g = np.minimum(np.abs(np.asarray(gamma, float)), gamma_max)
     cg = np.cos(g)[:, None]
     u_a, v_a = share
-    a = np.clip(u_a * cg ** v_a, 0.0, 1.0)
+    a = cap_share(np.maximum(u_a * cg ** v_a, 0.0))  # the one share rule of irreflect
     w = np.maximum(lobes[:, 1] + lobes[:, 2] * a, 0.0)
     n = np.clip(lobes[:, 3] * cg ** lobes[:, 4], 0.0, 1e6)
     return w, n
@@ -717,6 +762,10 @@ def save_material(result, path, *, data_file=None, wavelength_nm=None, notes=Non
         "wavelength_nm": None if wavelength_nm is None else float(wavelength_nm),
         "notes": notes or "",
     }
+    verdict = result.verdict()
+    doc["trustworthy"] = verdict.trustworthy
+    doc["verdict"] = verdict.to_dict()
+    doc["warnings"] = list(result.warnings)
     if not np.all(np.isfinite(result.values)):
         raise IrreflectError(f"{path}: the fit has non-finite coefficients; nothing written")
     with atomic_path(path, "--save") as tmp:
@@ -762,7 +811,9 @@ def load_material(path, *, name: str | None = None, reflectance=None) -> Materia
                       source=f"{path.name} ({doc['model']})", stderr=doc.get("stderr"),
                       gamma_max_deg=gmax,
                       metadata={k: doc.get(k) for k in ("r2", "data_file", "wavelength_nm",
-                                                        "notes", "gamma_range_deg")})
+                                                        "notes", "gamma_range_deg",
+                                                        "trustworthy", "verdict",
+                                                        "warnings")})
 
 
 _LAMBERTIAN_RE = re.compile(r"^\s*lambertian\s*\(\s*([^)]*)\)\s*$", re.IGNORECASE)
@@ -780,6 +831,6 @@ def parse_lambertian(text: str):
 
 
 __all__ = ["Material", "lambertian", "from_model", "with_brdf", "load_material", "save_material",
-           "BRDFS", "PAPER_WARNING", "check_brdf",
+           "BRDFS", "PAPER_WARNING", "check_brdf", "fit_notes", "negative_power",
            "lobe_fraction_above", "lobe_hemisphere_integral", "parse_lambertian",
            "MATERIAL_FORMAT", "MATERIAL_FORMAT_VERSION"]

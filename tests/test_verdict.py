@@ -1,0 +1,181 @@
+"""A fit's verdict (issue 22, part 2): what R^2 cannot fool, carried into material files
+and printed by the room commands."""
+
+from __future__ import annotations
+
+import json
+import warnings
+
+import numpy as np
+import pytest
+
+from irreflect import fit
+from irreflect.cli import main
+from irreflect.data import Measurements, load_bundled
+from irreflect.errors import FitWarning
+from irreflect.models import two_lobe_power
+
+ROOM = """
+[scene]
+name = "tiny"
+[room]
+size_m = [3.0, 3.0, 2.5]
+[room.materials]
+walls = "white"
+ceiling = "white"
+floor = "floor"
+[materials.white]
+lambertian = 0.7
+[materials.floor]
+file = "{file}"
+reflectance = 0.5
+[[emitter]]
+name = "lamp"
+position_m = [1.5, 1.5, 2.5]
+direction = [0, 0, -1]
+lambertian_order = 1
+power_w = 1.0
+[[receiver]]
+name = "rx"
+position_m = [0.5, 1.0, 0.8]
+direction = [0, 0, 1]
+area_m2 = 1e-4
+fov_deg = 85
+"""
+
+
+def _narrow_lobe_table(seed=0):
+    """An acrylic-like table: a specular lobe of index 6000 (half width 0.9 deg) on a
+    goniometer grid of 10 deg with one receiver at the mirror: R^2 is high, the lobe's
+    width is not measured."""
+    p = (0.05, -1.5, 1.0, 0.3, 6000.0, 0.0, 1.0)
+    g, t = [], []
+    for gamma in (-15.0, -35.0, -55.0):
+        theta = np.unique(np.r_[np.arange(-75.0, 76.0, 10.0), -gamma])
+        g += [gamma] * theta.size
+        t += list(theta)
+    g, t = np.array(g), np.array(t)
+    clean = two_lobe_power(np.radians(g), np.radians(t), *p)
+    rng = np.random.default_rng(seed)
+    return Measurements(g, t, clean * (1 + 0.01 * rng.standard_normal(clean.size)),
+                        name="narrow")
+
+
+def _fit(meas):
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", FitWarning)
+        return fit(meas)
+
+
+def test_a_high_r2_with_an_unmeasured_lobe_width_is_not_trustworthy():
+    result = _fit(_narrow_lobe_table())
+    verdict = result.verdict()
+    assert result.r2 > 0.99  # what R^2 says
+    assert not verdict.trustworthy
+    assert {a.gamma_deg for a in verdict.unresolved} == {15.0, 35.0, 55.0}
+    for a in verdict.angles:
+        assert a.lobe_matters and a.lobe_points_1hw <= 1 and a.lobe_half_width_deg < 3
+    report = result.report()
+    assert report.splitlines()[0].startswith("verdict: NOT TRUSTWORTHY")
+    assert "specular lobe not resolved at |gamma| = 15 deg" in report
+    assert result.to_dict()["verdict"]["trustworthy"] is False
+
+
+def test_the_same_material_measured_across_its_lobe_is_trustworthy():
+    """The same lobe with receivers every 0.5 deg within 3 deg of the mirror."""
+    p = (0.05, -1.5, 1.0, 0.3, 6000.0, 0.0, 1.0)
+    g, t = [], []
+    for gamma in (-15.0, -35.0, -55.0):
+        theta = np.unique(np.r_[np.arange(-75.0, 76.0, 10.0),
+                                -gamma + np.arange(-3.0, 3.01, 0.5)])
+        g += [gamma] * theta.size
+        t += list(theta)
+    g, t = np.array(g), np.array(t)
+    clean = two_lobe_power(np.radians(g), np.radians(t), *p)
+    meas = Measurements(g, t, clean * (1 + 0.01 * np.random.default_rng(1).standard_normal(
+        clean.size)))
+    verdict = _fit(meas).verdict()
+    assert not verdict.unresolved
+    assert all(a.lobe_points_1hw >= 3 for a in verdict.angles)
+
+
+def test_terrazzo_is_trustworthy_and_its_verdict_leads_the_report():
+    result = fit(load_bundled("terrazzo"))
+    verdict = result.verdict()
+    assert verdict.trustworthy, verdict.summary()
+    assert max(a.polar_error_pct for a in verdict.angles) < 10
+    assert result.report().splitlines()[0].startswith("verdict: trustworthy")
+
+
+def test_fit_save_writes_the_verdict_and_warnings_and_room_prints_them(tmp_path, capsys):
+    table = tmp_path / "narrow.csv"
+    meas = _narrow_lobe_table()
+    import pandas as pd
+
+    pd.DataFrame({"gamma_deg": meas.gamma_deg, "theta_deg": meas.theta_deg,
+                  "power": meas.power}).to_csv(table, index=False)
+    material = tmp_path / "floor.json"
+    assert main(["fit", str(table), "--save", str(material)]) == 0
+    doc = json.loads(material.read_text())
+    assert doc["trustworthy"] is False
+    assert doc["verdict"]["summary"].startswith("verdict: NOT TRUSTWORTHY")
+    assert len(doc["verdict"]["angles"]) == 3
+    assert doc["warnings"] == list(_fit(meas).warnings)
+    scene = tmp_path / "tiny.toml"
+    scene.write_text(ROOM.format(file="floor.json"))
+    capsys.readouterr()
+    assert main(["room", str(scene), "--out", str(tmp_path / "out"), "--rays", "200",
+                 "--bounces", "1", "--no-figures", "--quiet"]) == 0
+    out = capsys.readouterr().out
+    assert "material 'floor' (floor.json (two-lobe)):" in out
+    assert "verdict: NOT TRUSTWORTHY" in out
+    for w in doc["warnings"]:
+        assert f"warning: {w}" in out
+
+
+def _unphysical_material(tmp_path):
+    """A hand-edited two-lobe n-lobe file: a negative share (outside the fit's bounds)."""
+    doc = {"format": "irreflect-material", "format_version": 1, "model": "n-lobe:2",
+           "params": {"t_1": 0.0, "n_1": 1.0, "a_1": 1.3, "t_2": 1.0, "n_2": 50.0,
+                      "a_2": -0.3, "K": 1.0},
+           "reflectance": 0.5, "gamma_range_deg": [10.0, 60.0]}
+    path = tmp_path / "floor.json"
+    path.write_text(json.dumps(doc))
+    scene = tmp_path / "tiny.toml"
+    scene.write_text(ROOM.format(file="floor.json"))
+    return scene
+
+
+def test_room_refuses_a_material_that_predicts_negative_power(tmp_path, capsys):
+    scene = _unphysical_material(tmp_path)
+    capsys.readouterr()
+    assert main(["room", str(scene), "--out", str(tmp_path / "out"), "--rays", "200",
+                 "--bounces", "1", "--no-figures", "--quiet"]) != 0
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "predicts negative power" in err[0]
+    assert "--allow-unphysical" in err[0]
+    assert not (tmp_path / "out").exists()
+    assert main(["room", str(scene), "--out", str(tmp_path / "out"), "--rays", "200",
+                 "--bounces", "1", "--no-figures", "--quiet", "--allow-unphysical"]) == 0
+    assert "UNPHYSICAL: its model predicts negative power" in capsys.readouterr().out
+
+
+def test_reproduce_refuses_it_too_before_any_work(tmp_path, capsys):
+    scene = _unphysical_material(tmp_path)
+    assert main(["reproduce", "--quick", "--out", str(tmp_path / "report"), "--no-progress",
+                 "--scene", str(scene)]) != 0
+    assert "predicts negative power" in capsys.readouterr().err
+    assert not (tmp_path / "report").exists()
+
+
+@pytest.mark.parametrize("model", ["two-lobe", "phong", "single-lobe"])
+def test_the_fitted_models_never_predict_negative_power(model):
+    from irreflect.models import get_model
+    from irreflect.room.materials import negative_power
+
+    result = _fit(_narrow_lobe_table())
+    if model != "two-lobe":
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", FitWarning)
+            result = fit(_narrow_lobe_table(), model)
+    assert negative_power(get_model(model), result.params, np.radians(89.5)) is None
