@@ -67,6 +67,8 @@ def _warn_materials(scene) -> None:
 
 
 def _report(result, summary) -> str:
+    import numpy as np
+
     scene = result.scene
     lines = [f"{scene.name}: {len(scene.emitters)} emitter(s), {len(scene.receivers)} receiver(s), "
              f"method {result.method}, {result.bounces} bounce(s)"
@@ -77,6 +79,12 @@ def _report(result, summary) -> str:
         lines.append(f"  Monte Carlo: {result.ray_bounces_per_s:,.0f} ray-bounces/s per process (tracing time only)")
     for name, mat in scene.materials.items():
         lines.append(f"  material {name}: {mat.describe()}")
+    est = np.array(list((result.error_estimate or {}).values()), float)
+    if est.size and np.isfinite(est).any():
+        worst = np.max(np.where(np.isfinite(est), est, 0.0), axis=0)
+        lines.append("  recursive method, estimated error per order (worst link, from a run at "
+                     "twice the cell size): " + ", ".join(
+                         f"{k} {100 * worst[k]:.2f} %" for k in range(1, len(worst))))
     for note in result.notes:
         lines.append(f"  note: {note}")
     singles = summary[summary.grid == ""]

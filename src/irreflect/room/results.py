@@ -85,8 +85,10 @@ def bounces_table(result) -> pd.DataFrame:
     import pandas as pd  # deferred: a room run without tables need not load it
 
     rows = []
+    est = result.error_estimate or {}
     for (e, r), link in sorted(result.links.items()):
         P = result.scene.emitters[e].power_w
+        err = est.get((e, r))
         for k in range(len(link.power_w)):
             p = float(link.power_w[k])
             rows.append({
@@ -96,6 +98,8 @@ def bounces_table(result) -> pd.DataFrame:
                 "mean_delay_ns": float(link.m1[k] / p * 1e9) if p > 0 else np.nan,
                 "reflected_power_fraction": (float(link.reflected_w[k - 1]) / P
                                              if k >= 1 else np.nan),
+                "estimated_error": (float(err[k]) if err is not None and k >= 1
+                                    else np.nan),
             })
     return pd.DataFrame(rows)
 
@@ -155,8 +159,10 @@ FILES = {
     "summary": "one row per emitter-receiver pair: DC gains (total, LoS, per reflection, "
                "Monte Carlo standard errors), mean delay and RMS delay spread (ns), phase error "
                "(deg) and range error (m) of phase-based ranging at the emitter's modulation",
-    "bounces": "one row per pair and order (0 = line of sight): DC gain, standard error, mean "
-               "delay (ns), power left after that many reflections per watt emitted",
+    "bounces": "one row per pair and order (0 = line of sight): DC gain, standard error (Monte "
+               "Carlo), mean delay (ns), power left after that many reflections per watt "
+               "emitted, and the recursive method's estimated relative error of the order "
+               "(from a run at twice the cell size; NaN for Monte Carlo)",
     "impulse_response": "h(t), non-zero bins only: t_ns is the START of each delay bin; the "
                         "bin holds the power (W) arriving in [t_ns, t_ns + dt) with dt = "
                         "time_resolution_ns of run.json",

@@ -706,9 +706,10 @@ def transfer(l0, l1, cells, tree, mats, ext, src, arr, knobs, stack):
 
     For each receiving cell the quadtree of every other surface it faces is walked from the
     root: a node is used as one source when it looks smaller than ``theta_open`` (its
-    longest side over its distance), is farther than NEAR sizes, lies wholly in front of the
-    cell, no box can cut the way and its light is a sum over its cells (not for light
-    straight from the emitter on lobed materials); otherwise its children are visited.
+    longest side over its distance), is farther than NEAR sizes of the receiving cell,
+    lies wholly in front of the cell, no box can cut the way and its light is a sum over
+    its cells (not for light straight from the emitter on lobed materials); otherwise its
+    children are visited.
     ``stack``: int64 work space (4096).
     """
     N = cells.pos.shape[0]
@@ -739,7 +740,7 @@ def transfer(l0, l1, cells, tree, mats, ext, src, arr, knobs, stack):
                 v = (src.cen[J, 0] - y[0], src.cen[J, 1] - y[1], src.cen[J, 2] - y[2])
                 dist = math.sqrt(dot(v, v))
                 split = (tree.size[J] > knobs.theta_open * dist
-                         or dist < NEAR * max(tree.size[J], size_l)
+                         or dist < NEAR * size_l
                          or exact_order0(knobs, ext, mats, m))
                 if not split:
                     side = _behind(tree, J, y, ny)
