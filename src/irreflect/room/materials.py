@@ -612,9 +612,15 @@ def _table_fidelity(paper: Material, shape: Material, terms, coef) -> dict:
 
 @functools.lru_cache(maxsize=32)
 def _read_table(path: str):
+    """The material's own table, read for the fidelity diagnostic only: what the reader
+    notes about it (slightly negative powers kept, ...) was said when it was fitted."""
+    import warnings
+
     from ..data import read_measurements
 
-    return read_measurements(path)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        return read_measurements(path)
 
 
 def _find_table(data_file) -> Path | None:
