@@ -38,7 +38,14 @@ from .models import (
 from .models.base import saturate_rows, saturated_column, share_factor
 from .models.extensions import Extension, _start_rows
 from .models.paper import specular_share
-from .validation import check_angles_deg, check_seed, check_subset_inputs, short_list
+from .validation import (
+    check_angles_deg,
+    check_fit_options,
+    check_seed,
+    check_starts,
+    check_subset_inputs,
+    short_list,
+)
 
 # ----------------------------------------------------------------------------- core solver
 _RIDGE = 1e-12
@@ -1404,7 +1411,13 @@ def fit(measurements, model="two-lobe", *, seed: int = 0, n_random_starts: int =
         beat a constant (R^2 <= 0).
     """
 
+    check_fit_options(seed=seed, n_random_starts=n_random_starts, n_screen=n_screen,
+                      n_keep=n_keep, n_data_starts=n_data_starts, use_sigma=use_sigma,
+                      max_iter=max_iter, max_rounds=max_rounds, polish=polish, n_hops=n_hops,
+                      retry=retry)
     spec = parse_spec(model) if isinstance(model, str) and "@" in model else None
+    extra_starts = check_starts(extra_starts, get_model(
+        spec.model_text if spec is not None else model).n_nonlinear)
     if spec is not None and spec.at_gamma_deg is not None:  # 'phong@10': one incidence
         sub = points_at_incidence(as_measurements(measurements), spec.at_gamma_deg, str(spec))
         result = fit(sub, spec.model_text, seed=seed, n_random_starts=n_random_starts,
@@ -1690,6 +1703,10 @@ def fit_subsets(gamma_deg, theta_deg, power, masks, model="two-lobe", *, sigma=N
     starts only, each subset's optimum is still that of its own points).
     """
     model_obj = get_model(model)
+    check_fit_options(seed=seed, max_iter=max_iter, ftol=ftol, n_screen=n_screen,
+                      n_keep=n_keep, data_starts=data_starts, n_data_starts=n_data_starts,
+                      scan=scan, exhaustive=exhaustive)
+    shared_starts = check_starts(shared_starts, model_obj.n_nonlinear, "shared_starts")
     seed = check_seed(seed)
     gamma_deg, theta_deg, power, masks, sigma = check_subset_inputs(gamma_deg, theta_deg, power,
                                                                     masks, sigma)

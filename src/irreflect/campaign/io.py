@@ -12,7 +12,9 @@ from pathlib import Path
 
 import pandas as pd
 
+from .._inputs import read_bytes
 from ..data import (
+    MAX_FILE_BYTES,
     Measurements,
     _check_columns,
     _decode,
@@ -41,15 +43,17 @@ def read_readings(path, *, average_duplicates: bool = False,
 
 def _header_only(path: Path) -> bool:
     """True when the table has column names and no rows (the names are checked)."""
-    if path.suffix.lower() in (".parquet", ".pq"):
-        df = _read_parquet(path)
+    if path.suffix.lower() in (".parquet", ".pq"):  # read within the table's limit
+        df = _read_parquet(path, read_bytes(path, str(path), "a CSV or Parquet measurement "
+                                            "table", MAX_FILE_BYTES))
         if len(df):
             return False
         _check_columns(df, str(path))
         return True
     if path.stat().st_size > 65536:
         return False
-    text = _decode(path.read_bytes(), path)
+    text = _decode(read_bytes(path, str(path), "a CSV or Parquet measurement table", 65536),
+                   path)
     lines = [line.split("#", 1)[0] for line in text.splitlines()]
     lines = [line for line in lines if line.strip()]
     if len(lines) != 1:

@@ -36,6 +36,7 @@ from .._progress import progress as progress_display
 from ..errors import IrreflectError
 from . import kernels as K
 from . import recursive as R
+from .checks import check_room_budget, check_simulate_arguments
 from .geometry import boxes_array, face_material_indices, line_of_sight
 from .materials import check_brdf
 from .results import summary_table, write_results
@@ -206,11 +207,13 @@ def simulate(scene: Scene, *, method=None, bounces=None, cell_m=None, rays=None,
         Recursive method: estimate each order's error from a run at twice the cell size
         (default True; about a tenth of the run's time).
     """
+    check_simulate_arguments(scene, scheduler, workers, threads)
     want = brdf or scene.settings.get("brdf")
     if want is not None:
         scene = scene.with_brdf(check_brdf(want))
     s = _resolve(scene, method=method, bounces=bounces, cell_m=cell_m, rays=rays, seed=seed,
                  time_resolution_ns=time_resolution_ns)
+    check_room_budget(scene, s, workers=workers)  # refused before any work when too large
     t0 = time.perf_counter()
     _, mats = scene.material_list()
     dt = s["time_resolution_ns"] * 1e-9
