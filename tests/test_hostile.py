@@ -507,7 +507,7 @@ def test_room_figures_take_any_name_as_plain_text(tmp_path):
 # ----------------------------------------------------------------------------- budgets
 @pytest.mark.parametrize("argv, option, bound", [
     (["room", "{scene}", "--rays", "1000000000000"], "--rays 1000000000000", "or less"),
-    (["room", "{scene}", "--method", "recursive", "--cell", "0.02"], "--cell 0.02", "or more"),
+    (["room", "{scene}", "--method", "recursive", "--cell", "0.005"], "--cell 0.005", "or more"),
     (["room", "{scene}", "--method", "recursive", "--cell", "1e-4"], "--cell 0.0001", "or more"),
     (["room", "{scene}", "--dt", "1e-9"], "--dt 1e-09", "or more"),
     (["select", "{data}", "--generations", "1000000000"], "--generations 1000000000", "or less"),
@@ -521,6 +521,7 @@ def test_every_budget_is_checked_before_the_work(office, data, tmp_path, monkeyp
                                                  option, bound):
     monkeypatch.setattr("irreflect.fitting._fit_search", _must_not_run)
     monkeypatch.setattr("irreflect.room.engine._run", _must_not_run)
+    monkeypatch.setattr("irreflect.room.recursive.prepare", _must_not_run)  # cells first
     argv = [a.format(scene=office, data=data, tmp=tmp_path) for a in argv]
     if argv[0] in ("room", "select"):
         argv += ["--out", str(tmp_path / "out")]
