@@ -524,6 +524,7 @@ def _reciprocal(paper: Material, K: float) -> Material:
     if rho_table.max() > 1.0 + 1e-6:  # cannot happen: g <= 1 / (s A0); a failed cap is a bug
         raise IrreflectError(f"material '{paper.name}': albedo {rho_table.max():.4g} > 1 after "
                              "the energy cap (internal error)")
+    rho_table = np.minimum(rho_table, 1.0)  # the cap leaves 1 + 2e-16 by rounding
     rho = None
     if paper.scale != "K":
         rho = float(np.trapezoid(rho_table * np.sin(2 * GAMMA_NODES), GAMMA_NODES))
