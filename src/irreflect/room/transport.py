@@ -953,20 +953,26 @@ def lobe_rays(j0, j1, cells, faces, mats, ext, src, arr, knobs, budget):
                         w *= w_factor(mats.tq[m, t], half_cos(i, o))
                     x, _ = _sub_point(cells, j, 2, k_origin % 4)
                     k_origin += 1
-                    x = (x[0] + 1e-9 * n[0], x[1] + 1e-9 * n[1], x[2] + 1e-9 * n[2])
-                    dist, nh, box, face = _intersect(x, o, faces.size, cells.boxes)
-                    if not dist < 1e300:
-                        continue
-                    surf = face if box < 0 else faces.boxsurf[box, face]
-                    if surf < 0:
-                        continue
-                    hp = (x[0] + dist * o[0], x[1] + dist * o[1], x[2] + dist * o[2])
-                    dst = cell_at(faces, surf, hp)
+                    dst, dist = _ray_cell(cells, faces, x, n, o)
                     if dst < 0:
                         continue
                     deposit(arr, ext, mats, cells, dst, unit * w,
                             _shift(tj, dist / C_LIGHT, knobs.omega), (-o[0], -o[1], -o[2]), knobs,
                             True)
+
+
+@hot_inline
+def _ray_cell(cells, faces, x, n, o):
+    """The cell a ray from ``x`` (lifted 1e-9 m along the normal ``n``) in direction ``o``
+    hits first, and the distance; (-1, 0) when it leaves through an opening or hits none."""
+    x = (x[0] + 1e-9 * n[0], x[1] + 1e-9 * n[1], x[2] + 1e-9 * n[2])
+    dist, _, box, face = _intersect(x, o, faces.size, cells.boxes)
+    if not dist < 1e300:
+        return -1, 0.0
+    surf = face if box < 0 else faces.boxsurf[box, face]
+    if surf < 0:
+        return -1, 0.0
+    return cell_at(faces, surf, (x[0] + dist * o[0], x[1] + dist * o[1], x[2] + dist * o[2])), dist
 
 
 @hot
@@ -994,15 +1000,7 @@ def map_rays(j0, j1, cells, faces, mats, ext, src, arr, knobs):
             o = _offset(_offset(scaled3(n, lz), a1, lx), a2, ly)
             x, _ = _sub_point(cells, j, 2, k % 4)
             k += 1
-            x = (x[0] + 1e-9 * n[0], x[1] + 1e-9 * n[1], x[2] + 1e-9 * n[2])
-            dist, nh, box, face = _intersect(x, o, faces.size, cells.boxes)
-            if not dist < 1e300:
-                continue
-            surf = face if box < 0 else faces.boxsurf[box, face]
-            if surf < 0:
-                continue
-            hp = (x[0] + dist * o[0], x[1] + dist * o[1], x[2] + dist * o[2])
-            dst = cell_at(faces, surf, hp)
+            dst, dist = _ray_cell(cells, faces, x, n, o)
             if dst < 0:
                 continue
             deposit(arr, ext, mats, cells, dst, val * omega_bin,
