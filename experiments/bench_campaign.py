@@ -91,15 +91,16 @@ def misfit_glossy(seed: int):
     return Measurements(gamma_deg=g, theta_deg=t, power=power, name=f"misfit-glossy-{seed}")
 
 
-def generated(n: int) -> list[tuple[str, str, int]]:
-    """(label, kind, seed) of the generated tables: ``n`` of each family."""
+def generated(n: int, first: int = 0) -> list[tuple[str, str, int]]:
+    """(label, kind, seed) of the generated tables: ``n`` of each family, seeds from
+    ``first`` (a new ``first`` gives tables no rule was tuned on)."""
     out = []
-    for seed in range(n):
+    for seed in range(first, first + n):
         out += [(f"glossy-{seed}", "glossy", seed), (f"matte-{seed}", "matte", seed),
                 (f"wild-{seed}", "wild", seed), (f"misfit-glossy-{seed}", "misfit", seed)]
     effects = ("incidence_reflectance", "offspecular_peak", "specular_halo", "angle_offset",
                "retroreflection", "bump")
-    for seed in range(max(1, n // 2)):
+    for seed in range(first, first + max(1, n // 2)):
         eff = effects[seed % len(effects)]
         out.append((f"hidden-{eff}-{seed}", f"hidden:{eff}", seed))
     return out
@@ -133,7 +134,7 @@ def _warm_worker():
 
 
 def run_one(job):
-    label, kind, source, generations, n_max = job
+    label, kind, source, generations, n_max, rule = job
     warnings.simplefilter("ignore")
     os.environ.setdefault("OMP_NUM_THREADS", "1")
     from irreflect.campaign import replay
@@ -146,7 +147,10 @@ def run_one(job):
                 "three or more is needed)"}
     t0 = time.perf_counter()
     try:
-        result = replay(meas, n_max=n_max, seed=0, generations=generations)
+        from irreflect.campaign.design import DEFAULT_RULE
+
+        result = replay(meas, n_max=n_max, seed=0, generations=generations,
+                        rule=rule or DEFAULT_RULE)
     except Exception as exc:  # noqa: BLE001 - reported in the table, the benchmark goes on
         return {"label": label, "kind": kind, "skipped": f"{type(exc).__name__}: {exc}"}
     c = result.curves
@@ -276,6 +280,12 @@ def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--generated", type=int, default=12,
                         help="tables of each generated family (default 12)")
+    parser.add_argument("--first-seed", type=int, default=0,
+                        help="seeds of the generated tables start here (default 0; the rule "
+                             "was tuned on 0-11: use e.g. 100 for tables it has not seen)")
+    parser.add_argument("--rule", nargs="+", metavar="KNOB=VALUE",
+                        help="change knobs of the adaptive rule (irreflect.campaign.DesignRule), "
+                             "e.g. range_weights=false misfit_min=0.06")
     parser.add_argument("--real-only", action="store_true")
     parser.add_argument("--generated-only", action="store_true")
     parser.add_argument("--data-dir", default=None,
@@ -290,6 +300,20 @@ def main(argv=None) -> int:
 
     from irreflect.data import real_data_dir
 
+    rule = None
+    if args.rule:
+        import dataclasses
+
+        from irreflect.campaign.design import DEFAULT_RULE
+
+        changes = {}
+        for item in args.rule:
+            key, _, value = item.partition("=")
+            current = getattr(DEFAULT_RULE, key)  # an unknown knob fails here, loudly
+            changes[key] = (value.lower() in ("1", "true", "yes") if isinstance(current, bool)
+                            else type(current)(value))
+        rule = dataclasses.replace(DEFAULT_RULE, **changes)
+        print(f"rule: {changes}")
     jobs_r, jobs_g = [], []
     if not args.generated_only:
         root = Path(args.data_dir) if args.data_dir else real_data_dir()
@@ -297,10 +321,10 @@ def main(argv=None) -> int:
             print("real data not found (../shared/datasets/real)", file=sys.stderr)
         else:
             for p in sorted(root.rglob("*.csv")):
-                jobs_r.append((p.stem, "file", str(p), args.generations, args.n_max))
+                jobs_r.append((p.stem, "file", str(p), args.generations, args.n_max, rule))
     if not args.real_only:
-        jobs_g = [(label, kind, seed, min(args.generations, 50), args.n_max)
-                  for label, kind, seed in generated(args.generated)]
+        jobs_g = [(label, kind, seed, min(args.generations, 50), args.n_max, rule)
+                  for label, kind, seed in generated(args.generated, args.first_seed)]
     t0 = time.perf_counter()
     print(f"{len(jobs_r)} real and {len(jobs_g)} generated tables, {args.workers} workers, "
           f"{args.n_max} readings per campaign", flush=True)

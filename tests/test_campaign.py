@@ -176,6 +176,60 @@ def test_a_real_glossy_paint_beats_the_paper_protocol(real_dir):
     assert result.curves["adaptive"].r2[12] >= result.reference_r2 - 0.01
 
 
+# ----------------------------------------------------------------------------- the fit
+def test_range_weights_give_each_reading_the_share_of_the_range_nearest_to_it():
+    from irreflect.campaign.core import range_weights
+
+    tool = Instrument(gammas_deg=(-20.0, -60.0), theta_min=-80, theta_max=80, theta_step=1.0)
+    rng = tool.settings()
+    # three readings crowded at the mirror of -20 deg, one alone at -60 deg
+    g = np.array([-20.0, -20.0, -20.0, -60.0])
+    t = np.array([19.0, 20.0, 21.0, 0.0])
+    w = range_weights(rng, g, t)
+    assert w.mean() == pytest.approx(1.0)
+    # the lone reading stands for (nearly) the whole row of -60 deg, the crowded ones for
+    # a share of the row of -20 deg: the middle one for a single setting
+    counts = w / w.sum() * len(rng)
+    assert counts[3] >= 0.9 * np.sum(rng[:, 0] == -60.0)
+    assert counts[1] == pytest.approx(1.0)
+    assert counts[0] > 30 and counts[2] > 30  # each the rest of its side of the row
+
+
+#: the 25 settings the campaign chose on the RGL satin (seed 0, before its fit weighed the
+#: readings): the 25th, 7 deg off the mirror at 69 deg, sits where the model misfits
+SATIN = [(0.0, 0.0), (-39.7407, 39.7407), (-68.7703, 68.7703), (0.0, -50.0),
+         (-68.7703, 0.0), (-68.7703, 67.7703), (-39.7407, 75.0), (0.0, 1.0),
+         (-59.3795, 60.8795), (-68.7703, 73.0), (-68.7703, 64.5203), (-49.9236, 46.4236),
+         (-68.7703, 71.7703), (-49.9236, 48.0), (-27.4879, 18.0), (-27.4879, 27.4879),
+         (-49.9236, 53.4236), (-59.3795, 57.6295), (0.0, -6.0), (-27.4879, 22.9879),
+         (-49.9236, -14.0), (-59.3795, 63.6295), (-27.4879, 31.2379), (-39.7407, 36.7407),
+         (-68.7703, 62.0)]
+
+
+def test_the_campaign_fit_is_not_dragged_by_one_reading_where_the_model_misfits(real_dir):
+    # equally weighted, the satin's 25 readings give R^2 0.963 on all points, below the
+    # all-points fit's 0.976 - 0.01: the last reading pulls the fit as much as a whole row
+    # of settings would; weighted by the range each stands for, they stay within 0.01
+    import irreflect
+    from irreflect import metrics
+
+    dense = read_measurements(real_dir / "rgl_epfl" / "rgl_satin_rosaline.csv")
+    source = DenseInstrument(dense)
+    s = np.array(SATIN)
+    power = source.read(s[:, 0], s[:, 1], np.random.default_rng(0))
+    readings = pd.DataFrame({"gamma_deg": s[:, 0], "theta_deg": s[:, 1], "power": power})
+    reference = irreflect.fit(dense, seed=0).r2
+    plain = irreflect.fit(Measurements(gamma_deg=s[:, 0], theta_deg=s[:, 1], power=power),
+                          seed=0)
+    assert metrics.r2(dense.power, plain.predict(dense.gamma_deg, dense.theta_deg)) \
+        < reference - 0.01
+    campaign = Campaign(source.instrument(), readings, seed=0)
+    assert campaign.r2_against(dense) >= reference - 0.01
+    # the result is a fit of the readings: no sigma was given, none is reported
+    assert campaign.fit.sigma is None and np.isnan(campaign.fit.chi2_reduced)
+    assert np.all(np.isfinite(campaign.fit.stderr))
+
+
 # ----------------------------------------------------------------------------- verdict
 def test_the_verdict_continues_until_the_curve_holds_then_stops():
     dense = _material(GLOSSY, step=2.0, noise=0.005, name="gloss")
@@ -279,6 +333,33 @@ def test_next_never_replaces_its_input(tmp_path):
     code, _, err = _run(["next", measured, "--out", measured])
     assert code == 2 and "input" in err
     assert measured.read_text() == "gamma_deg,theta_deg,power\n"
+
+
+def test_next_saves_the_campaign_fit_as_a_material_file(tmp_path):
+    measured = tmp_path / "measured.csv"
+    measured.write_text("gamma_deg,theta_deg,power\n")
+    material = tmp_path / "material.json"
+    args = ["--gammas", "-20", "-40", "-60", "--theta-min", "-70", "--theta-max", "70"]
+    # nothing fitted yet: one line, exit 2, no file
+    code, _, err = _run(["next", measured, *args, "--save", material])
+    assert code == 2 and err.count("\n") == 1 and "first fit needs 8" in err, err
+    assert not material.exists()
+    # 10 readings of the glossy material: the campaign's fit is written
+    tool = Instrument(gammas_deg=(-20, -40, -60), theta_min=-70, theta_max=70)
+    rows = pd.DataFrame(opening_design(tool, 10), columns=["gamma_deg", "theta_deg", "why"])
+    rows["power"] = two_lobe_power(np.radians(rows["gamma_deg"]), np.radians(rows["theta_deg"]),
+                                   *GLOSSY)
+    rows[["gamma_deg", "theta_deg", "power"]].to_csv(measured, index=False)
+    code, stdout, err = _run(["next", measured, *args, "--save", material])
+    assert code == 0, err
+    assert "wrote" in stdout and "campaign's fit of 10 readings" in stdout
+    saved = json.loads(material.read_text())
+    assert saved["format"] == "irreflect-material" and "verdict" in saved
+    expected = Campaign(tool, measured, seed=0).fit.values
+    assert np.allclose(list(saved["params"].values()), expected)
+    # never onto the input
+    code, _, err = _run(["next", measured, *args, "--save", measured])
+    assert code == 2 and "input" in err
 
 
 def test_campaign_command_prints_and_writes_the_replay(tmp_path):

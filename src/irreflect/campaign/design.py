@@ -63,6 +63,8 @@ class DesignRule:
     shift_sd : the lobe shifted along theta by this share of its half width (an angle
         offset or a tilted lobe; 0: off, no gain in the benchmark either)
     loo_misfit : weight of the leave-one-out refits' relative errors in the local misfit
+    range_weights : fit the readings weighted by the share of the range each stands for
+        (:func:`irreflect.campaign.core.range_weights`) to this power (0: equally)
     """
 
     coefficient_prior: float = 1.0
@@ -79,6 +81,7 @@ class DesignRule:
     tail_sd: float = 0.0
     shift_sd: float = 0.0
     loo_misfit: float = 0.5
+    range_weights: float = 1.0
 
 
 DEFAULT_RULE = DesignRule()

@@ -61,9 +61,19 @@ def _cmd_next(args) -> int:
                 Path(args.out).absolute() == Path(args.measured).absolute()):
             raise IrreflectError(f"--out {args.out} is the input table: write the proposals "
                                  "to another file (irreflect never replaces an input)")
-    claim = (claim_output(args.out, "file", "--out") if args.out is not None
-             else contextlib.nullcontext())
-    with claim:
+    if args.save is not None and (_same_file(args.save, args.measured) or (
+            Path(args.save).absolute() == Path(args.measured).absolute())):
+        raise IrreflectError(f"--save {args.save} is the input table: write the material to "
+                             "another file (irreflect never replaces an input)")
+    if args.save is not None and args.out is not None and (
+            Path(args.save).absolute() == Path(args.out).absolute()):
+        raise IrreflectError(f"--save and --out are both {args.out}: give two files")
+    with contextlib.ExitStack() as stack:
+        if args.out is not None:
+            stack.enter_context(claim_output(args.out, "file", "--out"))
+        if args.save is not None:
+            stack.enter_context(claim_output(args.save, "file", "--save",
+                                             suffixes=(".json",)))
         return _next(args)
 
 
@@ -81,6 +91,18 @@ def _next(args) -> int:
     campaign = Campaign(tool, readings, model=model.name, seed=args.seed, name=name)
     proposals = campaign.propose(args.n)
     verdict = campaign.verdict()
+    if args.save is not None:
+        if campaign.fit is None:
+            need = model.n_params + 1
+            raise IrreflectError(
+                f"--save: no fit of the readings to save yet ({campaign.n_measured} readings; "
+                f"the first fit needs {need}): measure the proposed settings first")
+        from ..room.materials import save_material
+
+        save_material(campaign.fit, args.save, data_file=args.measured,
+                      notes=f"adaptive campaign (irreflect next), {verdict.text}; the "
+                            "readings weighted by the share of the instrument's range each "
+                            "stands for")
     if args.out is not None:
         table = proposals[["gamma_deg", "theta_deg", "why"]].copy()
         table["new_gamma"] = proposals["new_gamma"].map({True: "yes", False: "no"})
@@ -93,7 +115,7 @@ def _next(args) -> int:
                "proposals": [{"gamma_deg": float(r.gamma_deg), "theta_deg": float(r.theta_deg),
                               "why": r.why, "new_gamma": bool(r.new_gamma),
                               "gain": float(r.gain)} for r in proposals.itertuples()],
-               "verdict": verdict.to_dict(), "out": args.out}
+               "verdict": verdict.to_dict(), "out": args.out, "save": args.save}
         print_json(doc)
         return 0
     if not args.gammas:
@@ -112,6 +134,9 @@ def _next(args) -> int:
         what = "setting" if len(proposals) == 1 else "settings"
         print(f"wrote {args.out} ({len(proposals)} {what}: fill in power and add the rows "
               f"to {Path(args.measured).name})")
+    if args.save is not None:
+        print(f"wrote {args.save} (the campaign's fit of {campaign.n_measured} readings: a "
+              "material file for 'irreflect room' scenes)")
     return 0
 
 
@@ -278,6 +303,10 @@ def register(sub) -> None:
     p.add_argument("--average-duplicates", action="store_true",
                    help="average the power of repeated (gamma, theta) readings instead of "
                         "refusing them")
+    p.add_argument("--save", metavar="MATERIAL.json",
+                   help="write the campaign's fit of the readings as a material file (as "
+                        "'irreflect fit --save' does; the readings weighted by the share of "
+                        "the range each stands for, as the verdict judged them)")
     p.add_argument("--json", action="store_true", help="one JSON object on stdout")
     p.set_defaults(handler=_cmd_next)
 
