@@ -485,7 +485,7 @@ def test_numpy_screening_is_scored_in_pieces_with_the_same_costs(monkeypatch):
     """The numpy path scores screening candidates in pieces of at most
     SCREEN_PIECE_VALUES basis values (a 200,000-point table with hundreds of candidates
     would otherwise hold gigabytes); the costs equal those of one batch."""
-    from irreflect import fitting
+    from irreflect.fitting import screening as fitting
     from irreflect.models import Geometry, get_model
 
     meas = synthetic(noise=0.004, seed=8)

@@ -24,11 +24,11 @@ from ..models.extensions import (
     CATALOGUE,
     EXTENSIONS,
     Extension,
-    extend,
     extension_names,
     get_extension,
     register_extension,
 )
+from ..models.registry import extend
 from .workflow import (
     EFFECTS_FOUND,
     NO_MISSING_EFFECT,

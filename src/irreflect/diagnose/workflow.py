@@ -668,7 +668,7 @@ def _reason(c: Candidate, rank: int, accept: bool, checks: list[str]) -> str:
 
 def _effect(c: Candidate, result: FitResult) -> Effect:
     model = result.model_object
-    wrapped = model.options.get("wrapped")
+    wrapped = model.wrapped
     k0 = len(wrapped.params) if wrapped is not None else 0
     new = model.params[k0:]
     return Effect(
