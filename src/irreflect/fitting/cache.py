@@ -8,12 +8,17 @@ entry, and a frozen model is never written to.
 from __future__ import annotations
 
 import weakref
-from collections.abc import Callable
+from collections.abc import Callable, Hashable
 
 _CACHE: dict[int, tuple[weakref.ref, dict]] = {}
 
 
-def per_model(model, key: str, make: Callable[[], object]):
+#: At most this many values per model (the oldest goes first): keys that carry a seed
+#: would otherwise grow without bound in a long run.
+MAX_VALUES = 256
+
+
+def per_model(model, key: Hashable, make: Callable[[], object]):
     """The value ``make()`` computed once for ``model`` under ``key``."""
     entry = _CACHE.get(id(model))
     if entry is None or entry[0]() is not model:
@@ -22,6 +27,8 @@ def per_model(model, key: str, make: Callable[[], object]):
         _CACHE[ident] = entry
     values = entry[1]
     if key not in values:
+        if len(values) >= MAX_VALUES:
+            values.pop(next(iter(values)))
         values[key] = make()
     return values[key]
 

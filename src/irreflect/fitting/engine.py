@@ -4,6 +4,7 @@ of a model and a table.
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 
 import numpy as np
@@ -29,6 +30,16 @@ class KernelStatic:
 
     k: KModel
     jitter_width: np.ndarray
+
+    @functools.cached_property
+    def hop_width(self) -> np.ndarray:
+        """The screening box's width per coordinate (1 where it is empty): a hop's scale."""
+        return np.where(self.k.hi > self.k.lo, self.k.hi - self.k.lo, 1.0)
+
+    @functools.cached_property
+    def plain(self) -> tuple:
+        """``k`` as the plain tuple a kernel call takes (see :mod:`.kernel_types`)."""
+        return tuple(self.k)
 
 
 def _make_kernel_static(model_obj) -> KernelStatic:

@@ -150,7 +150,7 @@ def finish(model, z, alpha, cost, table, absolute_sigma, engine, kgeo, source) -
         from .finish_kernel import tl_finish
 
         kgeo = kgeo if kgeo is not None else _kernel_geometry(gamma, theta)
-        fin = tl_finish(_w(z), _w(alpha), kgeo.geo, kgeo.glcg, _w(weights), _w(power),
+        fin = tl_finish(_w(z), _w(alpha), tuple(kgeo.geo), kgeo.glcg, _w(weights), _w(power),
                         absolute_sigma, cost, model.n_params)
         values, round_trip, fitted = fin.values, fin.round_trip, fin.fitted
         _check_values(model, values, round_trip, source)

@@ -1,6 +1,8 @@
 """The named structures the compiled kernels take and return (plain namedtuples, which
 numba compiles as records): a kernel call passes a few of these instead of dozens of
-positional arrays. Built on the numpy side without importing numba.
+positional arrays. Built on the numpy side without importing numba. Across the call
+from Python they travel as plain tuples (``tuple(km)``), which numba's dispatcher types
+in C; an entry point names them again first (``km = KModel(*km)``).
 
 KModel     what the kernel needs of a model (built once per model: engine._kernel_static)
 KTable     one table's geometry as the kernel stores it (model_kernel.kernel_geometry)
@@ -17,7 +19,7 @@ from collections import namedtuple
 KModel = namedtuple("KModel", ["codes", "nonneg", "residual", "lo", "hi", "zlo", "zhi", "axes",
                                "ext_rows", "nd_grid", "ns_grid"])
 KTable = namedtuple("KTable", ["geo", "glcg", "levels", "group", "exact"])
-Work = namedtuple("Work", ["table", "pts", "gstart", "ws"])
+Work = namedtuple("Work", ["table", "power", "pts", "gstart", "lgroup", "ws"])
 Solution = namedtuple("Solution", ["z", "alpha", "cost", "reason", "nfev"])
 SubsetSolution = namedtuple("SubsetSolution", ["z", "alpha", "cost", "converged", "nfev"])
 FastWork = namedtuple("FastWork", ["vec", "lin", "coef", "grad", "hess", "a", "rhs", "step",

@@ -181,9 +181,10 @@ def check_fit_data(power, model, source: str = "table") -> None:
     power = np.asarray(power)
     n = power.size
     check_enough_points(n, model, source)
-    if not np.all(np.isfinite(power)):
+    low, high = float(power.min()), float(power.max())  # NaN or inf show in either
+    if not (math.isfinite(low) and math.isfinite(high)):
         raise DataError(f"{source}: power has non-finite values: remove or fix those rows")
-    if np.ptp(power) == 0:
+    if high == low:
         raise DataError(
             f"{source}: power is constant ({power.flat[0]:g} at all {n} points): a reflection "
             "model needs the power measured at varying angles; check the power column"

@@ -1,38 +1,20 @@
-"""The global search of one table, written once (:func:`run_search`) over a backend that
-implements its few steps: numpy (:class:`NumpyBackend`, every model) or the compiled kernel
-(:class:`KernelBackend`, the two-lobe model and its extensions; :mod:`.search_kernel`).
-
-The search: (1) the caller's starts, the model's data-driven ones and seeded random
-perturbations of them, and a screening of the model's shape space (:mod:`.screening`);
-every candidate scored by its projected cost; (2) Levenberg-Marquardt from the best
-data-driven starts and the best candidates in different basins; (3) refinement rounds:
-global scans through the best point, one block of coordinates at a time, and seeded
-jumps around it (basin hopping, Wales and Doye 1997), Levenberg-Marquardt from every
-point that beats it, until a round improves nothing.
-
-A backend offers:
-
-``candidates()``            the own starts and the screening candidates, ``(rows, n_own)``
-``score(rows)``             the projected cost of every row
-``pick(rows, costs, k, d)`` up to ``k`` low-cost rows at least ``d`` apart (unit box)
-``solve(starts)``           Levenberg-Marquardt from every start: the best end point
-                            (:class:`~irreflect.fitting.kernel_types.Solution`)
-``scan(z)``                 the scan candidates through ``z``, their costs and blocks
-``hops(round, z)``          the basin hops of a round around ``z``
-``clip(rows)``              rows within the model's bounds
+"""The global search of one table: the driver (:func:`~.driver.run_search`, written once)
+on numpy's steps (:class:`NumpyBackend`, every model) or compiled in the kernel with the
+kernel's steps (:func:`~.search_kernel.search`, the two-lobe model and its extensions, a
+search in one call); :func:`global_search` chooses, scales the power and finishes.
 """
 
 from __future__ import annotations
 
-import dataclasses
 import functools
 import math
-from typing import NamedTuple
 
 import numpy as np
 
 from ..models import Geometry
 from . import draws as _draws_mod
+from .cache import per_model
+from .driver import bind
 from .engine import _kernel_codes, _kernel_geometry, _kernel_static, _w
 from .finish import _conclude
 from .kernel_types import Solution
@@ -50,57 +32,12 @@ from .screening import (
 from .starts import _candidates, _draws
 
 
-class Found(NamedTuple):
-    """The best point of a search: shape coordinates, linear coefficients, cost, why its
-    local search stopped, how many starts and evaluations the search spent."""
-
-    z: np.ndarray
-    alpha: np.ndarray
-    cost: float
-    reason: int
-    n_starts: int
-    n_evals: int
-
-
-def run_search(backend, n_data_starts: int, n_keep: int, max_rounds: int) -> Found | None:
-    """The global search over ``backend`` (see the module docstring); None when no start
-    reaches a finite cost."""
-    cands, n_own = backend.candidates()
-    costs = backend.score(cands)
-    first = backend.pick(cands[:n_own], costs[:n_own], n_data_starts, 1e-9)
-    others = backend.pick(cands, costs, n_keep, 0.08)
-    picks = np.unique(np.concatenate([first, others]))
-    if not picks.size:
-        picks = np.zeros(1, np.int64)
-    best = backend.solve(cands[picks])
-    n_starts, n_evals = picks.size, len(cands) + best.nfev
-    if not math.isfinite(best.cost):
-        return None
-    for rnd in range(max_rounds if backend.n_nonlinear else 0):
-        scan, scan_costs, blocks = backend.scan(best.z)
-        n_evals += len(scan)
-        rows = [scan[a + int(np.argmin(scan_costs[a:b]))] for a, b in blocks
-                if np.min(scan_costs[a:b]) < best.cost * (1.0 - 1e-9)]
-        extra = backend.clip(np.vstack([np.reshape(rows, (-1, backend.n_nonlinear)),
-                                        backend.hops(rnd, best.z)]))
-        if not len(extra):
-            break
-        found = backend.solve(extra)
-        n_starts += len(extra)
-        n_evals += found.nfev
-        if not found.cost < best.cost * (1.0 - 1e-12):
-            break
-        best = found
-    return Found(best.z, best.alpha, float(best.cost), int(best.reason), int(n_starts),
-                 int(n_evals))
-
-
 class NumpyBackend:
     """The search's steps in numpy, batched over candidates (every model)."""
 
-    def __init__(self, model, table, opts: FitOptions, n_hops: int):
+    def __init__(self, model, table, opts: FitOptions, n_screen: int, n_hops: int):
         gamma, theta, power, weights = table
-        self.model, self.opts, self.table = model, opts, table
+        self.model, self.opts, self.table, self.n_screen = model, opts, table, n_screen
         self.n_nonlinear = model.n_nonlinear
         self.lo, self.hi = model.screen_box()
         self.geom = Geometry.of(gamma[None], theta[None])
@@ -113,9 +50,9 @@ class NumpyBackend:
         gamma, theta, power, _ = self.table
         m, o = self.model, self.opts
         own = _candidates(m, gamma, theta, power, o.seed, o.n_random_starts, o.extra_starts)
-        if not (o.n_screen and m.n_nonlinear):
+        if not (self.n_screen and m.n_nonlinear):
             return own, len(own)
-        return np.vstack([own, self.clip(screen_samples(m, o.n_screen, o.seed))]), len(own)
+        return np.vstack([own, self.clip(screen_samples(m, self.n_screen, o.seed))]), len(own)
 
     def score(self, rows):
         return _screen_costs(self.model, self.geom, rows, self.sw1,
@@ -136,14 +73,22 @@ class NumpyBackend:
     def scan(self, z):
         blocks = _scan_blocks(self.model)
         rows = _block_candidates(z, blocks)
+        costs = self.score(rows)
         ends = np.cumsum([0] + [len(values) for _, values in blocks])
-        return rows, self.score(rows), list(zip(ends[:-1], ends[1:], strict=True))
+        best = [a + int(np.argmin(costs[a:b])) for a, b in zip(ends[:-1], ends[1:], strict=True)]
+        return rows[best].reshape(-1, self.n_nonlinear), costs[best], len(rows)
 
     def hops(self, rnd, z):
         return z + self.jumps[rnd] * np.where(self.hi > self.lo, self.hi - self.lo, 1.0)
 
     def clip(self, rows):
         return np.clip(rows, self.model.z_lower, self.model.z_upper)
+
+
+#: The driver on numpy's steps: ``run_search_numpy(NumpyBackend(...), n_data_starts,
+#: n_keep, max_rounds)``.
+run_search_numpy = bind({name: getattr(NumpyBackend, name) for name in
+                         ("candidates", "score", "pick", "solve", "scan", "hops", "clip")})
 
 
 @functools.lru_cache(maxsize=64)
@@ -162,55 +107,24 @@ def _kernel_draws(seed, n_random: int, n_hops: int, rounds: int, p: int):
     return jitter, hops
 
 
-class KernelBackend:
-    """The search's steps in the compiled kernel (:mod:`.search_kernel`), one call each."""
+def _kernel_context(model, kt, table, opts: FitOptions, n_screen: int, n_hops: int):
+    """The compiled search's context (see :mod:`.search_kernel`) for one table."""
+    from .search_kernel import work_for
 
-    def __init__(self, model, kt, table, opts: FitOptions, n_hops: int):
-        from . import search_kernel, starts_kernel
-
-        self.kernel, self.diverse = search_kernel, starts_kernel._diverse
-        _, _, power, weights = table
-        static = _kernel_static(model)
-        self.km = km = static.k
-        self.n_nonlinear = p = model.n_nonlinear
-        self.model, self.opts, self.kt = model, opts, kt
-        self.power, self.weights = _w(power), _w(weights)
-        jitter, self.jumps = _kernel_draws(opts.seed, opts.n_random_starts, n_hops,
-                                           opts.max_rounds, p)
-        self.jitter = jitter * static.jitter_width
-        self.width = np.where(km.hi > km.lo, km.hi - km.lo, 1.0)
-        self.stop = (int(opts.max_iter), 1e-10, 1e-9)
-        self.work = None
-
-    def candidates(self):
-        o, km = self.opts, self.km
-        extra = (np.zeros((0, self.n_nonlinear)) if o.extra_starts is None else
-                 self.clip(np.asarray(o.extra_starts, float).reshape(-1, self.n_nonlinear)))
-        self.work, own = self.kernel.prepare(km, self.kt, self.power, self.weights,
-                                             _w(self.jitter), _w(extra))
-        screen = (screen_samples(self.model, o.n_screen, o.seed) if o.n_screen
-                  else np.zeros((0, self.n_nonlinear)))
-        return np.vstack([own, self.clip(screen)]), len(own)
-
-    def score(self, rows):
-        return self.kernel.score(self.km, self.work, _w(rows))
-
-    def pick(self, rows, costs, k, min_distance):
-        return self.diverse(_w(rows), costs, k, self.km.lo, self.km.hi, min_distance)
-
-    def solve(self, starts):
-        return self.kernel.solve(self.km, self.work, _w(starts), self.stop)
-
-    def scan(self, z):
-        rows, costs = self.kernel.scan(self.km, self.work, _w(z))
-        n_axis = self.km.axes.shape[1]
-        return rows, costs, [(q * n_axis, (q + 1) * n_axis) for q in range(self.n_nonlinear)]
-
-    def hops(self, rnd, z):
-        return z + self.jumps[rnd] * self.width
-
-    def clip(self, rows):
-        return np.clip(rows, self.km.zlo, self.km.zhi)
+    static = _kernel_static(model)
+    p = model.n_nonlinear
+    _, _, power, weights = table
+    jitter, jumps = _kernel_draws(opts.seed, opts.n_random_starts, n_hops, opts.max_rounds, p)
+    extra = (np.zeros((0, p)) if opts.extra_starts is None else
+             np.clip(np.asarray(opts.extra_starts, float).reshape(-1, p), model.z_lower,
+                     model.z_upper))
+    screen = per_model(model, ("clipped screen", n_screen, opts.seed), lambda: _w(np.clip(
+        screen_samples(model, n_screen, opts.seed) if n_screen else np.zeros((0, p)),
+        model.z_lower, model.z_upper)))
+    kt = (tuple(kt.geo), kt.glcg, kt.levels, kt.group, kt.exact)
+    draws = (_w(jitter * static.jitter_width), _w(extra), screen, _w(jumps), static.hop_width)
+    return (static.plain, kt, work_for(kt, _w(power), _w(weights)), draws,
+            (int(opts.max_iter), 1e-10, 1e-9))
 
 
 def global_search(model_obj, table, opts: FitOptions, kgeo=None):
@@ -232,16 +146,21 @@ def global_search(model_obj, table, opts: FitOptions, kgeo=None):
     n_screen, n_keep, n_data_starts = _search_defaults(model_obj, opts.n_screen, opts.n_keep,
                                                        opts.n_data_starts)
     n_hops = _default_hops(model_obj, n_keep) if opts.n_hops is None else int(opts.n_hops)
-    opts_n = dataclasses.replace(opts, n_screen=n_screen)
     codes = _kernel_codes(model_obj, opts.engine)
-    if codes is not None and kgeo is None:
-        kgeo = _kernel_geometry(gamma, theta)
     if codes is None:
-        backend = NumpyBackend(model_obj, unit, opts_n, n_hops)
+        backend = NumpyBackend(model_obj, unit, opts, n_screen, n_hops)
+        best, n_starts, n_evals = run_search_numpy(backend, n_data_starts, n_keep,
+                                                   opts.max_rounds)
     else:
-        backend = KernelBackend(model_obj, kgeo, unit, opts_n, n_hops)
-    found = run_search(backend, n_data_starts, n_keep, opts.max_rounds)
-    if found is None:
+        from .search_kernel import search
+
+        kgeo = kgeo if kgeo is not None else _kernel_geometry(gamma, theta)
+        ctx = _kernel_context(model_obj, kgeo, unit, opts, n_screen, n_hops)
+        best, n_starts, n_evals = search(ctx, int(n_data_starts), int(n_keep),
+                                         int(opts.max_rounds))
+    if not math.isfinite(best.cost):
         return None
+    found = (best.z, best.alpha, float(best.cost), int(best.reason), int(n_starts),
+             int(n_evals))
     z, alpha, cost, *rest = _conclude(model_obj, *unit, found, opts.polish, opts.max_iter)
     return (z, alpha * scale, cost * scale * scale, *rest)

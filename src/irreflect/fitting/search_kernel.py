@@ -1,18 +1,24 @@
-"""The steps of the global search in the compiled kernel (numba), one call each, for the
-search driver (:func:`irreflect.fitting.search.run_search` with the compiled backend):
-the table's points and the data-driven starts (:func:`prepare`), the projected cost of
-candidates (:func:`score`), Levenberg-Marquardt from a batch of starts (:func:`solve`) and
-a refinement round's scans (:func:`scan`). The plain two-lobe model takes the fast path
-(:mod:`.fast_kernel`), its extensions the generic one (:mod:`.local_kernel`).
+"""The global search in the compiled kernel (numba): the steps of :mod:`.driver` on a
+context ``ctx = (model, table, work, draws, stop)``, and :func:`search`, the driver's
+:func:`~.driver.run_search` bound to these steps and compiled, so that a search is one
+call. The plain two-lobe model takes the fast path (:mod:`.fast_kernel`), its extensions
+the generic one (:mod:`.local_kernel`).
+
+``model``: :class:`~.kernel_types.KModel`; ``table``: :class:`~.kernel_types.KTable`;
+``work``: :func:`work_for`; ``draws``: (the jitter of the first start, the caller's
+extra starts, the screening candidates, the hops (rounds, hops, P), the hops' width);
+``stop``: (max_iter, ftol, xtol).
 """
 
 from __future__ import annotations
 
 import math
+import types
 
 import numpy as np
 from numba import njit
 
+from .driver import run_search
 from .fast_kernel import (
     _TL_ROWS,
     _tl_lm,
@@ -23,47 +29,66 @@ from .fast_kernel import (
     tl_work,
 )
 from .kernel_math import STOP_NONFINITE
-from .kernel_types import Solution, Work
+from .kernel_types import KModel, KTable, Solution, Work
 from .local_kernel import _costs, _lm, _scan_candidates
 from .model_kernel import _sizes
-from .starts_kernel import _own_starts, _tl_profile
+from .starts_kernel import _diverse, _own_starts, _tl_profile
+
+
+# Every entry point takes its structures as plain tuples (numba's dispatcher types a plain
+# tuple of arrays in C, a namedtuple several times slower in Python) and names them first.
+def work_for(kt, power, weights):
+    """The scratch of one search of a table (numpy, allocated once per fit) as the kernel
+    takes it: (the table as :func:`_lm` reads it, the power, the points by angle of
+    incidence, the blocks' starts, each point's level, the fast path's scratch)."""
+    n, n_groups = power.size, kt[1].size
+    sw = np.sqrt(weights)
+    ws = tl_work.py_func(n, n_groups)
+    return ((tuple(kt[0]), kt[1], sw, sw * power), power, np.empty((_TL_ROWS, n)),
+            np.empty(n_groups + 1, np.int64), np.empty(n, np.int64),
+            tuple(ws[:12]) + (tuple(ws[12]),))
 
 
 @njit(cache=True)
-def prepare(km, kt, power, weights, jitter, extra):
-    """One table ready to search (``power`` already divided by its scale): its points by
-    angle of incidence, the fast path's scratch and the data-driven starts (the caller's
-    ``extra`` rows first, then the per-angle decomposition's, the jittered ones), clipped
-    and unique. Returns (Work, starts)."""
+def candidates(ctx):
+    """The table's points by angle of incidence into ``work``; the own starts (the
+    caller's extra rows first, then the per-angle decomposition's, the jittered ones),
+    clipped and unique, then the screening candidates. Returns (rows, how many own)."""
+    km, kt, work = KModel(*ctx[0]), KTable(*ctx[1]), Work(*ctx[2])
+    jitter, extra, screen = ctx[3][0], ctx[3][1], ctx[3][2]
+    _, sw, yw, power = work.table[1], work.table[2], work.table[3], work.power
     n = power.size
-    sw = np.sqrt(weights)
-    yw = sw * power
-    pts = np.empty((_TL_ROWS, n))
-    gstart = np.empty(kt.glcg.size + 1, np.int64)
-    lgroup = np.empty(n, np.int64)
+    pts, gstart, lgroup = work.pts, work.gstart, work.lgroup
     tl_points(kt.geo, kt.glcg.size, (sw, yw, np.ones(n), power), np.ones(n, np.bool_), pts,
               gstart, lgroup, kt.group)
-    ws = tl_work(n, kt.glcg.size)
-    _tl_set_yy(pts, gstart, ws[12][0])
+    _tl_set_yy(pts, gstart, work.ws[12][0])
     prof, ok = _tl_profile(pts, n, lgroup, kt.levels.size, km.nd_grid, km.ns_grid)
     own = _own_starts(prof, ok, kt.levels, jitter, km.zlo, km.zhi, km.ext_rows, extra)
-    return Work((kt.geo, kt.glcg, sw, yw), pts, gstart, ws), own
+    return np.vstack((own, screen)), own.shape[0]
 
 
 @njit(cache=True)
-def score(km, work, cands):
+def score(ctx, rows):
     """The projected cost of every candidate row (no derivatives)."""
+    km, work = KModel(*ctx[0]), Work(*ctx[2])
     if km.codes.size == 0:
-        return _tl_screen_costs(cands, work.pts, work.gstart, work.table[1], km.nonneg,
+        return _tl_screen_costs(rows, work.pts, work.gstart, work.table[1], km.nonneg,
                                 km.residual, work.ws)
-    return _costs(km.codes, km.nonneg, km.residual, cands, work.table)
+    return _costs(km.codes, km.nonneg, km.residual, rows, work.table)
 
 
 @njit(cache=True)
-def solve(km, work, starts, stop):
-    """Levenberg-Marquardt from every row of ``starts`` (``stop``: max_iter, ftol, xtol);
-    the best end point (the first of equal costs; cost inf when none is finite) and the
-    evaluations of all."""
+def pick(ctx, rows, costs, k, min_distance):
+    """Up to ``k`` low-cost rows at least ``min_distance`` apart in the screening box."""
+    km = KModel(*ctx[0])
+    return _diverse(rows, costs, k, km.lo, km.hi, min_distance)
+
+
+@njit(cache=True)
+def solve(ctx, starts):
+    """Levenberg-Marquardt from every row of ``starts``: the best end point (the first of
+    equal costs; cost inf when none is finite) and the evaluations of all."""
+    km, work, stop = KModel(*ctx[0]), Work(*ctx[2]), ctx[4]
     p = km.zlo.size
     _, ll = _sizes(km.codes, km.codes.size)
     fast = km.codes.size == 0
@@ -91,13 +116,49 @@ def solve(km, work, starts, stop):
 
 
 @njit(cache=True)
-def scan(km, work, z):
+def scan(ctx, z):
     """A refinement round's global scans through ``z``: every coordinate swept along its
-    axis (``km.axes``) with the others held. Returns (candidates, costs)."""
+    axis (``km.axes``) with the others held. Returns each sweep's lowest point and its
+    cost (the first of equal costs), ``(P, P)`` and ``(P,)``, and the points scanned."""
+    km, work = KModel(*ctx[0]), Work(*ctx[2])
     cands = _scan_candidates(z, km.axes)
     if km.codes.size == 0:
         costs = _tl_scan_costs(z, km.axes, work.pts, work.gstart, work.table[1], km.nonneg,
                                km.residual, work.ws)
     else:
         costs = _costs(km.codes, km.nonneg, km.residual, cands, work.table)
-    return cands, costs
+    p, n_axis = km.axes.shape
+    rows = np.empty((p, p))
+    best = np.empty(p)
+    for q in range(p):
+        j = q * n_axis + np.argmin(costs[q * n_axis:(q + 1) * n_axis])
+        rows[q] = cands[j]
+        best[q] = costs[j]
+    return rows, best, p * n_axis
+
+
+@njit(cache=True)
+def hops(ctx, rnd, z):
+    """The basin hops of round ``rnd`` around ``z`` (not yet clipped)."""
+    jumps, width = ctx[3][3], ctx[3][4]
+    out = np.empty((jumps.shape[1], z.size))
+    for h in range(jumps.shape[1]):
+        for q in range(z.size):
+            out[h, q] = z[q] + jumps[rnd, h, q] * width[q]
+    return out
+
+
+@njit(cache=True)
+def clip(ctx, rows):
+    """``rows`` within the model's bounds."""
+    km = KModel(*ctx[0])
+    out = np.empty_like(rows)
+    for i in range(rows.shape[0]):
+        for q in range(rows.shape[1]):
+            out[i, q] = min(max(rows[i, q], km.zlo[q]), km.zhi[q])
+    return out
+
+
+#: The driver (:func:`irreflect.fitting.driver.run_search`) on these steps, compiled:
+#: ``search(ctx, n_data_starts, n_keep, max_rounds) -> (Solution, n_starts, n_evals)``.
+search = njit(cache=True)(types.FunctionType(run_search.__code__, globals(), "run_search"))
