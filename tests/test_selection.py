@@ -358,41 +358,29 @@ def _nsga2_front(noisy, stock: bool, generations: int = 6, pop_size: int = 20, s
     from pymoo.operators.selection.tournament import TournamentSelection
     from pymoo.operators.survival.rank_and_crowding.classes import RankAndCrowding
 
-    from irreflect.selection.problem import (
-        MaskDuplicateElimination,
-        SizeRepair,
-        SizeVariedSampling,
-        SubsetCrossover,
-        SubsetMutation,
-        SubsetProblem,
-    )
-    from irreflect.selection.pymoo_overrides import (
-        FeasibleRankAndCrowding,
-        MaskEvaluator,
-        SubsetNSGA2,
-        binary_tournament,
-    )
+    from irreflect.selection import problem as P
+    from irreflect.selection import pymoo_overrides as O
 
-    class StockCrossover(SubsetCrossover):
+    class StockCrossover(P.SubsetCrossover):
         do = Crossover.do
 
-    class StockMutation(SubsetMutation):
+    class StockMutation(P.SubsetMutation):
         do = Mutation.do
 
-    class StockRepair(SizeRepair):
+    class StockRepair(P.SizeRepair):
         do = Repair.do
 
     ev = SubsetEvaluator(noisy.gamma_deg, noisy.theta_deg, noisy.power)
-    problem = SubsetProblem(ev, 8, 20)
+    problem = P.SubsetProblem(ev, 8, 20)
     parts = (dict(algorithm=NSGA2, selection=TournamentSelection(func_comp=stock_tournament),
                   crossover=StockCrossover(), mutation=StockMutation(), repair=StockRepair(),
                   survival=RankAndCrowding(), evaluator=Evaluator()) if stock else
-             dict(algorithm=SubsetNSGA2, selection=TournamentSelection(
-                 func_comp=binary_tournament), crossover=SubsetCrossover(),
-                 mutation=SubsetMutation(), repair=SizeRepair(),
-                 survival=FeasibleRankAndCrowding(), evaluator=MaskEvaluator()))
-    algorithm = parts.pop("algorithm")(pop_size=pop_size, sampling=SizeVariedSampling(),
-                                       eliminate_duplicates=MaskDuplicateElimination(),
+             dict(algorithm=O.SubsetNSGA2, selection=TournamentSelection(
+                 func_comp=O.binary_tournament), crossover=P.SubsetCrossover(),
+                 mutation=P.SubsetMutation(), repair=P.SizeRepair(),
+                 survival=O.FeasibleRankAndCrowding(), evaluator=O.MaskEvaluator()))
+    algorithm = parts.pop("algorithm")(pop_size=pop_size, sampling=P.SizeVariedSampling(),
+                                       eliminate_duplicates=P.MaskDuplicateElimination(),
                                        **parts)
     algorithm.setup(problem, termination=("n_gen", generations), seed=seed, verbose=False)
     while algorithm.has_next():

@@ -57,7 +57,6 @@ KNOWN = {
     "room/kernels.py:_intersect": "issue 26: room kernels (rooms work)",
     "room/scene.py:scene_from_dict": "issue 26: scene validation as a schema (reliability work)",
     "selection/run.py:run_selection": "issue 26: the selection's run",
-    "report/protocol.py:section": "issue 26: report sections as result objects",
 }
 
 MODULES = sorted(PACKAGE.rglob("*.py"))

@@ -12,7 +12,16 @@ import math
 import numpy as np
 from numba import njit
 
-from .kernel_math import RIDGE, STOP_MAXITER, STOP_NONFINITE, TWO_PI, _saturates, fexp, lexp
+from .kernel_math import (
+    RIDGE,
+    STOP_MAXITER,
+    STOP_NONFINITE,
+    TWO_PI,
+    _insert_by_threshold,
+    _saturates,
+    fexp,
+    lexp,
+)
 from .kernel_types import CapWork, FastWork
 from .local_kernel import _lm_step, _lm_verdict
 
@@ -277,13 +286,8 @@ def _capped2(gsum, s_g, v_as, cap, lin, k):
         sg = s_g[g]
         t = 1.0 / sg if sg > 1.0 else math.inf
         tau_g[g] = t
-        if t < 1.0:  # insertion in threshold order
-            i = count
-            while i > 0 and tau_g[order[i - 1]] > t:
-                order[i] = order[i - 1]
-                i -= 1
-            order[i] = g
-            count += 1
+        if t < 1.0:
+            count = _insert_by_threshold(order, count, tau_g, g)
     best = math.inf
     bu = 0.0
     bk = 0.0

@@ -132,6 +132,18 @@ def _cos_parts(angle):
     return 0.0, False
 
 
+@njit(cache=True, inline="always")
+def _insert_by_threshold(order, count, tau, g):
+    """Insert angle ``g`` into ``order[:count]`` (kept in increasing ``tau``, a later equal
+    one after the earlier); returns the new count."""
+    i = count
+    while i > 0 and tau[order[i - 1]] > tau[g]:
+        order[i] = order[i - 1]
+        i -= 1
+    order[i] = g
+    return count + 1
+
+
 @njit(cache=True)
 def _stable_order(values):
     return np.argsort(values, kind="mergesort")

@@ -11,7 +11,7 @@ import math
 import numpy as np
 from numba import njit
 
-from .kernel_math import EXTREME, RIDGE, TWO_PI, fexp
+from .kernel_math import EXTREME, RIDGE, TWO_PI, _insert_by_threshold, fexp
 from .kernel_types import CappedWork, GenScratch, GenState
 from .model_kernel import _group_values, _point
 
@@ -325,13 +325,8 @@ def _capped_solve(sums, tau_g, yy, nonneg, residual, cw, out):
             rk[a] += ru[g, a]
             for c in range(ll):
                 gk[a, c] += gu[g, a, c]
-        if tau_g[g] < 1.0:  # insertion in threshold order
-            i = count
-            while i > 0 and tau_g[order[i - 1]] > tau_g[g]:
-                order[i] = order[i - 1]
-                i -= 1
-            order[i] = g
-            count += 1
+        if tau_g[g] < 1.0:
+            count = _insert_by_threshold(order, count, tau_g, g)
     best = math.inf
     best_lower = 0.0
     best_tau = -1.0

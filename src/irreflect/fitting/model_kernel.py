@@ -305,36 +305,34 @@ def _take(geo, idx):
 
 # ----------------------------------------------------------------------------- per table, per fit
 @njit(cache=True)
+def _distinct(values):
+    """The distinct values in increasing order and each value's index among them (as
+    numpy.unique with return_inverse, from a stable sort)."""
+    n = values.size
+    order = np.argsort(values, kind="mergesort")
+    index = np.empty(n, np.int64)
+    out = np.empty(n)
+    g = -1
+    for k in range(n):
+        j = order[k]
+        if g < 0 or values[j] != out[g]:
+            g += 1
+            out[g] = values[j]
+        index[j] = g
+    return out[:g + 1].copy(), index
+
+
+@njit(cache=True)
 def kernel_geometry(gamma, theta):
     """fitting._kernel_geometry in one call: (geometry, log cos of the exact angles of
     incidence, the rounded ones of the per-angle decomposition (as numpy.round(gamma, 9)),
     each point's index among those, the exact angles of incidence)."""
     n = gamma.size
-    order = np.argsort(gamma, kind="mergesort")
-    group = np.empty(n, np.int64)
-    exact = np.empty(n)
-    g = -1
-    for k in range(n):
-        j = order[k]
-        if g < 0 or gamma[j] != exact[g]:
-            g += 1
-            exact[g] = gamma[j]
-        group[j] = g
-    exact = exact[:g + 1].copy()
+    exact, group = _distinct(gamma)
     rounded = np.empty(n)
     for j in range(n):
         rounded[j] = np.rint(gamma[j] * 1e9) / 1e9
-    order = np.argsort(rounded, kind="mergesort")
-    pgroup = np.empty(n, np.int64)
-    levels = np.empty(n)
-    g = -1
-    for k in range(n):
-        j = order[k]
-        if g < 0 or rounded[j] != levels[g]:
-            g += 1
-            levels[g] = rounded[j]
-        pgroup[j] = g
-    levels = levels[:g + 1].copy()
+    levels, pgroup = _distinct(rounded)
     glcg = np.empty(exact.size)
     for i in range(exact.size):
         glcg[i] = math.log(math.cos(exact[i]))

@@ -261,6 +261,18 @@ def saturate_rows(basis, s, alpha, strict: bool = False):
     return basis
 
 
+def _lobes_to_natural(z, alpha, n_lobes: int, first: int):
+    """Natural parameters of ``n_lobes`` lobes of coordinates ``(axis, ln index)`` each and
+    shares ``alpha[:, first + i] / K`` (``K`` the sum of all linear coefficients):
+    ``(axis_1, index_1, share_1, ..., K)``."""
+    K = alpha.sum(axis=1)
+    safe = np.where(K > 0, K, 1.0)
+    out = []
+    for i in range(n_lobes):
+        out += [z[:, 2 * i], np.exp(z[:, 2 * i + 1]), alpha[:, first + i] / safe]
+    return np.column_stack(out + [K])
+
+
 def _col(z, k):
     """Column ``k`` of ``z`` shaped to broadcast against ``(B, n)`` arrays."""
     return z[:, k][:, None]

@@ -41,7 +41,7 @@ import functools
 import numpy as np
 
 from ..errors import IrreflectError, unknown_name
-from .base import FitHints, Parameter, ReflectionModel, _col
+from .base import FitHints, Parameter, ReflectionModel, _col, _lobes_to_natural
 from .guesses import MAX_LOBE_INDEX, estimate_specular_index, peak_directions
 
 INV_PI = 1.0 / np.pi
@@ -581,12 +581,7 @@ def _lafortune_basis_fn(n_lobes, geom, z, derivatives=True):
 
 
 def _lafortune_to_natural(n_lobes, z, alpha):
-    K = alpha.sum(axis=1)
-    safe = np.where(K > 0, K, 1.0)
-    out = []
-    for i in range(n_lobes):
-        out += [z[:, 2 * i], np.exp(z[:, 2 * i + 1]), alpha[:, i + 1] / safe]
-    return np.column_stack(out + [K])
+    return _lobes_to_natural(z, alpha, n_lobes, first=1)
 
 
 def _lafortune_from_natural(n_lobes, p):

@@ -18,6 +18,7 @@ from .base import (
     _col,
     _lobe_and_derivative,
     _lobe_from_log,
+    _lobes_to_natural,
     cap_share,
     generalized_lambertian,
     mirror_angle,
@@ -325,12 +326,7 @@ def _n_lobe_basis_fn(n_lobes, geom, z, derivatives=True):
 
 
 def _n_lobe_to_natural(n_lobes, z, alpha):
-    K = alpha.sum(axis=1)
-    safe = np.where(K > 0, K, 1.0)
-    out = []
-    for i in range(n_lobes):
-        out += [z[:, 2 * i], np.exp(z[:, 2 * i + 1]), alpha[:, i] / safe]
-    return np.column_stack(out + [K])
+    return _lobes_to_natural(z, alpha, n_lobes, first=0)
 
 
 def _n_lobe_from_natural(n_lobes, p):
