@@ -4,26 +4,32 @@ VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 
-.PHONY: demo test lint bench clean venv
+.PHONY: demo test lint bench clean venv docs pip-check
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
 	$(BIN)/pip install --quiet --upgrade pip
-	$(BIN)/pip install --quiet -e '.[dev]'
+	$(BIN)/pip install --quiet -e '.[dev,docs]'
 	$(BIN)/python -c "from irreflect.fitting import warm; warm()"  # compile the fitting kernel once
 	touch $(STAMP)
 
 venv: $(STAMP)
 
 demo: $(STAMP)
-	$(BIN)/irreflect reproduce --out out --scene datasets/rooms/office.toml
-	$(BIN)/irreflect room datasets/rooms/office.toml --out out/room --workers 2
+	$(BIN)/irreflect reproduce --out out --scene office
+	$(BIN)/irreflect room office --out out/room --workers 2
 
 test: $(STAMP)
 	$(BIN)/python -m pytest -q -n 2 --dist loadfile
 
 lint: $(STAMP)
 	$(BIN)/ruff check src tests experiments
+
+docs: $(STAMP)
+	$(BIN)/mkdocs build --strict --site-dir build/site
+
+pip-check: $(STAMP)
+	$(BIN)/python .ci/pip_install_check.py
 
 bench: $(STAMP)
 	$(BIN)/python experiments/bench_fit.py

@@ -56,7 +56,8 @@ def _params():
 
 
 def test_the_registry_holds_functions_in_report_order():
-    assert list(SECTIONS) == ["fits", "selection", "protocol", "compare", "diagnose"]
+    assert list(SECTIONS) == ["fits", "selection", "protocol", "campaign", "compare",
+                             "diagnose"]
     assert list(SCENE_SECTIONS) == ["room"]
     assert not set(SECTIONS) & set(SCENE_SECTIONS)
     for name, function in ALL.items():

@@ -13,6 +13,7 @@ from irreflect import fit
 from irreflect.cli import main
 from irreflect.data import Measurements, load_bundled, read_measurements, write_measurements
 from irreflect.diagnose import (
+    AMBIGUOUS,
     CATALOGUE,
     EFFECTS_FOUND,
     EXTENSIONS,
@@ -25,6 +26,7 @@ from irreflect.diagnose import (
     register_extension,
     structure_tests,
 )
+from irreflect.diagnose.blind import blind_case
 from irreflect.diagnose.hidden import hidden_case
 from irreflect.errors import IrreflectError, UnknownNameError
 from irreflect.models import Geometry, Parameter, get_model, two_lobe_power
@@ -189,17 +191,25 @@ def test_no_hidden_effect_gives_no_false_alarm_over_many_seeds():
 
 @pytest.mark.parametrize("effect", ["ripple", "bump"])
 def test_effect_outside_the_catalogue_leaves_unexplained_structure(effect):
-    """Clearly visible outside effects (excess chi2 >= 150); at the threshold of visibility
-    a bump can pass for an off-specular peak (rates: experiments/diagnose_rates.py)."""
-    verdicts = [diagnose(hidden_case(effect, seed, min_excess_chi2=150).measurements,
-                         seed=seed).verdict for seed in range(5)]
-    assert sum(v == UNEXPLAINED for v in verdicts) >= 4, verdicts
+    """Clearly visible outside effects (excess chi2 >= 150) on tables that give their
+    noise: every one is left unexplained, no catalogue name given. Without a sigma column
+    a ripple a few receiver steps long also inflates the difference-based noise estimate,
+    whose uncertainty the tests then carry (F tests): most are still flagged."""
+    with_sigma = [diagnose(hidden_case(effect, seed, min_excess_chi2=150,
+                                       sigma_column=True).measurements, seed=seed)
+                  for seed in range(5)]
+    assert all(d.verdict == UNEXPLAINED and not d.effects for d in with_sigma), \
+        [(d.verdict, [e.name for e in d.effects]) for d in with_sigma]
+    verdicts = [diagnose(hidden_case(effect, seed, min_excess_chi2=150,
+                                     sigma_column=False).measurements, seed=seed).verdict
+                for seed in range(5)]
+    assert sum(v == UNEXPLAINED for v in verdicts) >= 3, verdicts
 
 
 def test_ripple_location_is_reported():
-    # a ripple a few grid steps long also inflates the difference-based noise estimate,
-    # so here the lack of fit alone misses it; the mean residual per theta does not
-    d = diagnose(hidden_case("ripple", 0).measurements)
+    # on a table that gives its noise (without, a ripple a few grid steps long inflates
+    # the difference-based estimate, see above), the mean residual per theta finds it
+    d = diagnose(hidden_case("ripple", 0, sigma_column=True).measurements)
     assert d.unexplained and d.effects == ()
     flagged = [s.name for s in d.after.flagged(d.alpha)]
     assert "mean by receiver angle" in flagged
@@ -309,13 +319,20 @@ def test_real_data_verdicts_follow_the_residual_evidence(real_dir):
     assert ptfe.noise.source == "estimated" and krylon.noise.source == "estimated"
     # PTFE: the two-lobe model is close (chi2/dof of a few); the paint leaves clear structure
     assert ptfe.before.fit.r2 > 0.99 and ptfe.before.lack_of_fit.ratio < 5
-    assert krylon.before.lack_of_fit.ratio > 50
+    # (the noise of the paint's narrow lobe, seen by one receiver, is bounded by what the
+    # rest of the table allows: chi2/dof is then some 9, not the 50+ a constant noise gave)
+    assert krylon.before.lack_of_fit.ratio > 5 and krylon.before.lack_of_fit.p_value < 1e-10
     assert krylon.unexplained and krylon.where
-    assert any(s.p_value < 1e-10 for s in krylon.after.structure)
-    # whatever is named must have strong evidence behind it
+    assert any(s.p_value < 1e-6 for s in krylon.after.structure)
+    # whatever is named must have strong evidence behind it: each effect significant
+    # against the explanation without it, and together at least half the excess residual
+    from irreflect.diagnose.workflow import _share
+
     for d in (ptfe, krylon):
         for e in d.effects:
-            assert e.delta_bic < -10 and e.share_explained >= 0.5
+            assert e.p_value < d.alpha / len(CATALOGUE) and e.delta_bic < -10
+        if d.effects:
+            assert _share(d.before, d.after) >= 0.5
 
 
 @pytest.mark.real
@@ -326,3 +343,130 @@ def test_real_dense_wall_paint(real_dir):
     assert d.verdict == UNEXPLAINED
     assert d.before.lack_of_fit.p_value < 1e-12
     assert d.noise.value < 0.1 * d.before.fit.rmse
+
+
+# ----------------------------------------------------------------------------- issue 22
+# The four misnamed cases of the issue, built with the harder generator
+# (irreflect.diagnose.blind): the effects in forms that are not the catalogue's own, noise
+# proportional to the signal, no sigma column unless said. The specular share is kept
+# below 1 on these tables (saturate=False) so that they test the diagnosis, not the
+# base model's share law. Rates over hundreds of cases: experiments/diagnose_rates.py.
+def _names(d):
+    return sorted(e.name for e in d.effects)
+
+
+def test_offspecular_peak_on_glossy_paint_is_named_alone():
+    """Named 'offspecular_peak + angle_offset' before; a glossy lobe (index up to
+    6000) with noise proportional to the power and no sigma column."""
+    for seed in (0, 2):
+        case = blind_case(seed, effects=("offspecular_peak",), base="glossy", lam=300,
+                          grid="near-mirror", noise="proportional", sigma_column=False,
+                          saturate=False)
+        d = diagnose(case.measurements, seed=seed)
+        assert _names(d) == ["offspecular_peak"] and not d.alternatives, (seed, d.summary)
+        assert d.verdict == EFFECTS_FOUND
+        assert d.noise.relative == pytest.approx(case.truth["noise"]["b"], rel=0.3)
+
+
+def test_background_on_matte_white_is_not_taken_for_incidence_reflectance():
+    for seed in (2, 3):
+        case = blind_case(seed, effects=("background",), base="matte", lam=100, noise="both",
+                          sigma_column=False, saturate=False)
+        d = diagnose(case.measurements, seed=seed)
+        assert _names(d) == ["background"] and not d.alternatives, (seed, d.summary)
+        b = d.effects[0]
+        assert abs(b.params["b"] - case.truth["params"]["background"]["b"]) < 4 * b.stderr["b"]
+
+
+def test_offspecular_peak_with_retroreflection_is_found_as_a_pair():
+    """Named 'offspecular_peak + angle_offset' before (the retroreflection missed)."""
+    case = blind_case(4, effects=("offspecular_peak", "retroreflection"), base="semigloss",
+                      lam=300, grid="near-mirror", saturate=False)
+    d = diagnose(case.measurements, seed=4)
+    assert _names(d) == ["offspecular_peak", "retroreflection"] and not d.alternatives, \
+        d.summary
+    assert d.verdict == EFFECTS_FOUND
+    # each is needed: the pair beats either alone by far more than the test's quantile
+    pair = d.after.deviance
+    singles = {c.name: c.assessment.deviance for c in d.candidates[0]}
+    assert singles["offspecular_peak"] - pair > 50 and singles["retroreflection"] - pair > 50
+
+
+def test_specular_halo_that_is_found_ends_effects_found():
+    """Found before, but the verdict still said 'unexplained structure remains'."""
+    case = blind_case(2, effects=("specular_halo",), base="glossy", lam=200,
+                      noise="proportional", saturate=False)
+    d = diagnose(case.measurements, seed=2)
+    assert _names(d) == ["specular_halo"] and d.verdict == EFFECTS_FOUND, d.summary
+    assert d.after.consistent(d.alpha) and not d.where
+
+
+def test_ambiguous_offset_or_tilt_and_the_measurement_that_separates_them():
+    """A receiver offset of 1 deg on a medium-gloss lobe seen at 55, 65 and 75 deg only:
+    there a tilt growing as sin^2(gamma) (0.67, 0.82, 0.93) shifts the lobes nearly alike,
+    and the noise hides the rest. The diagnosis says so, proposes readings where the two
+    part (nearer the normal, where the tilt vanishes), and once those are taken names the
+    offset."""
+    model = extend("two-lobe", ["angle_offset"])
+    truth = np.array([0.15, -1.0, 1.2, 0.3, 60.0, 0.2, 1.0, 1.0])
+    g = np.repeat([-55.0, -65.0, -75.0], 35)
+    t = np.tile(np.arange(-85.0, 86.0, 5.0), 3)
+    rng = np.random.default_rng(0)
+    sig = np.full(g.size, 0.03)
+    meas = Measurements(gamma_deg=g, theta_deg=t, sigma=sig, name="offset",
+                        power=model.predict_deg(truth, g, t) + rng.normal(0, 1, g.size) * sig)
+    d = diagnose(meas, seed=0)
+    assert d.verdict == AMBIGUOUS and d.effects == ()
+    assert set(d.alternatives) == {("angle_offset",), ("offspecular_peak",)}
+    assert "ambiguous between" in d.summary and "measure" in d.summary
+    plan = d.separating_table()
+    assert list(plan.columns[:3]) == ["gamma_deg", "theta_deg", "readings"]
+    assert d.separating[0]["total_chi2"] >= d.settings["separation_target"]
+    assert plan["gamma_deg"].abs().min() < 55  # toward the normal, where a tilt vanishes
+    assert (plan["theta_deg"].between(-85, 85)).all()
+    # take the proposed readings (the same surface, the same noise; repeats averaged)
+    n = plan["readings"].to_numpy()
+    g2, t2 = plan["gamma_deg"].to_numpy(), plan["theta_deg"].to_numpy()
+    s2 = 0.03 / np.sqrt(n)
+    more = Measurements(
+        gamma_deg=np.concatenate([g, g2]), theta_deg=np.concatenate([t, t2]),
+        power=np.concatenate([meas.power, model.predict_deg(truth, g2, t2)
+                              + rng.normal(0, 1, g2.size) * s2]),
+        sigma=np.concatenate([sig, s2]), name="offset_more")
+    d2 = diagnose(more, seed=0)
+    assert _names(d2) == ["angle_offset"] and not d2.alternatives, d2.summary
+    assert d2.effects[0].params["delta"] == pytest.approx(1.0, abs=4 * d2.effects[0].stderr["delta"])
+
+
+@pytest.mark.parametrize("base", ["glossy", "semigloss", "matte"])
+def test_clean_tables_of_the_harder_set_raise_no_alarm(base):
+    for seed, noise in ((0, "proportional"), (1, "both")):
+        case = blind_case(seed, effects=(), base=base, noise=noise, sigma_column=False,
+                          saturate=False)
+        d = diagnose(case.measurements, seed=seed)
+        assert d.verdict == NO_MISSING_EFFECT and not d.effects and not d.alternatives, \
+            (base, seed, d.summary)
+
+
+def test_noise_proportional_to_the_power_is_estimated_and_a_misfit_is_not_taken_for_it():
+    # a matte table with noise proportional to the power, no sigma column
+    case = blind_case(20, effects=(), base="matte", noise="proportional", sigma_column=False,
+                      saturate=False)
+    m = case.measurements
+    f = fit(m)
+    est = estimate_noise(m, residuals=f.residuals, fitted=f.fitted)
+    assert est.relative == pytest.approx(case.truth["noise"]["b"], rel=0.3)
+    assert "proportional to the power found" in est.method
+    # a glossy lobe seen by one receiver per angle of incidence, additive noise, and a
+    # tilt the base model cannot follow: the misfit at the peaks is not proportional noise,
+    # and the noise there is bounded by what the rest of the table allows
+    case = blind_case(3, effects=("offspecular_peak",), base="glossy", lam=300, grid="paper",
+                      noise="additive", sigma_column=False, saturate=False)
+    m = case.measurements
+    f = fit(m)
+    est = estimate_noise(m, residuals=f.residuals, fitted=f.fitted)
+    assert "no noise proportional to the power found" in est.method
+    low = case.clean < 0.5 * np.max(case.clean[case.clean < np.percentile(case.clean, 80)])
+    assert est.sigma[low] == pytest.approx(case.truth["noise"]["a"], rel=0.35)
+    peaks = case.clean > 100 * np.median(case.clean)
+    assert np.all(est.sigma[peaks] > 10 * case.truth["noise"]["a"])

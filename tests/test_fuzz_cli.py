@@ -42,7 +42,27 @@ def _commands(data: str, root: Path) -> dict[str, list[str]]:
         "evaluate-protocol": ["evaluate-protocol", str(root / "protocol.csv"), data],
         "reproduce": ["reproduce", "--quick", "--no-progress", "--data-dir",
                       str(Path(data).parent), "--out", str(root / "report")],
+        "next": ["next", data, "--n", "2", "--out", str(root / "next.csv")],
+        "campaign": ["campaign", data, "--strategies", "adaptive", "--n-max", "9",
+                     "--out", str(root / "camp")],
     }
+
+
+def _readings_ok(data: Path) -> bool:
+    """Whether ``irreflect next`` takes the table: a header alone or a few readings are a
+    campaign's start, not an error."""
+    import warnings
+
+    from irreflect.campaign.io import read_readings
+    from irreflect.errors import IrreflectError
+
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            read_readings(data)
+    except IrreflectError:
+        return False
+    return True
 
 
 def _snapshot(root: Path) -> dict[str, int]:
@@ -205,7 +225,9 @@ def test_every_command_refuses_a_malformed_table_in_one_line(table):
         data = root / "data" / name
         data.write_bytes(content)
         (root / "protocol.csv").write_text(PROTOCOL)
-        for argv in _commands(str(data), root).values():
+        for command, argv in _commands(str(data), root).items():
+            if command == "next" and _readings_ok(data):
+                continue  # tests/test_campaign.py: next takes a header alone or few rows
             _assert_refused(argv, root)
 
 
@@ -273,8 +295,22 @@ BAD_OPTIONS = [
     ("room", ["{scene}", "--bounces", "-1", "--out", "{root}/r"]),
     ("room", ["{scene}", "--method", "raytrace", "--out", "{root}/r"]),
     ("room", ["{root}/nothing.toml", "--out", "{root}/r"]),
+    ("datasets", ["--path", "terazzo"]), ("datasets", ["--path"]), ("datasets", ["--nope"]),
     ("room", ["{root}/file.txt", "--out", "{root}/r"]),
     ("room", ["{scene}", "--out", "{root}/foreign"]),
+    ("next", ["{data}", "--n", "0"]), ("next", ["{data}", "--seed", "-1"]),
+    ("next", ["{data}", "--gammas", "-20", "95"]), ("next", ["{data}", "--theta-step", "0"]),
+    ("next", ["{data}", "--theta-min", "60", "--theta-max", "-60"]),
+    ("next", ["{data}", "--gammas", "-20", "30"]), ("next", ["{data}", "--gamma-settings", "0"]),
+    ("next", ["{data}", "--gamma-cost", "-1"]), ("next", ["{data}", "--out", "{root}/n.txt"]),
+    ("next", ["{data}", "--out", "{root}/folder"]), ("next", ["{data}", "--out", "{data}"]),
+    ("next", ["{data}", "--model", "nope"]), ("next", ["{data}", "--source-clearance", "nan"]),
+    ("campaign", ["{data}", "--strategies", "greedy"]), ("campaign", ["{data}", "--n-max", "3"]),
+    ("campaign", ["{data}", "--method", "spline"]), ("campaign", ["{data}", "--noise", "-1"]),
+    ("campaign", ["{data}", "--theta-step", "1"]), ("campaign", ["{data}", "--seed", "-1"]),
+    ("campaign", ["{data}", "--strategies", ","]), ("campaign", ["{data}", "--out", "{root}/file.txt"]),
+    ("campaign", ["{data}", "--out", "{root}/foreign"]),
+    ("campaign", ["{data}", "--angle-error", "45", "--strategies", "adaptive"]),
 ]
 
 

@@ -23,14 +23,14 @@ PACKAGE = Path(irreflect.__file__).parent
 LAYERS = [
     ("data and models", ["errors", "validation", "_atomic", "_progress", "_jsonio", "paper",
                          "data", "metrics", "models"]),
-    ("fitting", ["fitting", "synthetic", "verdict"]),
-    ("capabilities", ["diagnose", "protocol", "compare", "selection", "room"]),
+    ("fitting", ["fitting", "_compiled", "synthetic", "verdict"]),
+    ("capabilities", ["diagnose", "protocol", "compare", "selection", "campaign", "room"]),
     ("plots", ["plots"]),
     ("report", ["report"]),
     ("cli", ["cli", "__main__"]),
 ]
 #: the order among the capabilities (a capability imports only those before it)
-CAPABILITIES = ["diagnose", "protocol", "compare", "selection", "room"]
+CAPABILITIES = ["diagnose", "protocol", "compare", "selection", "campaign", "room"]
 
 
 def _module_name(path: Path) -> str:

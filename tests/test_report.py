@@ -52,9 +52,7 @@ def test_numbers_in_report_equal_the_csvs(report_dir):
 
 
 def test_paper_columns_equal_the_paper_tables(report_dir):
-    paper = paper_tables_dir()
-    if paper is None:
-        pytest.skip("../shared/paper/tables not found")
+    paper = paper_tables_dir()  # shipped inside the package: never absent
     t2 = pd.read_csv(report_dir / "tables" / "table2_fit_quality.csv").set_index("material")
     p2 = pd.read_csv(paper / "table2_fit_quality_12pt.csv").set_index("material")
     for material in p2.index:
@@ -91,9 +89,7 @@ def test_every_capability_has_its_tables_and_figures(report_dir):
 
 
 def test_table5_and_table6_paper_columns_equal_the_paper(report_dir):
-    paper = paper_tables_dir()
-    if paper is None:
-        pytest.skip("../shared/paper/tables not found")
+    paper = paper_tables_dir()  # shipped inside the package: never absent
     t5 = pd.read_csv(report_dir / "tables" / "selection_table5.csv")
     p5 = pd.read_csv(paper / "table5_methods_r2.csv")
     merged = t5.merge(p5, left_on=["dataset", "method"], right_on=["material", "method"])
@@ -114,13 +110,94 @@ def test_table5_and_table6_paper_columns_equal_the_paper(report_dir):
 
 
 def test_ours_are_measured_not_copied(report_dir):
-    if paper_tables_dir() is None:
-        pytest.skip("../shared/paper/tables not found: no paper values to differ from")
     t2 = pd.read_csv(report_dir / "tables" / "table2_fit_quality.csv").set_index("material")
     assert t2["R^2 paper"].notna().all() and t2["R^2 ours"].notna().all()
     # the reconstructed data give a close but different R^2 than the paper's measurements
     assert (t2["R^2 ours"] != t2["R^2 paper"]).all()
     assert t2["R^2 ours"].between(0.9, 1.0).all()
+
+
+# ----------------------------------------------------------------------------- one answer
+def _select_like_the_report(data: str, tmp_path, md: str) -> dict:
+    """Run ``irreflect select`` with the command the report names for its answers."""
+    import json
+    import shlex
+
+    command = re.search(r"`(irreflect select DATA[^`]*)`", md).group(1)
+    argv = shlex.split(command)[1:]
+    argv[argv.index("DATA")] = data
+    argv[argv.index("DIR")] = str(tmp_path / "select")
+    assert main(argv + ["--quiet"]) == 0
+    return json.loads((tmp_path / "select" / "summary.json").read_text())
+
+
+def _assert_one_answer(report, summary, name):
+    fronts = pd.read_csv(report / "tables" / "selection_fronts.csv").set_index("dataset")
+    row = fronts.loc[name]
+    assert int(row["knee N (ours)"]) == summary["knee_n"]
+    enough = summary["enough_points"]
+    assert int(row["enough points N"]) == enough["n"]
+    expected = (f"{enough['n_low']}-{enough['n_high']}" if enough["n_high"] is not None
+                else f"{enough['n_low']} to more than")
+    assert row["enough points range"].startswith(expected)
+    assert row["search settings"].startswith("NSGA-II, population 30, 25 generations")
+
+
+def test_select_gives_the_reports_answer_with_the_settings_the_report_names(report_dir,
+                                                                           tmp_path):
+    md = (report_dir / "report.md").read_text()
+    summary = _select_like_the_report("plasterboard", tmp_path, md)
+    _assert_one_answer(report_dir, summary, "plasterboard")
+
+
+# ----------------------------------------------------------------------------- fit warnings
+def _findings(md: str) -> str:
+    return md.split('<a id="sec-findings"></a>', 1)[1].split("\n## ", 1)[0]
+
+
+def test_findings_count_and_group_the_fit_warnings(report_dir):
+    md = (report_dir / "report.md").read_text()
+    findings = _findings(md)
+    warned = pd.read_csv(report_dir / "tables" / "fit_warnings.csv")
+    assert len(warned) > 0  # the bundled data make some fits ill-determined
+    assert "Nothing failed" not in findings
+    key = ["table", "model", "warning", "coefficients"]
+    assert not warned.duplicated(key).any()  # one row per table, model, kind, coefficients
+    assert not warned["table"].isin(["measurements", "(unnamed)", "table"]).any()
+    total = 0
+    for name in ("terrazzo", "plasterboard", "foam_board"):
+        mine = warned[(warned["table"] == name) | warned["table"].str.endswith(f" on {name}")]
+        line = re.search(rf"^- \*\*{name}\*\*: (\d+) fit warning\(s\)", findings, re.M)
+        if len(mine):
+            assert line is not None and int(line.group(1)) == mine["fits"].sum(), name
+        else:
+            assert line is None, name
+        total += mine["fits"].sum()
+    rest = warned["fits"].sum() - total
+    other = re.search(r"^- (\d+) fit warning\(s\) on tables the sections", findings, re.M)
+    assert (int(other.group(1)) if other else 0) == rest
+
+
+def test_fit_warnings_are_parsed_and_grouped():
+    from irreflect.report.fit_warnings import collect, findings, group
+
+    notes = collect([
+        ("fit", "terrazzo, two-lobe: ill-determined by these data: v_ns = 0.63 +- 1.3 (x): m"),
+        ("fit", "terrazzo, two-lobe: ill-determined by these data: v_ns = 0.63 +- 1.3 (x): m"),
+        ("selection", "terrazzo, two-lobe: ill-determined by these data: v_ns = 0.64 +- 1.2: m"),
+        ("protocol", "paper-12pt on terrazzo, n-lobe:3: at a bound of the physical range: "
+                     "n_1 = 12 (upper bound 12): m"),
+        ("diagnose", "hidden_bump_3, two-lobe+background: ill-determined by these data: "
+                     "u_as = 1 +- 2, v_as = 3 +- 9: m"),
+    ])
+    assert len(notes) == 4 and notes[2].model == "n-lobe:3" and notes[3].coefficients == (
+        "u_as", "v_as")
+    table = group(notes, ["terrazzo"])
+    assert table["fits"].tolist() == [2, 1, 1]
+    assert table["raised in"].iloc[0] == "the common fit, point selection"
+    found = findings(notes, ["terrazzo"])
+    assert found[0].dataset == "terrazzo" and found[0].text.startswith("3 fit warning(s)")
+    assert found[1].dataset == "" and found[1].text.startswith("1 fit warning(s) on tables")
 
 
 def test_bad_data_dir_is_a_one_line_error(tmp_path, capsys):
@@ -215,6 +292,16 @@ def test_report_on_measured_data_speaks_of_measurements(real_report_dir):
 
 
 @pytest.mark.real
+def test_select_and_the_report_agree_on_a_measured_gloss_paint(real_report_dir, tmp_path):
+    from irreflect.data import real_data_dir
+
+    md = (real_report_dir / "report.md").read_text()
+    table = real_data_dir() / "cornell" / "cornell_cayman.csv"
+    summary = _select_like_the_report(str(table), tmp_path, md)
+    _assert_one_answer(real_report_dir, summary, "cornell_cayman")
+
+
+@pytest.mark.real
 def test_report_on_measured_data_names_the_failed_protocol_first(real_report_dir):
     md = (real_report_dir / "report.md").read_text()
     findings = md.split('<a id="sec-findings"></a>', 1)[1].split("\n## ", 1)[0]
@@ -226,5 +313,5 @@ def test_report_on_measured_data_names_the_failed_protocol_first(real_report_dir
     ev = pd.read_csv(real_report_dir / "tables" / "protocol_evaluation.csv")
     assert f"R^2 = {t2['R^2 ours'].iloc[0]:.4g}" in findings
     assert f"R^2 = {ev['R^2 protocol'].iloc[0]:.4g}" in findings
-    assert "specular lobe" in findings and ev["fails"].iloc[0] == "yes"
+    assert "specular lobe" in findings and ev["verdict"].iloc[0] == "fails"
     assert t2["R^2 ours"].iloc[0] < t2["R^2 all-points fit"].iloc[0] - 0.5

@@ -337,11 +337,20 @@ def test_select_warns_when_the_papers_protocol_fails_on_a_glossy_material(real_d
     r2_12, r2_a = summary["methods"]["12"]["r2"], summary["methods"]["A"]["r2"]
     assert r2_a > 0.99 and r2_12 < r2_a - 0.5
     line = next(x for x in captured.err.splitlines() if "protocol fails" in x)
-    assert f"R^2 = {r2_12:.4g} against all points" in line and "--lobe-from" in line
+    assert f"R^2 = {r2_12:.4g} against all points" in line
     assert f"the all-points fit's {r2_a:.4g}" in line
+    # the cause from the evidence (Cayman's lobe is a fraction of a degree wide) and the
+    # adaptive campaign as the remedy, never a command that makes a protocol
+    assert "cause: the specular lobe is not resolved at gamma" in line
+    assert "`irreflect next MEASURED.csv" in line and "irreflect protocol" not in line
+    verdict = next(x for x in captured.out.splitlines() if "verdict on method 12" in x)
+    assert f"R^2 {r2_12:.4f} on all points" in verdict and "PROTOCOL FAILS" in verdict
     assert main(["select", str(bundled_dir() / "terrazzo.csv"), "--generations", "5", "--pop-size", "20", "--quiet",
                  "--out", str(tmp_path / "t")]) == 0
-    assert "protocol fails" not in capsys.readouterr().err
+    captured = capsys.readouterr()
+    assert "protocol fails" not in captured.err
+    # a verdict is printed when the protocol passes too
+    assert "verdict on method 12: pass:" in captured.out
 
 
 # ----------------------------------------------------------------------------- pymoo's overrides

@@ -344,9 +344,10 @@ def read_measurements(path, *, average_duplicates: bool = False) -> Measurements
               "(or pass the DataFrame to irreflect.fit directly)")
     if not isinstance(path, str | os.PathLike):
         _fail(f"expected a path to a CSV or Parquet table, found {type(path).__name__}")
-    path = Path(path)
+    path = find_bundled(path, "table") or Path(path)
     if not path.exists():
-        _fail(f"{path}: no such file: expected a CSV or Parquet measurement table")
+        _fail(f"{path}: no such file: expected a CSV or Parquet measurement table"
+              + _bundled_hint(path, "table"))
     if path.is_dir():
         _fail(f"{path}: is a folder; expected a CSV or Parquet measurement table")
     suffix = path.suffix.lower()
@@ -521,6 +522,93 @@ def check_enough_points(n_points: int, model, source: str = "table") -> None:
 
 # ----------------------------------------------------------------------------- datasets
 BUNDLED = ("terrazzo", "plasterboard", "foam_board")
+#: The bundled example scenes (``irreflect room office``).
+BUNDLED_SCENES = ("office",)
+
+_RECONSTRUCTION = ("reconstruction of the paper's {name}, not a measurement: its Table 3 "
+                   "model on its sampling plan plus seeded Gaussian noise")
+
+
+@dataclass(frozen=True)
+class BundledFile:
+    """One file shipped with irreflect: its name (what commands accept in place of a path),
+    kind, where it came from, and where it lies in the installed package."""
+
+    name: str
+    kind: str  # "table", "scene", "material", "paper table", "readme"
+    origin: str
+    path: Path
+    points: int | None = None
+
+
+def bundled_files() -> list[BundledFile]:
+    """Every dataset, scene, material file and paper table shipped inside the package,
+    with its origin and installed path (``irreflect datasets`` prints them)."""
+    from .paper import PAPER_SOURCE, PAPER_TABLES, paper_tables_dir
+
+    root = bundled_dir()
+    out = []
+    for name in BUNDLED:
+        path = root / f"{name}.csv"
+        with open(path, encoding="utf-8") as fh:
+            rows = sum(1 for line in fh if line.strip() and not line.startswith("#")) - 1
+        out.append(BundledFile(name, "table",
+                               _RECONSTRUCTION.format(name=name.replace("_", " ")), path, rows))
+    for name in BUNDLED_SCENES:
+        out.append(BundledFile(name, "scene", "example room: Barry et al.'s (1993) configuration "
+                               "A geometry with the three materials fitted from the "
+                               "reconstructions, a desk, three receivers and a receiver grid",
+                               root / "rooms" / f"{name}.toml"))
+    for name in BUNDLED:
+        out.append(BundledFile(f"rooms/{name}.json", "material",
+                               f"two-lobe fit of the {name} reconstruction (irreflect fit "
+                               "--save), used by the office scene", root / "rooms" / f"{name}.json"))
+    papers = paper_tables_dir()
+    for file, (table, what) in PAPER_TABLES.items():
+        out.append(BundledFile(file.removesuffix(".csv"), "paper table",
+                               f"the paper's {table} ({what}), as published in "
+                               f"{PAPER_SOURCE}", papers / file))
+    return out
+
+
+def find_bundled(name, kind: str = "table") -> Path | None:
+    """The installed path of a bundled file of ``kind`` ("table" or "scene") named ``name``
+    (``terrazzo``, ``terrazzo.csv``; ``office``, ``office.toml``), or None. A file that
+    exists at ``name`` always wins: names are looked up only when there is no such file."""
+    if not isinstance(name, str | os.PathLike):
+        return None
+    text = str(name)
+    if Path(text).exists() or os.sep in text or "/" in text:
+        return None
+    names, suffix = ((BUNDLED, ".csv") if kind == "table" else (BUNDLED_SCENES, ".toml"))
+    stem = text[: -len(suffix)] if text.endswith(suffix) else text
+    if stem not in names:
+        return None
+    folder = bundled_dir() if kind == "table" else bundled_dir() / "rooms"
+    return folder / f"{stem}{suffix}"
+
+
+def _bundled_hint(path: Path, kind: str) -> str:
+    """What to write instead of a missing path that names a bundled file."""
+    names, suffix = ((BUNDLED, ".csv") if kind == "table" else (BUNDLED_SCENES, ".toml"))
+    stem = path.name[: -len(suffix)] if path.name.endswith(suffix) else path.name
+    if stem in names:
+        return (f"; the bundled '{stem}' is reachable by name: write '{stem}' instead of a "
+                "path ('irreflect datasets' lists what ships with irreflect)")
+    return (f" (or the name of a bundled {'dataset' if kind == 'table' else 'scene'}: "
+            f"{', '.join(names)}; 'irreflect datasets' lists them)")
+
+
+def resolve_scene(scene) -> Path:
+    """A scene file as given, or a bundled scene by name (``office``); a missing file is a
+    one-line error naming the bundled scenes."""
+    found = find_bundled(scene, "scene")
+    if found is not None:
+        return found
+    path = Path(scene)
+    if not path.exists():
+        _fail(f"{path}: no such file: expected a scene (TOML)" + _bundled_hint(path, "scene"))
+    return path
 
 
 def bundled_dir() -> Path:
@@ -551,3 +639,24 @@ def real_datasets() -> dict[str, Path]:
     if root is None:
         return {}
     return {p.stem: p for p in sorted(root.rglob("*.csv"))}
+
+
+def header_only(path: Path) -> bool:
+    """True when the table at ``path`` has column names and no rows (the names are checked):
+    a campaign's first table (`irreflect next`)."""
+    if path.suffix.lower() in (".parquet", ".pq"):
+        df = _read_parquet(path)
+        if len(df):
+            return False
+        _check_columns(df, str(path))
+        return True
+    if path.stat().st_size > 65536:
+        return False
+    text = _decode(path.read_bytes(), path)
+    lines = [line.split("#", 1)[0] for line in text.splitlines()]
+    lines = [line for line in lines if line.strip()]
+    if len(lines) != 1:
+        return False
+    header = [h.strip() for h in next(csv.reader(lines, skipinitialspace=True))]
+    _check_columns(pd.DataFrame(columns=header), str(path))
+    return True

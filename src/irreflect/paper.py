@@ -1,14 +1,17 @@
-"""What the paper gives, in one place: its Table 1 (the 12-point protocol), its Table 3 (the
-fitted coefficients of its three materials), and where its tables and the real measured
-data lie beside a checkout (``../shared``).
+"""What the paper gives, in one place: its published tables (1-7) as data shipped inside the
+package (:func:`paper_tables_dir`, :data:`PAPER_TABLES`), its Table 1 (the 12-point
+protocol) and Table 3 (the fitted coefficients of its three materials) as constants, and
+where the real measured data lie beside a checkout (``../shared``).
 
-The constants are copied from the paper (``../shared/paper/tables``) so that irreflect runs
-without that folder; ``tests/test_paper.py`` checks them against it when it is present.
+The tables are the paper's published numbers, not measurements (its raw data were never
+published); ``irreflect/paper_tables/README.md`` names the source and the SHA-256 of every
+file, and ``tests/test_paper.py`` checks the files and the constants against them.
 """
 
 from __future__ import annotations
 
 import os
+from importlib import resources
 from pathlib import Path
 
 #: Table 3: two-lobe coefficients (u_as, v_as, u_nd, v_nd, u_ns, v_ns, K) per material.
@@ -41,11 +44,39 @@ def shared_dir() -> Path | None:
     return None
 
 
-def paper_tables_dir() -> Path | None:
-    """The paper's tables as CSV (``../shared/paper/tables``), if present."""
-    base = shared_dir()
-    path = None if base is None else base / "paper" / "tables"
-    return path if path is not None and path.is_dir() else None
+#: The paper's tables shipped with irreflect: file -> (the paper's table, what it holds).
+PAPER_TABLES: dict[str, tuple[str, str]] = {
+    "table1_protocol_12pt.csv": ("Table 1", "the 12 (gamma, theta) points of the protocol"),
+    "table2_fit_quality_12pt.csv": ("Table 2", "R^2, RMSE, MSE of the 12-point fit"),
+    "table3_parameters.csv": ("Table 3", "fitted two-lobe coefficients per material"),
+    "table4_fit_time_ms.csv": ("Table 4", "time of one fit (MATLAB, Core 2 Duo)"),
+    "table5_methods_r2.csv": ("Table 5", "R^2 of Methods A, B and 12"),
+    "table6_polar_error_pct.csv": ("Table 6", "polar-area error per gamma, two-lobe vs Phong"),
+    "table7_literature_error_pct.csv": ("Table 7", "other models' errors (Karner et al. 1994)"),
+}
+#: Where the numbers come from (every file of :func:`paper_tables_dir`).
+PAPER_SOURCE = ("De-La-Llana-Calvo et al., Modeling Infrared Signal Reflections to "
+                "Characterize Indoor Multipath Propagation, Sensors 17(4), 847 (2017), "
+                "doi:10.3390/s17040847")
+
+
+def paper_tables_dir() -> Path:
+    """The paper's published tables as CSV, shipped inside the package
+    (``irreflect/paper_tables``, found through :mod:`importlib.resources`, so an installed
+    package has them too); ``$IRREFLECT_PAPER_TABLES`` points elsewhere."""
+    env = os.environ.get("IRREFLECT_PAPER_TABLES")
+    return Path(env) if env else Path(str(resources.files("irreflect") / "paper_tables"))
+
+
+def paper_table(filename: str):
+    """One of the paper's tables (:data:`PAPER_TABLES`) as a pandas DataFrame."""
+    import pandas as pd
+
+    from .errors import unknown_name
+
+    if filename not in PAPER_TABLES:
+        raise unknown_name("paper table", filename, PAPER_TABLES)
+    return pd.read_csv(paper_tables_dir() / filename)
 
 
 def real_data_dir() -> Path | None:

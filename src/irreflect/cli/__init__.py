@@ -33,11 +33,19 @@ COMMANDS = {
     "evaluate-protocol": "protocol",
     "compare": "compare",
     "diagnose": "diagnose",
+    "next": "campaign",
+    "campaign": "campaign",
     "reproduce": "reproduce",
     "room": "room",
+    "datasets": "datasets",
 }
 
-__all__ = ["COMMANDS", "build_parser", "main"]
+#: Commands that fit with the compiled kernel: a cold on-disk cache is built (and announced)
+#: before they start. ``fit`` and ``plot`` fit one small table with numpy and do not wait.
+COMPILED_COMMANDS = frozenset({"select", "protocol", "evaluate-protocol", "compare",
+                               "diagnose", "reproduce"})
+
+__all__ = ["COMMANDS", "COMPILED_COMMANDS", "build_parser", "main"]
 
 
 def build_parser(command: str | None = None) -> OneLineParser:
@@ -71,6 +79,10 @@ def main(argv=None) -> int:
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         try:
+            if args.command in COMPILED_COMMANDS:
+                from .._compiled import ensure_compiled
+
+                ensure_compiled()  # a cold cache: built now, announced, not silently
             code = args.handler(args)
             sys.stdout.flush()
         except BrokenPipeError:  # `irreflect ... | head`: the reader left; no error to report

@@ -23,11 +23,13 @@ def register(sub) -> None:
     p = sub.add_parser(
         "diagnose",
         help="find what a model misses: residual structure, named effect, extended fit",
-        description="Fit the model, estimate the noise (sigma column or estimated), test the "
-                    "residual for structure, try every catalogue extension on top of the model "
-                    "(ranked by BIC, accepted only on strong evidence) and repeat; end with a "
-                    "verdict: 'no missing effect', 'effects found' or 'unexplained structure "
-                    "remains'. Extensions: " + ", ".join(EXTENSIONS) + ".",
+        description="Fit the model, estimate the noise (sigma column, or estimated: additive "
+                    "and proportional to the power), test the residual for structure, fit "
+                    "explanations made of catalogue effects on top of the model and compare "
+                    "them by likelihood ratio; end with a verdict: 'no missing effect', "
+                    "'effects found', 'ambiguous' (the explanations the data cannot tell "
+                    "apart, and the measurements that would separate them) or 'unexplained "
+                    "structure remains'. Extensions: " + ", ".join(EXTENSIONS) + ".",
     )
     add_data_argument(p)
     add_model_argument(p, what="base model")
@@ -35,6 +37,10 @@ def register(sub) -> None:
     p.add_argument("--out", metavar="DIR",
                    help="write residual maps before/after, polar fits and diagnosis.json here "
                         "(default: print only)")
+    p.add_argument("--separate-out", metavar="FILE",
+                   help="when ambiguous, write the measurements that would separate the "
+                        "alternatives as a plan (gamma_deg, theta_deg, why, separation_sigma; "
+                        "CSV); header only when nothing is ambiguous (default: not written)")
     p.add_argument("--extensions", metavar="A,B",
                    help="candidate extensions, comma-separated (default: all registered)")
     p.add_argument("--max-effects", type=NON_NEGATIVE_INT, default=3, metavar="N",
@@ -63,8 +69,19 @@ def _cmd_diagnose(args: argparse.Namespace) -> int:
         for name in extensions:
             get_extension(name)
     get_model(args.model)
-    claim = claim_output(args.out, "dir", "--out") if args.out else contextlib.nullcontext()
-    with claim:
+    if args.separate_out:
+        from pathlib import Path
+
+        target, data = Path(args.separate_out), Path(str(args.data))
+        if target.exists() and data.exists() and target.resolve() == data.resolve():
+            raise IrreflectError(f"--separate-out {target}: is the input table; give another "
+                                 "file name (the plan would replace your measurements)")
+    with contextlib.ExitStack() as stack:
+        if args.out:
+            stack.enter_context(claim_output(args.out, "dir", "--out"))
+        if args.separate_out:
+            stack.enter_context(claim_output(args.separate_out, "file", "--separate-out",
+                                             suffixes=(".csv",)))
         return _diagnose(args, extensions)
 
 
@@ -80,6 +97,15 @@ def _diagnose(args, extensions) -> int:
     finally:
         bar.close()
     written = write_outputs(result, meas, args.out) if args.out else []
+    if args.separate_out:
+        from pathlib import Path
+
+        from .._atomic import atomic_path
+
+        path = Path(args.separate_out)
+        with atomic_path(path, "--separate-out") as tmp:
+            result.separating_table().to_csv(tmp, index=False)
+        written.append(path)
     if args.json:
         print_json(result.to_dict())
     else:

@@ -71,7 +71,7 @@ def _cmd_plot(args) -> int:
             result = fit(meas, model, seed=args.seed, engine=_engine(meas.n_points))
             predict = result.predict
             title = f"{meas.name}: {result.model} fit, R^2 = {result.r2:.4f}"
-        ax = plot_polar(meas, predict, title=title)
+        ax = plot_polar(meas, predict, title=title, radius=args.radius)
         save_figure(ax.figure, args.out)
     print(f"wrote {args.out}")
     return 0
@@ -113,6 +113,10 @@ def register(sub) -> None:
     add_data_argument(p)
     add_model_argument(p)
     p.add_argument("--fit", action="store_true", help="draw the fitted model over the markers")
+    p.add_argument("--radius", choices=("auto", "linear", "log"), default="auto",
+                   help="radius scale of the power (default auto: logarithmic when the "
+                        "largest power is more than 100 times the 10th percentile, as on "
+                        "glossy materials, else linear)")
     p.add_argument("--seed", type=SEED, default=0,
                    help="seed of the fit's random extra starts, with --fit (default 0)")
     p.add_argument("--out", required=True, metavar="FILE.png",

@@ -57,8 +57,9 @@ def add_data_argument(parser: argparse.ArgumentParser, *, nargs=None) -> None:
     """The DATA positional and the options every command that reads a table shares."""
     parser.add_argument("data", metavar="DATA", nargs=nargs,
                         help="measurement table (CSV or Parquet: gamma_deg, theta_deg, power"
-                             "[, sigma, material])" + ("; several run in parallel" if nargs
-                                                       else ""))
+                             "[, sigma, material]), or the name of a bundled dataset "
+                             "(terrazzo, plasterboard, foam_board; 'irreflect datasets' lists "
+                             "them)" + ("; several run in parallel" if nargs else ""))
     parser.add_argument("--average-duplicates", action="store_true",
                         help="average the power of duplicated (gamma, theta) rows instead of "
                              "refusing them")

@@ -61,12 +61,9 @@ def _protocol(args, fmt: str) -> int:
                                        theta_max=args.theta_max, seed=args.seed,
                                        wide_offset=args.wide_offset,
                                        central_offset=args.central_offset)
-        print(f"irreflect: note: glossy-aware protocol designed from {pilot.name}: gammas "
-              f"{', '.join(f'{g:g}' for g in protocol.settings['gammas_deg'])} deg, layout "
-              f"{protocol.settings['layout']}, lobe offsets "
-              f"{', '.join(f'{w:g}' for w in protocol.settings['lobe_offsets_deg'].values())} "
-              f"deg, R^2 {protocol.settings['pilot_r2']:.4f} on the pilot's points",
-              file=sys.stderr)
+        print(f"irreflect: note: glossy-aware protocol designed from {pilot.name}: "
+              f"{_placed_text(protocol)}, R^2 {protocol.settings['pilot_r2']:.4f} on the "
+              "pilot's points", file=sys.stderr)
     elif args.specular_index is not None:
         from ..protocol.core import glossy_protocol
 
@@ -99,8 +96,10 @@ def _protocol(args, fmt: str) -> int:
             mirror_offset=args.mirror_offset, wide_offset=args.wide_offset,
             central_offset=args.central_offset, min_separation=args.min_separation,
         )
+    warning = protocol.settings.get("placement_warning")
     for note in protocol.notes:
-        print(f"irreflect: note: {note}", file=sys.stderr)
+        kind = "warning" if note == warning else "note"
+        print(f"irreflect: {kind}: {note}", file=sys.stderr)
     if args.out:
         write_protocol(protocol, args.out, fmt)
         print(f"wrote {args.out} ({protocol.n_points} points, {len(protocol.gammas)} angles of "
@@ -108,6 +107,18 @@ def _protocol(args, fmt: str) -> int:
     else:
         sys.stdout.write(render(protocol, fmt))
     return 0
+
+
+def _placed_text(protocol) -> str:
+    """A glossy-aware protocol's angles, layout and where its lobe-width points stand, as
+    written in its file (``settings["lobe_offsets_deg"]``, measured from the points)."""
+    st = protocol.settings
+    placed = st["lobe_offsets_deg"]
+    parts = [f"{g}: {'/'.join(f'{o:g}' for o in offs)}" for g, offs in placed.items() if offs]
+    return (f"gammas {', '.join(f'{g:g}' for g in st['gammas_deg'])} deg, layout "
+            f"{st['layout']}, lobe-width points at "
+            + ("; ".join(f"gamma {p}" for p in parts) if parts else "none")
+            + " deg from the mirror (as written)")
 
 
 def _cmd_evaluate(args) -> int:

@@ -6,12 +6,14 @@ from .options import SEED
 
 
 def _cmd_reproduce(args) -> int:
+    from ..data import resolve_scene
     from ..report.runner import reproduce
 
     if args.scene is not None:  # what the scene's materials say of themselves, up front
         from ..room.checks import material_notes
         from ..room.scene import load_scene
 
+        args.scene = resolve_scene(args.scene)
         for line in material_notes(load_scene(args.scene), args.allow_unphysical):
             print(line)
     reproduce(out_dir=args.out, data_dir=args.data_dir, quick=args.quick, seed=args.seed,
@@ -34,8 +36,8 @@ def register(sub) -> None:
                    help="no progress display (a bar on a terminal, one line per step through "
                         "a pipe)")
     p.add_argument("--scene", default=None, metavar="SCENE.toml",
-                   help="add the room multipath section for this scene (irreflect room; "
-                        "default: none)")
+                   help="add the room multipath section for this scene (a TOML file or a "
+                        "bundled scene's name, e.g. office; default: none)")
     p.add_argument("--allow-unphysical", action="store_true",
                    help="with --scene: simulate a material whose model predicts negative power "
                         "in the room (clipped to 0; default: refused)")

@@ -24,9 +24,10 @@ def _room(args) -> int:
 
         check_scheduler_address(args.scheduler)
     out = Path(args.out)
-    scene = load_scene(args.scene)
+    from ..data import resolve_scene
     from ..room.checks import material_notes
 
+    scene = load_scene(resolve_scene(args.scene))
     for line in material_notes(scene, allow_unphysical=args.allow_unphysical):
         print(line)
     result = simulate(scene, method=args.method, bounces=args.bounces, cell_m=args.cell,
@@ -85,7 +86,7 @@ def register(sub) -> None:
                     "next-event estimation) for every emitter-receiver pair of a scene; writes "
                     "summary/bounces/impulse_response as CSV and Parquet, run.json and figures "
                     "to --out. Options override the scene's [simulation] table.")
-    p.add_argument("scene", metavar="SCENE.toml", help="scene file (see datasets/rooms/office.toml)")
+    p.add_argument("scene", metavar="SCENE.toml", help="scene file (TOML), or the name of a bundled scene (office; see 'irreflect datasets')")
     p.add_argument("--out", required=True, metavar="DIR", help="output folder")
     p.add_argument("--method", choices=("recursive", "montecarlo"), default=None,
                    help="reflections by Barry's recursive method or Monte Carlo (default: the "

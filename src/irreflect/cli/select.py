@@ -34,11 +34,14 @@ PAPER_N = 12  # the paper's protocol size (irreflect.selection.run.PAPER_N)
 
 
 def _print_run(result, methods: dict | None) -> None:
-    from ..protocol.evaluate import protocol_fails
-
     m = result.measurements
     state = " (interrupted: results so far)" if result.interrupted else ""
-    print(f"{m.name}: {m.n_points} points, selector {result.selector}, seed {result.seed}{state}")
+    cfg = result.settings
+    limit = (f"at most {cfg['max_points']} points"
+             if cfg.get("max_points") and cfg["max_points"] < m.n_points else "all points")
+    print(f"{m.name}: {m.n_points} points, selector {result.selector}, population "
+          f"{cfg.get('pop_size')}, {cfg.get('generations')} generations, {limit}, seed "
+          f"{result.seed}{state}")
     print(f"  {result.evaluations} subset fits ({result.failed_fits} failed) in "
           f"{result.seconds:.1f} s, {result.fits_per_second:.0f} fits/s; "
           f"hypervolume {result.hypervolume:.5f}")
@@ -77,16 +80,36 @@ def _print_run(result, methods: dict | None) -> None:
         print("  methods: " + "; ".join(parts) + f"  [{methods['note']}]")
         if methods["12"].get("how"):
             print(f"  method 12: {methods['12']['how']}")
-        r2_12, r2_b, r2_a = methods["12"]["r2"], methods["B"]["r2"], methods["A"]["r2"]
-        if r2_12 is not None and r2_a is not None and protocol_fails(r2_12, r2_a):
-            worse = ", worse than a constant" if r2_12 < 0 else ""
-            best = "" if r2_b is None else f"; the best 12 points give {r2_b:.4g}"
-            print(f"irreflect: warning: {m.name}: the paper's 12-point protocol fails on this "
-                  f"material: R^2 = {r2_12:.4g} against all points{worse} (the all-points "
-                  f"fit's {r2_a:.4g}{best}); its receiver angles miss the "
-                  "specular lobe: measure the points in optimal_points.csv or design a "
-                  "glossy-aware protocol with 'irreflect protocol --lobe-from PILOT.csv'",
-                  file=sys.stderr)
+        if methods["12"]["r2"] is not None and methods["A"]["r2"] is not None:
+            _print_protocol_verdict(result, methods)
+
+
+def _print_protocol_verdict(result, methods: dict) -> None:
+    """The paper's protocol's verdict (the rule of evaluate-protocol and the report, on
+    Method 12's snapped points) on stdout, and a warning with its causes and remedies on
+    stderr when it does not pass."""
+    from ..protocol.advice import adaptive_remedy
+    from ..protocol.points import assess_subset
+
+    m = result.measurements
+    summary = result.front_summary
+    reference = summary.reference_fit if summary is not None else None
+    verdict = assess_subset(m, reference=reference, model=result.model, seed=result.seed)
+    print("  " + verdict.line().replace("verdict: ", "verdict on method 12: ", 1))
+    if verdict.passed:
+        return
+    r2_12, r2_b, r2_a = methods["12"]["r2"], methods["B"]["r2"], methods["A"]["r2"]
+    worse = ", worse than a constant" if r2_12 < 0 else ""
+    best = "" if r2_b is None else f"; the best 12 points give {r2_b:.4g}"
+    word = "fails" if verdict.failed else "is marginal"
+    causes = "; ".join(c.text for c in verdict.causes)
+    specific = [c.remedy for c in verdict.causes if c.remedy]
+    print(f"irreflect: warning: {m.name}: the paper's 12-point protocol {word} on this "
+          f"material: R^2 = {r2_12:.4g} against all points{worse} (the all-points fit's "
+          f"{r2_a:.4g}{best}); cause: {causes}; remedy: "
+          + "".join(f"{r}; " for r in specific)
+          + "measure the points in optimal_points.csv (the best 12 points for this "
+          "material), or " + adaptive_remedy(m), file=sys.stderr)
 
 
 def _cmd_select(args) -> int:

@@ -180,7 +180,8 @@ def hidden_case(effect: str | None, seed: int, *, sigma_column: bool | None = No
             sigma = np.full(clean.size, sigma0)
         excess = 0.0
         if effect != "none":
-            probe = Measurements(gamma_deg=g, theta_deg=t, power=clean, sigma=sigma)
+            probe = Measurements(gamma_deg=g, theta_deg=t, power=clean, sigma=sigma,
+                                 name=f"hidden_{effect}_{seed} (noise-free probe)")
             excess = float(np.sum((fit(probe, "two-lobe", seed=seed).residuals / sigma) ** 2))
             if excess < min_excess_chi2:
                 continue

@@ -1,27 +1,48 @@
 """The discrepancy workflow: where model and measurements disagree, which effect is missing.
 
-1. Fit the base model (default ``two-lobe``). Noise: the table's ``sigma`` column
-   ("given"), or estimated from the data ("estimated"): a difference-based estimator
-   (Gasser, Sroka and Jennen-Steinmetz 1986) along theta within each angle of incidence,
-   applied to the base model's residuals so that the sharp specular peak the model already
-   describes does not inflate it, made robust by clipping pseudo-residuals beyond 3 MAD;
-   re-estimated on the residuals of each accepted extended model when that gives less
-   (a misfit that is sharp on the scale of the grid leaks into the first estimate).
-2. Locate the disagreement: residuals normalised by the noise, mapped over (gamma, theta);
-   a lack-of-fit statistic ``chi2 / dof`` with its p-value (chi-square with a given sigma,
-   F with an estimated one, whose degrees of freedom are measured by simulating pure noise
-   on the same grid); structure tests: the runs of residual signs along theta, and the mean
-   residual per angle of incidence, per receiver angle, per distance from the mirror
+1. Fit the base model (default ``two-lobe``). Noise (:mod:`irreflect.diagnose.noise`): the
+   table's ``sigma`` column, or estimated from differences along theta of the base
+   model's residuals, with a part proportional to the power when the data show one (then
+   the base model is fitted again, weighted by that noise). Every later fit is weighted by
+   the same noise.
+2. Locate the disagreement: residuals normalised by the noise over (gamma, theta); a
+   lack-of-fit statistic ``chi2 / dof`` with its p-value (chi-square with a given sigma,
+   F with an estimated one); structure tests: runs of residual signs along theta, and the
+   mean residual per angle of incidence, per receiver angle, per distance from the mirror
    direction and per distance from the source direction.
-3. Name the effect: fit every registered extension on top of the current model, started at
-   its optimum, and rank them by BIC. The best is accepted only on strong evidence: BIC
-   lower by more than ``min_delta_bic`` (10: "very strong", Kass and Raftery 1995), a lower
-   ``chi2 / dof``, at least ``min_share`` of the excess residual (the chi-square above
-   what noise alone would give) explained, and a BIC at least ``min_margin`` below the
-   runner-up's (else the data cannot tell the two apart and no name is given).
-4. Repeat until no candidate is accepted; verdict: "no missing effect", "effects found"
-   (and the residual is now consistent with the noise) or "unexplained structure remains"
-   (with where it lies).
+3. Name the effect. Each catalogue effect is a law in the angle of incidence as well as in
+   theta: a constant receiver offset shifts every gamma alike, an off-specular tilt grows
+   toward grazing (``sin^2 gamma``), a background is flat in theta and gamma, an
+   incidence-dependent reflectance scales each gamma's whole curve, retroreflection peaks
+   toward the source (``theta = gamma``), a halo widens the base of the lobe. Every
+   explanation (a set of effects) is fitted on top of the base model, over all angles of
+   incidence at once, started from the optimum of every smaller set it contains and from
+   a scan of the coordinates it adds (:mod:`irreflect.diagnose.search`), and compared by
+   likelihood ratio (:func:`irreflect.diagnose.noise.deviance`):
+
+   * an explanation ``S`` is *adequate* when no single further effect ``X`` improves it
+     significantly: the likelihood ratio of ``S + X`` against ``S`` is below the
+     chi-square quantile at level ``alpha / m`` (``m`` effects tried, Bonferroni) or, for
+     ``S`` not empty, ``X`` explains less than ``min_share`` of the excess residual ``S``
+     leaves (the chi-square above what noise alone would give: a sliver of misfit an
+     extra term can always mop up is not a second effect). A non-empty ``S`` whose
+     residual is consistent with the noise (lack of fit and structure tests at ``alpha``)
+     is adequate without more: a further effect is sought only where the named ones leave
+     structure (a gate: the specific tests follow a significant global one);
+   * sets are tried by size, from the empty one (the base model): the smallest adequate
+     explanations win. One: its effects are named. Several of the same size: each fits as
+     well as the model that holds both (neither is rejected against it): the data cannot
+     tell them apart, and the diagnosis says "ambiguous between A and B" with the
+     measurements that would separate them (:mod:`irreflect.diagnose.separate`). Effects
+     common to all of them are named;
+   * explanations that are not adequate are grown by one effect; of the grown ones, those
+     rejected against the best of their size (the likelihood ratio to the best exceeds the
+     quantile, a lower bound of the one to their union) are dropped;
+   * what is named must explain at least ``min_share`` of the base model's excess
+     residual; else nothing is named (an effect outside the catalogue).
+4. Verdict: "no missing effect", "effects found" (the residual is then consistent with
+   the noise), "ambiguous" (with the alternatives and the separating measurements) or
+   "unexplained structure remains" (with where it lies).
 """
 
 from __future__ import annotations
@@ -40,141 +61,35 @@ from ..data import Measurements, as_measurements
 from ..errors import FitError, FitWarning, IrreflectError
 from ..fitting import FitResult, fit
 from ..models import ReflectionModel, get_model
-from ..models.extensions import (
-    EXTENSIONS,
-    applied_extensions,
-    get_extension,
-    warm_starts,
+from ..models.extensions import EXTENSIONS, applied_extensions, get_extension
+from .noise import (
+    NoiseEstimate,
+    clipped_scale,
+    deviance,
+    difference_weights,
+    estimate_noise,
 )
+from .search import ModelSets, canonical_order, set_name, starts_for
+from .separate import separating_settings
 
 #: verdict codes (the ``verdict`` key of the JSON output)
 NO_MISSING_EFFECT = "no missing effect"
 EFFECTS_FOUND = "effects found"
+AMBIGUOUS = "ambiguous"
 UNEXPLAINED = "unexplained structure remains"
+#: at most this many explanations of one size are grown further (the rest are ambiguous
+#: with them anyway, and every one costs a fit per effect)
+MAX_CONTENDERS = 3
+#: at most this many times the noise is estimated again from a chosen explanation's
+#: residual and the explanations judged again
+MAX_NOISE_PASSES = 2
 
-_MAD_TO_SIGMA = 1.0 / special.ndtri(0.75)  # normal quantile: 1 / 0.6745
-
-
-# ----------------------------------------------------------------------------- noise
-@dataclass(frozen=True)
-class NoiseEstimate:
-    """Measurement noise: per-point 1-sigma ``sigma`` (power units), its typical value
-    ``value`` (median), where it came from (``source``: "given" or "estimated") and the
-    degrees of freedom of the estimate (``inf`` when given)."""
-
-    sigma: np.ndarray
-    value: float
-    source: str
-    dof: float
-    method: str
-
-
-def difference_weights(gamma_deg, theta_deg, order: int = 2):
-    """Weights of the difference-based pseudo-residuals along theta within each gamma.
-
-    Every run of ``order + 1`` consecutive receiver angles (sorted, same angle of incidence)
-    gives one pseudo-residual ``e = sum_j w_j y_j`` with ``w`` the divided-difference
-    weights of that run normalised to unit length: ``e`` is blind to any polynomial of
-    degree < ``order`` in theta and has variance ``sigma^2`` for pure noise (Gasser et al.
-    1986 for ``order = 2``). Returns a sparse ``(windows, n)`` matrix (``order + 1`` values
-    per row: a dense one would hold 3.2 GB on a 20,000-point table); angles in degrees.
-    """
-    from scipy import sparse
-
-    gamma_deg = np.asarray(gamma_deg, float)
-    theta = np.radians(np.asarray(theta_deg, float))
-    n = gamma_deg.size
-    k = order + 1
-    cols, vals = [], []
-    for g in np.unique(gamma_deg):
-        idx = np.nonzero(gamma_deg == g)[0]
-        idx = idx[np.argsort(theta[idx], kind="stable")]
-        if idx.size < k:
-            continue
-        win = np.lib.stride_tricks.sliding_window_view(idx, k)  # (windows, k)
-        x = theta[win]
-        diff = x[:, :, None] - x[:, None, :]
-        diff[:, np.arange(k), np.arange(k)] = 1.0
-        good = ~np.any(diff == 0, axis=(1, 2))
-        w = 1.0 / np.prod(diff[good], axis=2)
-        cols.append(win[good])
-        vals.append(w / np.linalg.norm(w, axis=1, keepdims=True))
-    cols = np.concatenate(cols) if cols else np.zeros((0, k), np.int64)
-    vals = np.concatenate(vals) if vals else np.zeros((0, k))
-    m = cols.shape[0]
-    return sparse.csr_array((vals.ravel(), cols.ravel(), np.arange(0, m * k + 1, k)),
-                            shape=(m, n))
-
-
-def clipped_scale(e, clip: float = 3.0) -> np.ndarray:
-    """Robust RMS along the last axis: pseudo-residuals beyond ``clip`` times the MAD scale
-    are dropped (sharp features the differences do not cancel), the RMS of the rest is
-    corrected for the truncation of a normal distribution at ``clip`` sigma. As efficient
-    as the plain RMS on pure noise, as robust as the median when a minority is spoiled."""
-    e = np.atleast_2d(np.asarray(e, float))
-    s0 = _MAD_TO_SIGMA * np.median(np.abs(e), axis=-1, keepdims=True)
-    keep = np.abs(e) <= clip * s0
-    pdf = np.exp(-0.5 * clip * clip) / np.sqrt(2.0 * np.pi)
-    kept_var = 1.0 - 2.0 * clip * pdf / (2.0 * special.ndtr(clip) - 1.0)
-    mean_sq = np.sum(np.where(keep, e * e, 0.0), axis=-1) / np.maximum(np.sum(keep, axis=-1), 1)
-    return np.sqrt(mean_sq / kept_var)
-
-
-def estimate_noise(measurements, residuals=None, *, order: int = 2, seed: int = 0,
-                   n_sim: int = 400) -> NoiseEstimate:
-    """Noise of a measurement table: the ``sigma`` column if present, else estimated.
-
-    Parameters
-    ----------
-    measurements : Measurements
-    residuals : array, optional
-        Residuals of a fitted model (power units). The estimator is applied to them instead
-        of the raw power: the model takes out the sharp specular peak, the differences take
-        out what smooth misfit is left. Without them, the raw power is used.
-    order : int
-        Order of the differences (2: three consecutive receiver angles).
-    seed : int
-        Seeds the simulation that measures the estimate's degrees of freedom.
-    n_sim : int
-        Pure-noise replicates of that simulation.
-
-    Returns
-    -------
-    NoiseEstimate
-        The clipped RMS of the pseudo-residuals (:func:`clipped_scale`) for every point
-        (constant noise is assumed), with the degrees of freedom ``1 / (2 var(ln sigma))``
-        of that estimate measured on pure noise on this grid.
-
-    Raises
-    ------
-    IrreflectError
-        If no angle of incidence has ``order + 1`` receiver angles and no sigma is given.
-    """
-    meas = as_measurements(measurements)
-    if meas.sigma is not None:
-        sigma = np.asarray(meas.sigma, float)
-        return NoiseEstimate(sigma=sigma, value=float(np.median(sigma)), source="given",
-                             dof=float("inf"), method="sigma column of the table")
-    weights = difference_weights(meas.gamma_deg, meas.theta_deg, order)
-    if weights.shape[0] < 5:
-        raise IrreflectError(
-            f"cannot estimate the measurement noise: found {weights.shape[0]} runs of "
-            f"{order + 1} receiver angles at one angle of incidence, need at least 5; "
-            "add a sigma column to the table or measure more receiver angles per gamma"
-        )
-    values = meas.power if residuals is None else np.asarray(residuals, float)
-    sigma_hat = float(clipped_scale(weights @ values)[0])
-    floor = 1e-12 * max(float(np.max(np.abs(meas.power))), 1e-300)
-    sigma_hat = max(sigma_hat, floor)
-    rng = np.random.default_rng(seed)
-    log_s = np.log(clipped_scale((weights @ rng.standard_normal((n_sim, meas.n_points)).T).T))
-    dof = float(1.0 / (2.0 * max(np.var(log_s), 1e-12)))
-    what = "base-model residuals" if residuals is not None else "measured power"
-    return NoiseEstimate(
-        sigma=np.full(meas.n_points, sigma_hat), value=sigma_hat, source="estimated", dof=dof,
-        method=f"clipped RMS of order-{order} differences of the {what} along theta within "
-               f"each gamma ({weights.shape[0]} pseudo-residuals, {dof:.0f} effective dof)",
-    )
+__all__ = [
+    "AMBIGUOUS", "EFFECTS_FOUND", "NO_MISSING_EFFECT", "UNEXPLAINED", "Assessment",
+    "Candidate", "Diagnosis", "Effect", "LackOfFit", "NoiseEstimate", "StructureTest",
+    "assess", "clipped_scale", "diagnose", "diagnose_many", "difference_weights",
+    "estimate_noise", "lack_of_fit", "per_gamma_chi2", "structure_tests",
+]
 
 
 # ----------------------------------------------------------------------------- statistics
@@ -255,15 +170,19 @@ def _runs_test(gamma_deg, theta_deg, z) -> StructureTest:
                          float(zscore))
 
 
-def _group_test(name, z, labels, describe) -> StructureTest:
-    """Mean normalised residual per group: ``sum n_b mean_b^2 ~ chi2(groups)`` for noise."""
+def _group_test(name, z, labels, describe, noise_dof=np.inf) -> StructureTest:
+    """Mean normalised residual per group: ``sum n_b mean_b^2 ~ chi2(groups)`` for noise
+    of a known sigma; ``(that / groups) ~ F(groups, noise_dof)`` for an estimated one."""
     keys, inverse, counts = np.unique(labels, return_inverse=True, return_counts=True)
     sums = np.bincount(inverse, weights=z, minlength=keys.size)
     means = sums / counts
     zb = means * np.sqrt(counts)
     stat = float(np.sum(zb * zb))
     dof = int(keys.size)
-    p = float(special.chdtrc(dof, stat))
+    if np.isfinite(noise_dof):
+        p = float(special.fdtrc(dof, noise_dof, stat / dof))
+    else:
+        p = float(special.chdtrc(dof, stat))
     i = int(np.argmax(np.abs(zb)))
     where = (f"{describe(keys[i])}: mean residual {means[i]:+.2f} sigma over {counts[i]} "
              f"points (z = {zb[i]:+.1f})")
@@ -284,8 +203,10 @@ def _offset_label(direction: str, negative: str, positive: str):
     return describe
 
 
-def structure_tests(gamma_deg, theta_deg, normalized_residuals) -> list[StructureTest]:
-    """The five structure tests of the workflow (angles in degrees, residuals / sigma)."""
+def structure_tests(gamma_deg, theta_deg, normalized_residuals,
+                    noise_dof: float = np.inf) -> list[StructureTest]:
+    """The five structure tests of the workflow (angles in degrees, residuals / sigma;
+    ``noise_dof``: degrees of freedom of an estimated sigma, ``inf`` when it is known)."""
     g = np.asarray(gamma_deg, float)
     t = np.asarray(theta_deg, float)
     z = np.asarray(normalized_residuals, float)
@@ -293,15 +214,16 @@ def structure_tests(gamma_deg, theta_deg, normalized_residuals) -> list[Structur
     source = t - g  # > 0: from the source toward the normal
     return [
         _runs_test(g, t, z),
-        _group_test("mean by angle of incidence", z, g, lambda k: f"gamma {_deg(k)} deg"),
+        _group_test("mean by angle of incidence", z, g, lambda k: f"gamma {_deg(k)} deg",
+                    noise_dof),
         _group_test("mean by receiver angle", z, np.round(t / 10.0) * 10.0,
-                    lambda k: f"theta {_deg(k - 5)}..{_deg(k + 5)} deg"),
+                    lambda k: f"theta {_deg(k - 5)}..{_deg(k + 5)} deg", noise_dof),
         _group_test("mean by distance from the mirror direction", z,
                     np.searchsorted(_OFFSET_EDGES, mirror),
-                    _offset_label("mirror", "the normal", "grazing")),
+                    _offset_label("mirror", "the normal", "grazing"), noise_dof),
         _group_test("mean by distance from the source direction", z,
                     np.searchsorted(_OFFSET_EDGES, source),
-                    _offset_label("source", "grazing", "the normal")),
+                    _offset_label("source", "grazing", "the normal"), noise_dof),
     ]
 
 
@@ -315,7 +237,9 @@ def per_gamma_chi2(gamma_deg, normalized_residuals) -> dict[float, float]:
 # ----------------------------------------------------------------------------- steps
 @dataclass(frozen=True)
 class Assessment:
-    """A fitted model judged against the noise."""
+    """A fitted model judged against the noise: normalised residuals, lack of fit,
+    structure, ``deviance`` (-2 log L, :func:`irreflect.diagnose.noise.deviance`) and
+    ``bic = deviance + k ln n``; ``effects``: the extensions it adds to the base model."""
 
     fit: FitResult
     residuals_z: np.ndarray
@@ -324,23 +248,34 @@ class Assessment:
     bic: float
     polar_errors: dict
     gamma_chi2: dict
+    deviance: float = float("nan")
+    effects: tuple[str, ...] = ()
 
     @property
     def model_name(self) -> str:
         return self.fit.model
 
+    def level(self, alpha: float) -> float:
+        """The level of each of the lack-of-fit and structure tests: ``alpha`` shared
+        among them (Bonferroni), so that noise alone fails the family at most ``alpha``."""
+        return alpha / (1 + len(self.structure))
+
     def flagged(self, alpha: float) -> list[StructureTest]:
-        """Structure tests significant at ``alpha`` after a Bonferroni correction."""
-        return [s for s in self.structure if s.p_value < alpha / len(self.structure)]
+        """Structure tests significant at :meth:`level`."""
+        return [s for s in self.structure if s.p_value < self.level(alpha)]
 
     def consistent(self, alpha: float) -> bool:
-        """The residual looks like noise: no lack of fit and no structure at ``alpha``."""
-        return self.lack_of_fit.p_value >= alpha and not self.flagged(alpha)
+        """The residual looks like noise: neither lack of fit nor structure (each test at
+        :meth:`level`: the family at ``alpha``)."""
+        return self.lack_of_fit.p_value >= self.level(alpha) and not self.flagged(alpha)
 
 
 @dataclass(frozen=True)
 class Candidate:
-    """One extension tried on top of the current model."""
+    """One explanation tried: the set ``name`` (effects joined by ``+``), grown from
+    ``parent`` by the effect ``added``; the likelihood ratio ``lr`` against the parent on
+    ``df`` degrees of freedom, its p-value and the level it was judged at, ``delta_bic``
+    against the parent, the share of the parent's excess residual it explains."""
 
     name: str
     assessment: Assessment | None
@@ -349,11 +284,18 @@ class Candidate:
     rss_drop: float
     accepted: bool
     reason: str
+    added: str = ""
+    parent: str = ""
+    lr: float = float("nan")
+    df: int = 0
+    p_value: float = float("nan")
+    level: float = float("nan")
 
 
 @dataclass(frozen=True)
 class Effect:
-    """An accepted extension: its new parameters with standard errors, the evidence."""
+    """A named effect: its parameters (in the final model) with standard errors, and the
+    evidence for it (against the explanation without it)."""
 
     name: str
     params: dict
@@ -362,11 +304,19 @@ class Effect:
     delta_bic: float
     share_explained: float
     rss_drop: float
+    lr: float = float("nan")
+    p_value: float = float("nan")
 
 
 @dataclass(frozen=True)
 class Diagnosis:
-    """The outcome of :func:`diagnose`."""
+    """The outcome of :func:`diagnose`.
+
+    ``effects`` are named; ``alternatives`` (when the verdict is "ambiguous") are the
+    explanations the data cannot tell apart, each the effects it adds to ``effects``, with
+    their fits in ``alternative_fits`` and the settings that would separate them in
+    ``separating``. ``steps`` lead from the base model to the final one (the best of the
+    alternatives when ambiguous); ``candidates`` holds every explanation tried, by size."""
 
     name: str
     n_points: int
@@ -381,6 +331,9 @@ class Diagnosis:
     alpha: float
     elapsed_s: float
     settings: dict = field(default_factory=dict)
+    alternatives: tuple[tuple[str, ...], ...] = ()
+    alternative_fits: dict = field(default_factory=dict)
+    separating: tuple[dict, ...] = ()
 
     @property
     def before(self) -> Assessment:
@@ -395,8 +348,20 @@ class Diagnosis:
         return self.verdict == UNEXPLAINED
 
     @property
+    def ambiguous(self) -> bool:
+        return bool(self.alternatives)
+
+    @property
     def final_model(self) -> ReflectionModel:
         return self.after.fit.model_object
+
+    def separating_table(self):
+        """The separating settings as a measurement plan: ``gamma_deg, theta_deg,
+        readings, why, separation_sigma`` (empty when nothing is ambiguous)."""
+        import pandas as pd
+
+        cols = ["gamma_deg", "theta_deg", "readings", "why", "separation_sigma"]
+        return pd.DataFrame([{k: r[k] for k in cols} for r in self.separating], columns=cols)
 
     def to_dict(self) -> dict:
         """The JSON object of ``irreflect diagnose --json``."""
@@ -404,7 +369,7 @@ class Diagnosis:
         def metrics(a: Assessment) -> dict:
             return {"model": a.model_name, "rmse": a.fit.rmse, "r2": a.fit.r2,
                     "chi2_dof": a.lack_of_fit.ratio, "lack_of_fit_p": a.lack_of_fit.p_value,
-                    "bic": a.bic,
+                    "bic": a.bic, "deviance": a.deviance,
                     "polar_error_pct": {f"{k:g}": v for k, v in a.polar_errors.items()}}
 
         return finite({
@@ -412,19 +377,28 @@ class Diagnosis:
             "n_points": self.n_points,
             "model": self.base_model,
             "effects": [{"name": e.name, "params": e.params, "stderr": e.stderr,
-                         "delta_bic": e.delta_bic, "share_explained": e.share_explained}
+                         "delta_bic": e.delta_bic, "share_explained": e.share_explained,
+                         "lr": e.lr, "p_value": e.p_value}
                         for e in self.effects],
+            "alternatives": [list(a) for a in self.alternatives],
+            "alternative_fits": {k: metrics(a) | {"params": a.fit.params}
+                                 for k, a in self.alternative_fits.items()},
+            "separating_measurements": [dict(r) for r in self.separating],
             "before": metrics(self.before),
             "after": metrics(self.after),
             "steps": [metrics(a) | {"structure": {s.name: {"p": s.p_value, "where": s.where}
                                                   for s in a.structure}}
                       for a in self.steps],
-            "candidates": [[{"name": c.name, "delta_bic": c.delta_bic,
-                             "share_explained": c.share_explained, "accepted": c.accepted,
-                             "reason": c.reason} for c in row] for row in self.candidates],
+            "candidates": [[{"name": c.name, "added": c.added, "parent": c.parent,
+                             "delta_bic": c.delta_bic, "lr": c.lr, "df": c.df,
+                             "p_value": c.p_value, "share_explained": c.share_explained,
+                             "accepted": c.accepted, "reason": c.reason} for c in row]
+                           for row in self.candidates],
             "noise_sigma": self.noise.value,
             "noise_source": self.noise.source,
             "noise_method": self.noise.method,
+            "noise_additive": self.noise.additive,
+            "noise_relative": self.noise.relative,
             "unexplained": self.unexplained,
             "verdict": self.verdict,
             "summary": self.summary,
@@ -439,14 +413,15 @@ class Diagnosis:
             f"estimated: {self.noise.method}"
         lines.append(f"noise: sigma = {self.noise.value:.4g} ({src})")
         for i, a in enumerate(self.steps):
-            head = "step 0: base model" if i == 0 else f"step {i}: + {self.effects[i - 1].name}"
+            added = [n for n in a.effects if i and n not in self.steps[i - 1].effects]
+            head = "step 0: base model" if i == 0 else f"step {i}: + {' + '.join(added)}"
             lines.append("")
             lines.append(f"{head} ({a.model_name})")
             lines.append(_assessment_line(a))
-            lines.append("  structure (p-values; Bonferroni level "
-                         f"{self.alpha / len(a.structure):.3g}):")
+            lines.append("  structure (p-values; each test, and the lack of fit, at level "
+                         f"{a.level(self.alpha):.3g}):")
             for s in a.structure:
-                mark = " *" if s.p_value < self.alpha / len(a.structure) else ""
+                mark = " *" if s.p_value < a.level(self.alpha) else ""
                 lines.append(f"    {s.name:<44} {_p_text(s.p_value)}{mark}  [{s.where}]")
             worst = sorted(a.gamma_chi2.items(), key=lambda kv: -kv[1])[:3]
             lines.append("  chi2/points by gamma (1 = noise): "
@@ -456,24 +431,38 @@ class Diagnosis:
                              + ", ".join(f"{_deg(g)} deg {e:.2f}%"
                                          for g, e in a.polar_errors.items()))
             if i > 0:
-                e = self.effects[i - 1]
-                lines.append(f"  added {e.name}: delta BIC {e.delta_bic:.1f}, explains "
-                             f"{100 * e.share_explained:.0f}% of the excess residual "
-                             f"(RSS -{100 * e.rss_drop:.0f}%)")
-                lines.append("  " + ", ".join(
-                    f"{k} = {v:.4g} +- {e.stderr[k]:.2g} {e.units[k]}".rstrip()
-                    for k, v in e.params.items()))
+                prev = self.steps[i - 1]
+                gain = {g: prev.gamma_chi2[g] - a.gamma_chi2.get(g, np.nan)
+                        for g in prev.gamma_chi2}
+                lines.append("  evidence by angle of incidence (chi2/points removed): "
+                             + ", ".join(f"{_deg(g)} deg {v:+.3g}" for g, v in
+                                         sorted(gain.items(), key=lambda kv: abs(kv[0]))))
             if i < len(self.candidates):
-                lines.append("  candidates (delta BIC; share of the excess residual explained):")
+                lines.append(f"  explanations with {i + 1} effect(s) (likelihood ratio to "
+                             "the one grown from; share of its excess residual explained):")
                 for c in self.candidates[i]:
-                    lines.append(f"    {c.name:<22} {c.delta_bic:>10.1f} "
-                                 f"{100 * c.share_explained:>6.0f}%  "
-                                 f"{'ACCEPTED' if c.accepted else c.reason}")
+                    lr = f"LR {c.lr:9.1f} (df {c.df}, {_p_text(c.p_value)})" \
+                        if np.isfinite(c.lr) else f"{'':>28}"
+                    lines.append(f"    {c.name:<34} {lr} {100 * c.share_explained:>5.0f}%  "
+                                 f"{c.reason}")
         lines.append("")
+        if self.effects:
+            lines.append("named: " + "; ".join(f"{e.name} ({_param_text(e)})"
+                                               for e in self.effects))
         lines.append(f"verdict: {self.verdict}")
         lines.append(self.summary)
         for w in self.where:
             lines.append(f"  - {w}")
+        if self.separating:
+            lines.append("measurements that would separate them (setting, readings, the "
+                         "separation they add in noise units with the wrong one refitted):")
+            for r in self.separating:
+                lines.append(f"  - gamma {_deg(r['gamma_deg'])} deg, theta "
+                             f"{_deg(r['theta_deg'])} deg x{r['readings']}: "
+                             f"{r['separation_sigma']:.1f} sigma"
+                             + (" (measured already)" if r["measured"] else ""))
+            lines.append(f"  together: chi2 {self.separating[0]['total_chi2']:.1f} (write "
+                         "them as a plan with --separate-out)")
         b, a = self.before, self.after
         lines.append(f"gap: RMSE {b.fit.rmse:.4g} -> {a.fit.rmse:.4g}, R^2 {b.fit.r2:.5f} -> "
                      f"{a.fit.r2:.5f}, chi2/dof {b.lack_of_fit.ratio:.3g} -> "
@@ -483,6 +472,8 @@ class Diagnosis:
 
 def _p_text(p: float) -> str:
     """``p = 0.012``, ``p = 3.1e-09`` or ``p < 1e-300`` (underflow)."""
+    if not np.isfinite(p):
+        return "p = n/a"
     if p <= 0.0:
         return "p < 1e-300"
     return f"p = {p:.3g}" if p >= 1e-4 else f"p = {p:.1e}"
@@ -491,48 +482,29 @@ def _p_text(p: float) -> str:
 def _assessment_line(a: Assessment) -> str:
     lof = a.lack_of_fit
     return (f"  RMSE {a.fit.rmse:.4g}   R^2 {a.fit.r2:.5f}   chi2/dof {lof.ratio:.3g} "
-            f"(dof {lof.dof}, {lof.test} {_p_text(lof.p_value)})   BIC {a.bic:.1f}")
+            f"(dof {lof.dof}, {lof.test} {_p_text(lof.p_value)})   -2 ln L {a.deviance:.1f}")
 
 
-def _bic(result: FitResult, z: np.ndarray, noise: NoiseEstimate) -> float:
-    """BIC: ``chi2 + k ln n`` with a given sigma (known variance); ``n ln(RSS/n) + k ln n``
-    with an estimated one (variance profiled out, which does not lean on the estimate)."""
-    n, k = result.n_points, result.n_params
-    if noise.source == "given":
-        return float(np.sum(z * z) + k * np.log(n))
-    rss = float(np.sum(result.residuals ** 2))
-    return float(n * np.log(max(rss, 1e-300) / n) + k * np.log(n))
-
-
-def assess(result: FitResult, noise: NoiseEstimate) -> Assessment:
-    """Judge a fit against the noise: normalised residuals, lack of fit, structure, BIC."""
+def assess(result: FitResult, noise: NoiseEstimate, effects: Sequence[str] = (),
+           polar: bool = True) -> Assessment:
+    """Judge a fit against the noise: normalised residuals, lack of fit, structure, the
+    deviance and BIC (and the polar-area errors, unless ``polar`` is False)."""
     z = result.residuals / noise.sigma
+    dev = deviance(result.residuals, result.fitted, noise)
     return Assessment(
         fit=result,
         residuals_z=z,
         lack_of_fit=lack_of_fit(z, result.n_params, noise),
-        structure=tuple(structure_tests(result.gamma_deg, result.theta_deg, z)),
-        bic=_bic(result, z, noise),
-        polar_errors=result.polar_errors(),
+        structure=tuple(structure_tests(result.gamma_deg, result.theta_deg, z, noise.dof)),
+        bic=float(dev + result.n_params * np.log(result.n_points)),
+        polar_errors=result.polar_errors() if polar else {},
         gamma_chi2=per_gamma_chi2(result.gamma_deg, z),
+        deviance=dev,
+        effects=tuple(effects),
     )
 
 
-# ----------------------------------------------------------------------------- the loop
-def _fit_candidate(meas, model, current: FitResult, seed: int) -> FitResult:
-    """Fit ``model`` (an extension of the current model), started at the current optimum as
-    well as from the model's own data-driven starts. No second search (``retry=False``):
-    an absent effect leaves its coefficient at a bound or ill-determined, which would
-    send nearly every candidate to fit()'s second search (2.3 times the time of a
-    diagnosis) while the warm starts already hold the current optimum (the rates of
-    experiments/diagnose_rates.py were measured so); the current model's own fit is
-    searched again when it looks local."""
-    z_cur, _ = current.model_object.from_natural(current.values[None])
-    gamma, theta = np.radians(meas.gamma_deg), np.radians(meas.theta_deg)
-    warm = warm_starts(model, z_cur[0], gamma, theta, meas.power)
-    return fit(meas, model, seed=seed, extra_starts=warm, retry=False)
-
-
+# ----------------------------------------------------------------------------- the search
 def _share(before: Assessment, after: Assessment) -> float:
     """Share of the excess residual (chi2 above its noise expectation) an extension removes."""
     b, a = before.lack_of_fit, after.lack_of_fit
@@ -540,10 +512,182 @@ def _share(before: Assessment, after: Assessment) -> float:
     return float(np.clip((b.chi2 - a.chi2) / excess, 0.0, 1.0))
 
 
+class _Search:
+    """The fits of one diagnosis: every explanation tried, by set name, judged against the
+    current noise estimate."""
+
+    def __init__(self, meas, work, base_model, names, noise, seed, say):
+        self.meas, self.work, self.names, self.noise = meas, work, names, noise
+        self.seed, self.say = seed, say
+        self.sets = ModelSets(base_model)
+        self.gamma = np.radians(meas.gamma_deg)
+        self.theta = np.radians(meas.theta_deg)
+        self.weights = 1.0 / noise.sigma
+        self.fits: dict[str, Assessment | None] = {}
+        self.z: dict[str, np.ndarray] = {}
+        self.failed: dict[str, str] = {}
+        self.stale: set[str] = set()
+
+    def add(self, key: str, result: FitResult, effects) -> Assessment:
+        a = assess(result, self.noise, effects, polar=False)
+        self.fits[key] = a
+        zz, _ = result.model_object.from_natural(result.values[None])
+        self.z[key] = zz[0]
+        return a
+
+    def reassess(self, noise: NoiseEstimate) -> None:
+        """Judge with another noise estimate: every fit is redone, weighted by it and
+        started from its previous optimum, when it is next asked for."""
+        self.noise = noise
+        self.work = dataclasses.replace(self.work, sigma=noise.sigma)
+        self.weights = 1.0 / noise.sigma
+        self.stale = set(self.fits)
+
+    def get(self, effects) -> Assessment | None:
+        key = set_name(effects)
+        if key in self.fits and key not in self.stale:
+            return self.fits[key]
+        effects = canonical_order(effects)
+        model = self.sets.model(effects)
+        self.say(f"trying {key or 'the base model'}")
+        starts = starts_for(self.sets, effects, self.z, self.gamma, self.theta,
+                            self.meas.power, self.weights)
+        if key in self.z:  # a fit with other weights: its optimum first
+            starts = np.vstack([self.z[key][None], starts])
+        self.stale.discard(key)
+        try:
+            with warnings.catch_warnings():  # candidates are trials: warn for the result
+                warnings.simplefilter("ignore", FitWarning)
+                result = fit(self.work, model, seed=self.seed,
+                             extra_starts=starts if starts.shape[0] else None,
+                             retry=not effects)
+        except (FitError, IrreflectError) as exc:
+            if key in self.fits and self.fits[key] is not None:  # keep the previous fit
+                self.fits[key] = assess(self.fits[key].fit, self.noise, effects, polar=False)
+                return self.fits[key]
+            self.fits[key] = None
+            self.failed[key] = str(exc)
+            return None
+        return self.add(key, result, effects)
+
+    def dev(self, effects) -> float:
+        return self.get(effects).deviance
+
+    def n_params(self, effects) -> int:
+        return self.sets.model(canonical_order(effects)).n_params
+
+
+def _beaten(search: _Search, s, other, level: float, min_share: float) -> bool:
+    """Whether explanation ``s`` is rejected in favour of the one holding both it and
+    ``other``: the likelihood ratio to ``other`` (a lower bound of the one to that union)
+    exceeds the quantile at ``level`` on the union's extra degrees of freedom, and (for
+    ``s`` not empty) ``other`` explains at least ``min_share`` of the excess residual
+    ``s`` leaves."""
+    if set(other) <= set(s):
+        return False
+    a, b = search.get(s), search.get(other)
+    union = canonical_order(set(s) | set(other))
+    df = search.n_params(union) - search.n_params(s)
+    if not a.deviance - b.deviance > _quantile(level, df, search.noise):
+        return False
+    return not s or _share(a, b) >= min_share
+
+
+def _quantile(level: float, df: int, noise: NoiseEstimate) -> float:
+    """What a likelihood ratio on ``df`` degrees of freedom must exceed at ``level``: the
+    chi-square quantile with a given sigma; ``df`` times the F quantile with an estimated
+    one (its ``noise.dof`` degrees of freedom: the ratio is measured in units of the
+    estimate)."""
+    df = max(int(df), 1)
+    if np.isfinite(noise.dof):
+        return float(df * special.fdtri(df, noise.dof, 1.0 - level))
+    return float(special.chdtri(df, level))
+
+
+def _lr_p_value(lr: float, df: int, noise: NoiseEstimate) -> float:
+    """p-value of a likelihood ratio (chi-square with a given sigma, F with an estimated
+    one; see :func:`_quantile`)."""
+    df = max(int(df), 1)
+    if np.isfinite(noise.dof):
+        return float(special.fdtrc(df, noise.dof, lr / df))
+    return float(special.chdtrc(df, lr))
+
+
+def _select(search: _Search, names, max_effects: int, alpha: float, min_share: float):
+    """The search over explanations (see the module docstring): the rounds of candidates
+    tried, by size, and the final explanations (one; several when ambiguous; the empty
+    one when nothing is named), best first."""
+    rounds: list[list[Candidate]] = []
+    contenders: list[tuple[str, ...]] = [()]
+    adequate: list[tuple[str, ...]] = []
+    inadequate_best = None
+    noise = search.noise
+    level_all = alpha / max(len(names), 1)
+    for size in range(max(int(max_effects), 0) + 1):
+        row, grown, ok = [], [], []
+        for s in contenders:
+            parent = search.get(s)
+            tried = [x for x in names if x not in s]
+            if size >= max_effects or not tried or (s and parent.consistent(alpha)):
+                # an explanation whose residual is consistent with the noise is not grown:
+                # a further effect is sought only where the named ones leave structure
+                ok.append(s)
+                continue
+            level = alpha / len(tried)
+            counted_here = False
+            for x in tried:
+                u = canonical_order(s + (x,))
+                a = search.get(u)
+                if a is None:
+                    row.append(Candidate(set_name(u), None, float("inf"), 0.0, 0.0, False,
+                                         f"fit failed: {search.failed[set_name(u)]}",
+                                         added=x, parent=set_name(s)))
+                    continue
+                df = a.fit.n_params - parent.fit.n_params
+                lr = max(parent.deviance - a.deviance, 0.0)
+                p = _lr_p_value(lr, df, noise)
+                share = _share(parent, a)
+                rss_b = float(np.sum(parent.fit.residuals ** 2))
+                rss_a = float(np.sum(a.fit.residuals ** 2))
+                row.append(Candidate(set_name(u), a, a.bic - parent.bic, share,
+                                     float(1.0 - rss_a / rss_b) if rss_b > 0 else 0.0, False,
+                                     "", added=x, parent=set_name(s), lr=lr, df=df, p_value=p,
+                                     level=level))
+                if p < level and (not s or share >= min_share):
+                    counted_here = True
+                    grown.append(u)
+            if not counted_here:
+                ok.append(s)
+        if row:
+            rounds.append(row)
+        grown = list(dict.fromkeys(grown))
+        if grown:  # an explanation no single effect improves may still be beaten by one
+            best = min(grown, key=search.dev)  # grown from another
+            ok = [s for s in ok if not _beaten(search, s, best, level_all, min_share)]
+        if ok or not grown:
+            adequate = ok
+            break
+        # grow: drop what the best of the next size rejects, keep a few
+        keep = sorted((u for u in grown if not _beaten(search, u, best, level_all, 0.0)),
+                      key=search.dev)
+        contenders = keep[:MAX_CONTENDERS]
+        inadequate_best = contenders[0]
+    if not adequate:  # every explanation of the largest size tried can still be improved
+        adequate = [inadequate_best] if inadequate_best is not None else [()]
+    # among the adequate ones, those the best rejects go; what is named must explain enough
+    base = search.get(())
+    best = min(adequate, key=search.dev)
+    final = [s for s in adequate
+             if not _beaten(search, s, best, level_all, 0.0)
+             and (not s or _share(base, search.get(s)) >= min_share)]
+    final.sort(key=search.dev)
+    return rounds, (final or [()])
+
+
 def diagnose(measurements, model="two-lobe", *, extensions: Sequence[str] | None = None,
-             max_effects: int = 3, seed: int = 0, min_delta_bic: float = 10.0,
-             min_share: float = 0.5, min_margin: float = 6.0, alpha: float = 0.01,
-             progress: Callable[[str], None] | None = None) -> Diagnosis:
+             max_effects: int = 3, seed: int = 0, min_share: float = 0.5,
+             alpha: float = 0.01, separate: int = 12,
+             progress: Callable[[str], None] | None = None, **legacy) -> Diagnosis:
     """Find what a reflection model misses in a measurement table.
 
     Parameters
@@ -555,18 +699,21 @@ def diagnose(measurements, model="two-lobe", *, extensions: Sequence[str] | None
     extensions : sequence of str, optional
         Candidate extension names (default: every registered one).
     max_effects : int
-        At most this many effects are added.
+        Explanations hold at most this many effects.
     seed : int
         Seeds the fits' random starts and the noise simulation.
-    min_delta_bic : float
-        An effect needs a BIC lower by more than this (strong evidence).
     min_share : float
-        ... and must explain at least this share (0..1) of the excess residual ...
-    min_margin : float
-        ... and beat the runner-up's BIC by at least this much (6: "strong", Kass and
-        Raftery 1995); otherwise the data cannot tell the two effects apart.
+        A further effect must explain at least this share (0..1) of the excess residual an
+        explanation leaves to count against it; what is named must explain this share of
+        the base model's excess residual.
     alpha : float
-        Significance level of the lack-of-fit and (Bonferroni-corrected) structure tests.
+        Significance level of the likelihood-ratio tests (Bonferroni-corrected for the
+        number of effects tried at each step), of the noise's proportional part, and of
+        the lack-of-fit and (Bonferroni-corrected) structure tests.
+    separate : int
+        When ambiguous, propose at most this many readings that would separate the
+        alternatives (fewer when fewer reach the chi-square the test needs, at 95 %
+        power).
     progress : callable(str), optional
         Called with a short message before every fit.
 
@@ -574,132 +721,226 @@ def diagnose(measurements, model="two-lobe", *, extensions: Sequence[str] | None
     -------
     Diagnosis
     """
+    legacy.pop("min_delta_bic", None)  # the rules of the BIC-ranking diagnosis: ignored
+    legacy.pop("min_margin", None)
+    if legacy:
+        raise TypeError(f"diagnose() got unexpected keyword arguments {sorted(legacy)}")
     t0 = time.perf_counter()
     meas = as_measurements(measurements)
     base_model = get_model(model)
     names = list(EXTENSIONS) if extensions is None else list(extensions)
     for name in names:
         get_extension(name)  # validates the names before any work
+    used = set(applied_extensions(base_model))
+    names = [n for n in names if n not in used]
     say = progress or (lambda message: None)
     say(f"fitting {base_model.name}")
     base_fit = fit(meas, base_model, seed=seed)
-    noise = estimate_noise(meas, residuals=base_fit.residuals, seed=seed)
-    current = assess(base_fit, noise)
-    steps, rounds, effects = [current], [], []
-    for _ in range(max(int(max_effects), 0)):
-        used = set(applied_extensions(current.fit.model_object))
-        row = []
-        for name in names:
-            if name in used:
-                continue
-            say(f"trying {name} on {current.model_name}")
-            extended = get_extension(name)(current.fit.model_object)
+    noise = estimate_noise(meas, residuals=base_fit.residuals, fitted=base_fit.fitted,
+                           seed=seed, alpha=alpha)
+    work = meas
+    if noise.source == "estimated":
+        work = dataclasses.replace(meas, sigma=noise.sigma)
+        if noise.relative > 0:  # weight the base fit by the noise found, then look again
+            z0, _ = base_model.from_natural(base_fit.values[None])
             try:
-                with warnings.catch_warnings():  # candidates are trials: warn for the result
+                with warnings.catch_warnings():
                     warnings.simplefilter("ignore", FitWarning)
-                    result = _fit_candidate(meas, extended, current.fit, seed)
-            except (FitError, IrreflectError) as exc:  # a candidate that cannot be fitted
-                row.append(Candidate(name, None, float("inf"), 0.0, 0.0, False,
-                                     f"fit failed: {exc}"))
-                continue
-            a = assess(result, noise)
-            rss_b = float(np.sum(current.fit.residuals ** 2))
-            rss_a = float(np.sum(result.residuals ** 2))
-            row.append(Candidate(name, a, a.bic - current.bic, _share(current, a),
-                                 float(1.0 - rss_a / rss_b) if rss_b > 0 else 0.0, False, ""))
-        if not row:
+                    weighted = fit(work, base_model, seed=seed, extra_starts=z0)
+            except FitError as exc:
+                # weighted by a noise proportional to the power, the model cannot follow
+                # the table at all (a sub-degree lobe that the weights make invisible):
+                # the proportional part is not usable; the noise is taken as additive
+                warnings.warn(
+                    f"{meas.name}: a noise proportional to the power was found, but the "
+                    f"model weighted by it fails ({str(exc).split(': check')[0]}); the diagnosis takes the noise as "
+                    "constant: give a sigma column to settle it", FitWarning, stacklevel=2)
+                noise = estimate_noise(meas, residuals=base_fit.residuals, seed=seed,
+                                       alpha=alpha)
+            else:
+                base_fit = weighted
+                noise = estimate_noise(meas, residuals=base_fit.residuals,
+                                       fitted=base_fit.fitted, seed=seed, alpha=alpha)
+            work = dataclasses.replace(meas, sigma=noise.sigma)
+    search = _Search(meas, work, base_model, names, noise, seed, say)
+    search.add("", base_fit, ())
+    rounds, final = _select(search, names, max_effects, alpha, min_share)
+    for _ in range(MAX_NOISE_PASSES):
+        # the noise is judged again from the residual the chosen explanation leaves when
+        # that shows less than the base model's (a misfit leaks into a difference
+        # estimate), and the explanations with it (their fits are kept)
+        if noise.source != "estimated" or not final[0]:
             break
-        row.sort(key=lambda c: c.delta_bic)
-        best = row[0]
-        checks = []
-        if not best.delta_bic < -min_delta_bic:
-            checks.append(f"delta BIC {best.delta_bic:.1f} not below -{min_delta_bic:g}")
-        if best.assessment is None or \
-                not best.assessment.lack_of_fit.ratio < current.lack_of_fit.ratio:
-            checks.append("lack of fit not reduced")
-        if best.share_explained < min_share:
-            checks.append(f"explains {100 * best.share_explained:.0f}% of the excess residual, "
-                          f"less than {100 * min_share:.0f}%")
-        if len(row) > 1 and not row[1].delta_bic - best.delta_bic >= min_margin:
-            checks.append(f"ambiguous: {row[1].name} does about as well (BIC "
-                          f"{row[1].delta_bic - best.delta_bic:.1f} higher, not {min_margin:g})")
-        accept = not checks
-        ranked = [dataclasses.replace(c, accepted=(accept and i == 0),
-                                      reason=_reason(c, i, accept, checks))
-                  for i, c in enumerate(row)]
-        rounds.append(tuple(ranked))
-        if not accept:
+        chosen = search.get(final[0]).fit
+        refreshed = estimate_noise(meas, residuals=chosen.residuals, fitted=chosen.fitted,
+                                   seed=seed, alpha=alpha)
+        if not refreshed.value < search.noise.value:
             break
-        new = best.assessment
-        effects.append(_effect(best, new.fit))
-        steps.append(new)
-        if noise.source == "estimated":
-            # the better model leaves a smoother residual: less of the misfit leaks into
-            # the difference-based estimate; every step is then judged with the new noise
-            refreshed = estimate_noise(meas, residuals=new.fit.residuals, seed=seed)
-            if refreshed.value < noise.value:
-                noise = dataclasses.replace(
-                    refreshed, method=refreshed.method.replace(
-                        "base-model residuals", f"residuals of {new.model_name}"))
-                steps = [assess(a.fit, noise) for a in steps]
-        current = steps[-1]
-    verdict, summary, where = _verdict(steps, effects, alpha)
+        search.reassess(dataclasses.replace(refreshed, method=refreshed.method.replace(
+            "base-model residuals", f"residuals of {chosen.model}")))
+        previous = final
+        rounds, final = _select(search, names, max_effects, alpha, min_share)
+        if final == previous:
+            break
+    noise = search.noise
+    base = search.get(())
+    common = tuple(n for n in final[0] if all(n in s for s in final))
+    alternatives = tuple(tuple(n for n in s if n not in common) for s in final) \
+        if len(final) > 1 else ()
+    chosen = final[0]
+    # the steps: from the base model to the chosen explanation, each time through the
+    # best-fitting explanation one effect smaller that was fitted
+    chain = [chosen]
+    while chain[-1]:
+        subs = [tuple(n for n in chain[-1] if n != x) for x in chain[-1]]
+        subs = [s for s in subs if search.get(s) is not None]
+        chain.append(min(subs, key=search.dev))
+    chain.reverse()
+    steps = [dataclasses.replace(search.get(s), polar_errors=search.get(s).fit.polar_errors())
+             for s in chain]
+    final_fit = steps[-1].fit
+    # the named effects, in the order the steps add them, with the final model's values
+    marks = {c.name: c for row in rounds for c in row}
+    effects = []
+    for prev, cur in zip(chain, chain[1:], strict=False):
+        added = next(n for n in cur if n not in prev)
+        if added in common:
+            effects.append(_effect(added, marks.get(set_name(cur)), final_fit, search.sets))
+    ranked = []
+    for row in rounds:
+        out = []
+        for c in row:
+            named = any(set_name(s) == c.name for s in chain)
+            in_final = any(set_name(s) == c.name for s in final)
+            out.append(dataclasses.replace(c, accepted=named, reason=_reason(c, named,
+                                                                             in_final, min_share)))
+        ranked.append(tuple(sorted(out, key=lambda c: (c.assessment is None,
+                                                       c.assessment.deviance if c.assessment
+                                                       else 0.0))))
+    alt_fits = {}
+    separating = []
+    target = _separation_target(alpha, len(names), noise)
+    if alternatives:
+        alt_fits = {set_name(s): search.get(s) for s in final}
+        separating = separating_settings({k: a.fit for k, a in alt_fits.items()},
+                                         noise, meas.gamma_deg, meas.theta_deg,
+                                         target=target, max_readings=max(int(separate), 0))
+    verdict, summary, where = _verdict(steps, effects, alternatives, common, separating,
+                                       alpha, base, target, meas)
     if len(steps) > 1:  # the extended model is a result too: say what is doubtful about it
         for text in steps[-1].fit.warnings:
             warnings.warn(FitWarning(f"{meas.name}, {steps[-1].fit.model}: {text}"),
                           stacklevel=2)
     return Diagnosis(
         name=meas.name, n_points=meas.n_points, base_model=base_model.name, noise=noise,
-        steps=tuple(steps), candidates=tuple(rounds), effects=tuple(effects), verdict=verdict,
-        summary=summary, where=tuple(where), alpha=alpha,
+        steps=tuple(steps), candidates=tuple(ranked), effects=tuple(effects),
+        verdict=verdict, summary=summary, where=tuple(where), alpha=alpha,
         elapsed_s=time.perf_counter() - t0,
-        settings={"max_effects": max_effects, "min_delta_bic": min_delta_bic,
-                  "min_share": min_share, "min_margin": min_margin, "alpha": alpha, "seed": seed, "extensions": names},
+        settings={"max_effects": max_effects, "min_share": min_share, "alpha": alpha,
+                  "seed": seed, "extensions": names, "separation_target": target},
+        alternatives=alternatives, alternative_fits=alt_fits, separating=tuple(separating),
     )
 
 
-def _reason(c: Candidate, rank: int, accept: bool, checks: list[str]) -> str:
+def _separation_target(alpha: float, m: int, noise: NoiseEstimate, power: float = 0.95):
+    """The chi-square gain at which the diagnosis' likelihood-ratio test on one degree of
+    freedom (level ``alpha / m``) tells two explanations apart with probability
+    ``power``: the non-centrality of that test's power."""
+    from scipy import optimize, stats
+
+    level = alpha / max(m, 1)
+    if np.isfinite(noise.dof):
+        crit = stats.f.isf(level, 1, noise.dof)
+        return float(optimize.brentq(lambda lam: stats.ncf.sf(crit, 1, noise.dof, lam)
+                                     - power, 1e-6, 1e7))
+    crit = stats.chi2.isf(level, 1)
+    return float(optimize.brentq(lambda lam: stats.ncx2.sf(crit, 1, lam) - power, 1e-6, 1e7))
+
+
+def _reason(c: Candidate, named: bool, in_final: bool, min_share: float) -> str:
     if c.assessment is None:
         return c.reason
-    if rank == 0:
-        return "accepted" if accept else "rejected: " + "; ".join(checks)
-    return "not the best"
+    if named:
+        return "named"
+    if in_final:
+        return "ambiguous: as good as the named explanation"
+    if not c.p_value < c.level:
+        return f"not significant at {c.level:.2g}"
+    if c.parent and c.share_explained < min_share:
+        return (f"significant, but explains {100 * c.share_explained:.0f}% of the excess "
+                f"residual, less than {100 * min_share:.0f}%")
+    return "rejected: a better explanation of this size"
 
 
-def _effect(c: Candidate, result: FitResult) -> Effect:
+def _effect(name: str, c: Candidate | None, result: FitResult, sets: ModelSets) -> Effect:
     model = result.model_object
-    wrapped = model.wrapped
-    k0 = len(wrapped.params) if wrapped is not None else 0
-    new = model.params[k0:]
+    one = sets.model([name])
+    new = one.params[len(sets.base.params):]
     return Effect(
-        name=c.name,
+        name=name,
         params={p.name: result.params[p.name] for p in new},
         stderr={p.name: result.stderrs[p.name] for p in new},
         units={p.name: ("" if p.unit == "1" else p.unit) for p in new},
-        delta_bic=c.delta_bic, share_explained=c.share_explained, rss_drop=c.rss_drop,
-    )
+        delta_bic=c.delta_bic if c else float("nan"),
+        share_explained=c.share_explained if c else float("nan"),
+        rss_drop=c.rss_drop if c else float("nan"),
+        lr=c.lr if c else float("nan"), p_value=c.p_value if c else float("nan"),
+    ) if model is not None else None
 
 
-def _verdict(steps, effects, alpha):
+def _verdict(steps, effects, alternatives, common, separating, alpha, base, target, meas):
     final = steps[-1]
     lof = final.lack_of_fit
     stat = f"chi2/dof = {lof.ratio:.3g}, {_p_text(lof.p_value)}"
+    named = ", ".join(f"{e.name} ({_param_text(e)})" for e in effects)
+    where = []
+    if not final.consistent(alpha):
+        where = [f"{s.name} ({_p_text(s.p_value)}): {s.where}" for s in final.flagged(alpha)]
+        worst = sorted(final.gamma_chi2.items(), key=lambda kv: -kv[1])[:2]
+        where.append("largest chi2/points at " + ", ".join(f"gamma {_deg(g)} deg ({v:.3g})"
+                                                           for g, v in worst))
+    if alternatives:
+        alts = " and ".join(" + ".join(a) for a in alternatives)
+        sep = ""
+        total = separating[0]["total_chi2"] if separating else 0.0
+        if total < target:
+            g = np.abs(meas.gamma_deg)
+            sep = (f"; within the table's reach (gamma {_deg(g.min())}..{_deg(g.max())} deg, "
+                   f"theta {_deg(meas.theta_deg.min())}..{_deg(meas.theta_deg.max())} deg) "
+                   f"no readings separate them: {sum(r['readings'] for r in separating)} "
+                   f"would add chi2 {total:.1f} of the {target:.0f} needed; measure at other "
+                   "angles of incidence, or nearer the source or grazing")
+        else:
+            n = sum(r["readings"] for r in separating)
+            where_to = "; ".join(f"gamma {_deg(r['gamma_deg'])} deg, theta "
+                                 f"{_deg(r['theta_deg'])} deg"
+                                 + (f" (x{r['readings']})" if r["readings"] > 1 else "")
+                                 for r in separating[:3])
+            more = f" and {len(separating) - 3} more settings" if len(separating) > 3 else ""
+            sep = (f"; to separate them, measure {n} reading(s) at {where_to}{more} (their "
+                   f"expected chi2 gain {separating[0]['total_chi2']:.0f} against the wrong "
+                   "one refitted)")
+        rest = ("the residual is then consistent with the noise" if final.consistent(alpha)
+                else f"structure remains ({stat})")
+        head = f"effects found: {named}; " if effects else ""
+        return AMBIGUOUS, (
+            f"{head}ambiguous between {alts}: each explains the data as well as the model "
+            f"holding both (likelihood ratio not significant at {alpha:g}); {rest}{sep}"), where
     if final.consistent(alpha):
         if not effects:
             return NO_MISSING_EFFECT, (
                 f"no missing effect: the {final.model_name} residual is consistent with the "
                 f"noise ({stat}; no structure at level {alpha:g})"), []
-        named = ", ".join(f"{e.name} ({_param_text(e)})" for e in effects)
         return EFFECTS_FOUND, (
             f"effects found: {named}; with them the residual is consistent with the noise "
             f"({stat}; no structure at level {alpha:g})"), []
-    where = [f"{s.name} ({_p_text(s.p_value)}): {s.where}" for s in final.flagged(alpha)]
-    worst = sorted(final.gamma_chi2.items(), key=lambda kv: -kv[1])[:2]
-    where.append("largest chi2/points at " + ", ".join(f"gamma {_deg(g)} deg ({v:.3g})"
-                                                       for g, v in worst))
-    added = f" after adding {', '.join(e.name for e in effects)}" if effects else ""
+    if effects:
+        return UNEXPLAINED, (
+            f"effects found: {named}; unexplained structure remains after adding them: the "
+            f"residual of {final.model_name} is not consistent with the noise ({stat}) and "
+            "no further catalogue effect explains it"), where
     return UNEXPLAINED, (
-        f"unexplained structure remains{added}: the residual of {final.model_name} is not "
+        f"unexplained structure remains: the residual of {final.model_name} is not "
         f"consistent with the noise ({stat}) and no candidate extension explains it"), where
 
 

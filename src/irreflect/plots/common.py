@@ -13,11 +13,35 @@ import matplotlib
 
 matplotlib.use("Agg")  # irreflect only ever draws to files
 
+import matplotlib.lines  # noqa: E402
 import matplotlib.pyplot as plt  # noqa: E402
 import matplotlib.ticker  # noqa: E402
 import numpy as np  # noqa: E402
 
 from .._atomic import atomic_path  # noqa: E402
+
+#: ``radius="auto"`` draws the power on a logarithmic radius when the measured dynamic
+#: range (:func:`dynamic_range`) exceeds this: on a glossy material a linear radius squashes
+#: every diffuse point into the centre.
+LOG_RADIUS_RANGE = 100.0
+#: The unit every power axis carries: irreflect keeps the table's own power unit.
+POWER_UNIT = "table's power units"
+
+
+def dynamic_range(power) -> float:
+    """Largest measured power over the 10th percentile of the positive ones (1 when there
+    is nothing to compare)."""
+    p = np.asarray(power, float)
+    p = p[np.isfinite(p) & (p > 0)]
+    if p.size < 2:
+        return 1.0
+    return float(p.max() / np.quantile(p, 0.1))
+
+
+def _log_radius(power, radius: str) -> bool:
+    if radius not in ("auto", "linear", "log"):
+        raise ValueError(f"radius must be 'auto', 'linear' or 'log', found {radius!r}")
+    return radius == "log" or (radius == "auto" and dynamic_range(power) > LOG_RADIUS_RANGE)
 
 
 def _polar_axes(ax=None, fig=None):
@@ -33,7 +57,94 @@ def _polar_axes(ax=None, fig=None):
     return ax
 
 
-def plot_polar(measurements, predict=None, ax=None, *, label="fit", title=None):
+class _PolarScale:
+    """The radius of polar diagrams: linear from 0, or logarithmic from a floor below the
+    smallest positive measured power; values below what can be drawn (negative, or under
+    the floor) are drawn at the bottom and flagged."""
+
+    def __init__(self, power, log: bool):
+        p = np.asarray(power, float)
+        positive = p[np.isfinite(p) & (p > 0)]
+        self.log = log
+        self.top = float(np.nanmax(p)) if p.size else 1.0
+        self.floor = (float(positive.min()) / 2.0 if positive.size else 1e-3) if log else 0.0
+
+    def clip(self, values) -> tuple[np.ndarray, np.ndarray]:
+        """(values drawable on this radius, mask of those that were not)."""
+        v = np.asarray(values, float)
+        low = v < self.floor if self.log else v < 0.0
+        return np.where(low, self.floor, v), low
+
+    def apply(self, ax, top: float | None = None) -> None:
+        top = max(top or 0.0, self.top)
+        if self.log:
+            ax.set_rscale("log")
+            ax.set_rlim(self.floor, top * 1.6)
+        else:
+            ax.set_rlim(0.0, top * 1.08)
+
+    def caption(self) -> str:
+        scale = (f"logarithmic radius from {self.floor:.2g}" if self.log else "linear radius")
+        return f"radius: power ({POWER_UNIT}), {scale}"
+
+
+def _curve(ax, scale, theta_deg, values, **kw):
+    """A model curve on a polar axes; returns the angles where the model is not drawable
+    (negative power; on a log radius also below the floor)."""
+    drawn, low = scale.clip(values)
+    ax.plot(np.radians(theta_deg), drawn, **kw)
+    return np.asarray(theta_deg)[low], np.asarray(values)[low]
+
+
+def _flag_negative(ax, scale, theta_deg, values) -> bool:
+    """Red downward triangles at the bottom of the radius where a model predicts negative
+    power (no power can be negative: such a fit is flawed there); True when any."""
+    theta_deg = np.asarray(theta_deg, float)
+    values = np.asarray(values, float)
+    neg = values < 0
+    if not neg.any():
+        return False
+    # one marker per stretch of negative values, at its most negative point
+    idx = np.flatnonzero(neg)
+    runs = np.split(idx, np.flatnonzero(np.diff(idx) > 1) + 1)
+    at = [r[np.argmin(values[r])] for r in runs]
+    ax.plot(np.radians(theta_deg[at]), np.full(len(at), scale.floor if scale.log else 0.0),
+            "v", ms=7, color="red", mec="k", mew=0.5, zorder=6, clip_on=False,
+            label="model predicts power < 0 here (drawn at the centre)")
+    return True
+
+
+def _flag_unmeasured_peak(ax, scale, theta_grid, curve, theta_measured, power_measured,
+                          colour) -> bool:
+    """An open diamond at a model peak that rises above every measured power of that
+    incidence (by 20 %) more than 1 deg from any measured point: the fit puts power where
+    nothing was measured. True when drawn."""
+    if not np.isfinite(curve).any() or theta_measured.size == 0:
+        return False
+    k = int(np.nanargmax(curve))
+    peak_theta, peak = float(theta_grid[k]), float(curve[k])
+    near = float(np.min(np.abs(theta_measured - peak_theta)))
+    if near <= 1.0 or peak <= 1.2 * float(np.nanmax(power_measured)):
+        return False
+    ax.plot([np.radians(peak_theta)], [scale.clip([peak])[0][0]], "D", ms=8, mfc="none",
+            mew=1.5, color=colour, zorder=6,
+            label="model peak with no measured point near it")
+    return True
+
+
+def _dedupe_legend(handles, labels):
+    seen, out_h, out_l = set(), [], []
+    for h, lb in zip(handles, labels, strict=True):
+        if lb in seen or lb.startswith("_"):
+            continue
+        seen.add(lb)
+        out_h.append(h)
+        out_l.append(lb)
+    return out_h, out_l
+
+
+def plot_polar(measurements, predict=None, ax=None, *, label="fit", title=None,
+               radius: str = "auto"):
     """Measured power per angle of incidence in polar form, with fitted curves.
 
     Parameters
@@ -43,56 +154,97 @@ def plot_polar(measurements, predict=None, ax=None, *, label="fit", title=None):
         ``predict(gamma_deg, theta_deg) -> power`` (e.g. ``FitResult.predict``) drawn as a
         line over the measured markers of each angle of incidence.
     ax : polar Axes, optional
+    radius : ``"auto"`` (default: logarithmic when the measured dynamic range exceeds
+        :data:`LOG_RADIUS_RANGE`, as on glossy materials, else linear), ``"linear"`` or
+        ``"log"``.
+
+    Every measured point is a marker; a model peak with no measured point near it is
+    marked (open diamond) and negative predicted power is flagged (red triangles at the
+    centre); the legend, to the right of the diagram, names every marker.
     """
     ax = _polar_axes(ax)
+    scale = _PolarScale(measurements.power, _log_radius(measurements.power, radius))
     colours = plt.cm.viridis(np.linspace(0, 0.9, len(measurements.gammas)))
+    top = 0.0
     for colour, g in zip(colours, measurements.gammas, strict=True):
         sel = measurements.gamma_deg == g
         th = measurements.theta_deg[sel]
-        ax.plot(np.radians(th), measurements.power[sel], "o", ms=3.5, color=colour,
-                label=f"gamma = {g:g} deg")
+        p = measurements.power[sel]
+        shown, _ = scale.clip(p)
+        ax.plot(np.radians(th), shown, "o", ms=3.5, color=colour,
+                label=f"gamma = {g:g} deg, measured" if predict is not None
+                else f"gamma = {g:g} deg")
         if predict is not None:
-            grid = np.linspace(th.min(), th.max(), 301)
-            ax.plot(np.radians(grid), predict(np.full_like(grid, g), grid), "-", lw=1.2,
-                    color=colour)
-    ax.set_xlabel("receiver angle theta (deg); radius: power")
+            grid = np.linspace(th.min(), th.max(), 721)
+            curve = np.asarray(predict(np.full_like(grid, g), grid), float)
+            _curve(ax, scale, grid, curve, ls="-", lw=1.2, color=colour)
+            _flag_negative(ax, scale, grid, curve)
+            if _flag_unmeasured_peak(ax, scale, grid, curve, th, p, colour):
+                top = max(top, float(np.nanmax(curve)))
+    scale.apply(ax, top)
     if title:
         ax.set_title(title, fontsize=10)
-    ax.legend(loc="lower left", bbox_to_anchor=(-0.12, -0.18), fontsize=7, ncol=3, frameon=False)
+    handles, labels = _dedupe_legend(*ax.get_legend_handles_labels())
+    if predict is not None:
+        handles.append(matplotlib.lines.Line2D([], [], color="0.3", lw=1.2))
+        labels.append(f"lines: {label} (colour of its gamma)")
+    # the axes' caption is the legend's title: beside the diagram, never over the legend
+    # (a polar axes' x label sits a whole circle below a half-circle diagram)
+    ax.legend(handles, labels, loc="center left", bbox_to_anchor=(1.04, 0.5), fontsize=7,
+              frameon=False, title=f"angle: receiver angle theta (deg)\n{scale.caption()}",
+              title_fontsize=7, alignment="left")
     return ax
 
 
-def plot_polar_per_gamma(measurements, curves: dict, fig=None, *, title=None, styles=None):
+def plot_polar_per_gamma(measurements, curves: dict, fig=None, *, title=None, styles=None,
+                         radius: str = "auto"):
     """One polar panel per angle of incidence: measured markers and one line per model
     (``curves``: label -> ``predict(gamma_deg, theta_deg)``), as in the paper's Fig. 25.
-    ``styles``: label -> a format string ("--") or a dict of line keywords."""
+    ``styles``: label -> a format string ("--") or a dict of line keywords. ``radius`` as
+    in :func:`plot_polar`. One legend for the figure, below the panels; a panel where a
+    model predicts negative power says so in its title (and red triangles mark where)."""
     gammas = measurements.gammas
     ncols = min(3, len(gammas))
     nrows = int(np.ceil(len(gammas) / ncols))
-    fig = fig or plt.figure(figsize=(4.0 * ncols, 3.2 * nrows))
+    fig = fig or plt.figure(figsize=(4.0 * ncols, 3.2 * nrows + 0.8))
     styles = styles or {}
+    scale = _PolarScale(measurements.power, _log_radius(measurements.power, radius))
+    handles, labels = [], []
     for i, g in enumerate(gammas):
         ax = _polar_axes(fig.add_subplot(nrows, ncols, i + 1, projection="polar"))
         sel = measurements.gamma_deg == g
         th = measurements.theta_deg[sel]
-        ax.plot(np.radians(th), measurements.power[sel], "o", ms=3, color="k", label="measured",
-                zorder=5)
-        grid = np.linspace(th.min(), th.max(), 301)
+        shown, _ = scale.clip(measurements.power[sel])
+        ax.plot(np.radians(th), shown, "o", ms=3, color="k", label="measured", zorder=5)
+        grid = np.linspace(th.min(), th.max(), 721)
+        negative = []
+        top = float(np.max(measurements.power[sel]))
         for label, predict in curves.items():
+            values = np.asarray(predict(np.full_like(grid, g), grid), float)
             style = styles.get(label, "-")
-            if isinstance(style, dict):  # line keywords: ls, lw, color, alpha, zorder
-                kw = {"ls": "-", "lw": 1.2} | style
-                ax.plot(np.radians(grid), predict(np.full_like(grid, g), grid), label=label,
-                        **kw)
-            else:
-                ax.plot(np.radians(grid), predict(np.full_like(grid, g), grid), style, lw=1.2,
-                        label=label)
-        ax.set_title(f"gamma = {g:g} deg", fontsize=9)
-        if i == 0:
-            ax.legend(loc="lower left", bbox_to_anchor=(-0.2, -0.25), fontsize=7, frameon=False)
-    if title:
-        fig.suptitle(title, fontsize=11)
-    fig.tight_layout()
+            kw = ({"ls": "-", "lw": 1.2} | style) if isinstance(style, dict) else {
+                "ls": style if style in ("-", "--", "-.", ":") else "-", "lw": 1.2}
+            _curve(ax, scale, grid, values, label=label, **kw)
+            if _flag_negative(ax, scale, grid, values):
+                negative.append(label)
+        # a sharp model peak between receivers must not squash the measured curve
+        if scale.log:
+            ax.set_rscale("log")
+            ax.set_rlim(scale.floor, top * 1.6)
+        else:
+            ax.set_rlim(0.0, 1.25 * top)
+        ax.set_title(f"gamma = {g:g} deg" + (f"\n{', '.join(negative)}: power < 0"
+                                             if negative else ""),
+                     fontsize=9, color="red" if negative else "k")
+        for h, lb in zip(*ax.get_legend_handles_labels(), strict=True):
+            if lb not in labels:
+                handles.append(h)
+                labels.append(lb)
+    fig.suptitle((title + "\n" if title else "") + f"receiver angle theta (deg); "
+                 f"{scale.caption()}", fontsize=10 if title else 9)
+    fig.tight_layout(rect=(0, 0.1 if nrows > 1 else 0.16, 1, 1))
+    fig.legend(handles, labels, loc="lower center", ncol=min(len(labels), 4), fontsize=8,
+               frameon=False)
     return fig
 
 
@@ -128,7 +280,7 @@ def plot_surface(measurements, predict, ax=None, *, highlight=None, title=None):
                    label="fitted points")
     ax.set_xlabel("gamma (deg)")
     ax.set_ylabel("theta (deg)")
-    ax.set_zlabel("power")
+    ax.set_zlabel("power (table's power units)")
     ax.legend(fontsize=7)
     if title:
         ax.set_title(title, fontsize=10)
@@ -239,7 +391,8 @@ def plot_residual_map(gamma_deg, theta_deg, values, ax=None, *, title=None,
 
 
 #: The diagnosis's maps: residuals in noise sigmas, clipped at 4, source direction marked.
-NORMALIZED = {"limit": 4.0, "label": "(measured - model) / sigma", "source_line": True}
+NORMALIZED = {"limit": 4.0, "label": "(measured - model) / sigma (noise sigmas)",
+              "source_line": True}
 
 
 def plot_residual_histogram(values, ax=None, *, title=None,
@@ -263,7 +416,7 @@ def plot_residual_histogram(values, ax=None, *, title=None,
     else:
         ax.hist(values, bins=bins, color="tab:blue", edgecolor="white")
     ax.set_xlabel(label)
-    ax.set_ylabel("number of points")
+    ax.set_ylabel("number of points (count)")
     if title:
         ax.set_title(title, fontsize=10)
     return ax

@@ -57,26 +57,35 @@ def plot_impulse_response(result, emitter=0, receiver=0, ax=None, *, max_order=N
 
 
 def plot_bounce_gains(result, emitter=0, receivers=None, ax=None):
-    """DC gain per order (0 = line of sight) for some receivers, as grouped bars (log scale),
-    with Monte Carlo error bars."""
+    """DC gain per order (0 = line of sight) for some receivers: one marker per receiver and
+    order on a logarithmic axis (points, not bars: a bar on a log axis has no baseline and
+    its length exaggerates differences), with Monte Carlo error bars, and each order's
+    share of the receiver's total gain written in the legend."""
     ax = _ax(ax)
     scene = result.scene
     receivers = list(range(len(scene.receivers))) if receivers is None else list(receivers)
-    width = 0.8 / max(len(receivers), 1)
+    offsets = np.linspace(-0.15, 0.15, len(receivers)) if len(receivers) > 1 else [0.0]
+    markers = ["o", "s", "^", "D", "v", "P"]
     for i, r in enumerate(receivers):
         link = result.link(emitter, r)
         P = scene.emitters[link.emitter].power_w
-        orders = np.arange(len(link.power_w))
-        ax.bar(orders + i * width - 0.4 + width / 2, link.power_w / P, width,
-               yerr=link.stderr_w / P if np.any(link.stderr_w > 0) else None,
-               label=scene.receivers[r].name)
+        gains = link.power_w / P
+        orders = np.arange(len(gains))
+        shown = gains > 0
+        share = ", ".join(f"{100 * g / gains.sum():.0f}" for g in gains) if gains.sum() > 0 \
+            else "n/a"
+        ax.errorbar(orders[shown] + offsets[i], gains[shown],
+                    yerr=(link.stderr_w / P)[shown] if np.any(link.stderr_w > 0) else None,
+                    fmt=markers[i % len(markers)], ls=":", lw=0.8, ms=6, capsize=2,
+                    label=f"{scene.receivers[r].name} (share per order: {share} %)")
     ax.set_yscale("log")
     ax.set_xticks(np.arange(result.bounces + 1))
     ax.set_xticklabels(["LoS"] + [str(k) for k in range(1, result.bounces + 1)])
-    ax.set_xlabel("reflections")
-    ax.set_ylabel("DC gain H(0)")
+    ax.set_xlabel("reflections (order; LoS = line of sight)")
+    ax.set_ylabel("DC gain H(0) (W/W, logarithmic axis)")
     ax.set_title(f"{scene.name}: DC gain per order ({result.method})", fontsize=9)
-    ax.legend(fontsize=7)
+    ax.grid(True, axis="y", which="both", alpha=0.3)
+    ax.legend(fontsize=7, loc="upper center", bbox_to_anchor=(0.5, -0.18), frameon=False)
     return ax
 
 
@@ -92,11 +101,14 @@ def plot_map(result, summary, grid, column, emitter, ax=None, *, label=None, cma
         cmap = "RdBu_r"
     mesh = ax.pcolormesh(x, y, values, shading="nearest", cmap=cmap, **kw)
     ax.figure.colorbar(mesh, ax=ax, label=label or column)
-    for em in result.scene.emitters:
-        ax.plot(em.position[0], em.position[1], "r*", ms=12)
-    for b in result.scene.boxes:
-        ax.add_patch(matplotlib.patches.Rectangle((b.lo[0], b.lo[1]), b.hi[0] - b.lo[0],
-                                                  b.hi[1] - b.lo[1], fill=False, ec="w", lw=1.2))
+    for em in result.scene.emitters:  # white with a black edge: seen on every colour map
+        ax.plot(em.position[0], em.position[1], "*", ms=14, mfc="white", mec="k", mew=1.0,
+                ls="none", label=f"emitter '{em.name}' (seen from above)")
+    for i, b in enumerate(result.scene.boxes):
+        ax.add_patch(matplotlib.patches.Rectangle(
+            (b.lo[0], b.lo[1]), b.hi[0] - b.lo[0], b.hi[1] - b.lo[1], fill=False,
+            ec="magenta", lw=1.5, label="box (furniture), outline seen from above" if i == 0
+            else "_box"))
     ax.set_xlim(0, result.scene.size[0])
     ax.set_ylim(0, result.scene.size[1])
     ax.set_aspect("equal")
@@ -104,6 +116,9 @@ def plot_map(result, summary, grid, column, emitter, ax=None, *, label=None, cma
     ax.set_ylabel("y (m)")
     ax.set_title(f"{result.scene.name}: {label or column}\n{grid.name} at z = {grid.z_m:g} m, "
                  f"{emitter} ({result.method})", fontsize=9)
+    if ax.get_legend_handles_labels()[0]:  # below the map: a legend inside would hide cells
+        ax.legend(fontsize=7, loc="upper center", bbox_to_anchor=(0.5, -0.13), ncol=2,
+                  frameon=False)
     return ax
 
 
@@ -122,8 +137,10 @@ def plot_material_3d(material, gamma_deg: float, ax=None, azimuths=(0, 30, 60, 9
     ax.tick_params(labelsize=7)
     ax.set_thetamin(-90)
     ax.set_thetamax(90)
-    ax.set_title(f"{material.name}: 3D intensity (1/sr per W), gamma = {gamma_deg:g} deg", fontsize=9)
-    ax.legend(fontsize=7, loc="lower left")
+    ax.set_title(f"{material.name}: 3D intensity, gamma = {gamma_deg:g} deg", fontsize=9)
+    ax.legend(fontsize=7, loc="center left", bbox_to_anchor=(1.05, 0.5), frameon=False,
+              title="angle: receiver angle theta (deg)\nradius: intensity (1/sr per W)",
+              title_fontsize=7, alignment="left")
     return ax
 
 

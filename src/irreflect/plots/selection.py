@@ -64,21 +64,27 @@ def plot_pareto(result, ax=None, *, title=None, label=None, log_y: bool = True, 
     if summary is not None:
         ax.axhline(summary.reference, color="0.35", ls=":", lw=1,
                    label=f"fit on all {n_total} points: 1 - R$^2$ = {summary.reference:.4g}")
-        if show_ideal:
-            ax.plot([summary.n_min], [summary.reference], "o", ms=9, color="tab:orange",
-                    label="ideal point (fewest points, all-points quality)", zorder=4)
+    # the ideal point is a star drawn on top of everything: where the knee falls on it
+    # (the knee is the frontier point closest to it), the knee's open ring surrounds it
+    ideal = dict(marker="*", ms=10, color="gold", mec="k", mew=0.8, ls="none", zorder=8)
+    if summary is not None and show_ideal:
+        ax.plot([summary.n_min], [summary.reference],
+                label="ideal point (fewest points, all-points quality)", **ideal)
     elif show_ideal:
-        ax.plot([x.min()], [y.min()], "o", ms=9, color="tab:orange", label="ideal point")
+        ax.plot([x.min()], [y.min()], label="ideal point", **ideal)
     if knee_n is not None and knee_n in set(x.astype(int)):
         k = int(np.flatnonzero(x == knee_n)[0])
-        ax.plot([x[k]], [y[k]], "o", ms=11, mfc="none", mew=2, color="tab:red",
-                label=f"knee: N = {knee_n} (closest to the ideal point)", zorder=5)
+        ax.plot([x[k]], [y[k]], "o", ms=15, mfc="none", mew=2, color="tab:red",
+                label=f"knee: N = {knee_n} (closest to the ideal point)", zorder=6)
     enough = getattr(result, "enough", None)
     threshold = None
     if enough is not None:
         threshold = enough.threshold_one_minus_r2(result.measurements.power)
+        # drawn in the axis' own quantity: the 1 - R^2 a fit with that RMSE would have
         ax.axhline(threshold, color="tab:green", ls="--", lw=1,
-                   label="all-points RMSE + noise sigma")
+                   label=f"enough-points threshold: 1 - R$^2$ = {threshold:.3g}, a fit whose "
+                         f"RMSE is the all-points {enough.rmse_all:.3g} + noise sigma "
+                         f"{enough.sigma:.3g}")
         if enough.n is not None:
             hi = enough.n_high if enough.n_high is not None else x.max()
             low = enough.n_low if enough.n_low is not None else enough.n
@@ -107,11 +113,11 @@ def plot_pareto(result, ax=None, *, title=None, label=None, log_y: bool = True, 
         ax.set_yscale("log")
     if y_lo is not None:
         ax.set_ylim(y_lo, y_hi)
-    ax.set_xlabel("number of points N (logarithmic)")
-    ax.set_ylabel("1 - R$^2$ (fit on N points, judged on all)")
+    ax.set_xlabel("number of points N (points, logarithmic axis)")
+    ax.set_ylabel("1 - R$^2$ (unitless; fit on N points, judged on all)")
     ax.grid(True, alpha=0.3, which="both")
     if legend_below:
-        ax.legend(fontsize=7, loc="upper center", bbox_to_anchor=(0.5, -0.16), ncol=2,
+        ax.legend(fontsize=7, loc="upper center", bbox_to_anchor=(0.5, -0.16), ncol=1,
                   frameon=False)
     else:
         ax.legend(fontsize=7, loc="upper right", framealpha=0.85)

@@ -47,6 +47,16 @@ ORDER_RULE = (
 _EPS = 1e-9
 
 
+def floor_sig(x: float, digits: int = 2) -> float:
+    """``x > 0`` rounded *down* to ``digits`` significant digits (a limit stated as "at
+    most" must not round up past the value it stands for): 0.617 -> 0.61."""
+    x = float(x)
+    if not (np.isfinite(x) and x > 0):
+        return x
+    scale = 10.0 ** (np.floor(np.log10(x)) - digits + 1)
+    return float(np.round(np.floor(x / scale * (1 + 1e-12)) * scale, 12))
+
+
 def _clean(x: float) -> float:
     """Round away binary noise (e.g. 69.99999999) and turn -0.0 into 0.0."""
     return float(np.round(float(x), 9)) + 0.0
@@ -459,7 +469,8 @@ GLOSSY_RULE = (
     "a pilot scan's two-lobe fit (u_ns cos^v_ns(gamma)) or is given. With a pilot scan, every "
     "point is moved to the nearest angle the pilot measured at that gamma (a tool with fixed "
     "receiver positions), distinct points kept distinct. Points outside the receiver range "
-    "are clamped as in the paper's rule."
+    "are clamped as in the paper's rule, and a clamped point on top of another of its gamma "
+    "is replaced as there (separation: half the lobe offset)."
 )
 
 
@@ -558,10 +569,12 @@ def glossy_protocol(gammas_deg, theta_min: float = -70.0, theta_max: float = 70.
     plan.sort(key=lambda p: order[p[0]])
     gamma_out, theta_out, purpose, requested, adjustment, notes = [], [], [], [], [], []
     taken: dict[float, list[float]] = {}
+    clamped = []
     for g, wanted, kind in plan:
         wanted = _clean(wanted)
         value = _clean(min(max(wanted, lo), hi))
         adj = "clamped" if abs(value - wanted) > _EPS else ""
+        clamped.append(bool(adj))
         if adj:
             notes.append(f"gamma {g:g}: {kind} theta {wanted:g} is outside the tool range, "
                          f"clamped to {value:g}")
@@ -569,15 +582,52 @@ def glossy_protocol(gammas_deg, theta_min: float = -70.0, theta_max: float = 70.
             value, moved = _nearest_free(available, g, value, taken.get(g, []), lo, hi)
             if moved:
                 adj = "snapped"
+        elif adj and _coincides(value, taken.get(g, []), 0.5 * offsets[g]):
+            # a clamped point on top of another of its gamma: the paper's coincidence rule
+            # with half the lobe offset as the separation (see PAPER_RULE)
+            mirror = _clean(-g)
+            other = _replacement(mirror, wanted, taken.get(g, []), lo, hi, 0.5 * offsets[g])
+            if other is None:
+                raise IrreflectError(
+                    f"gamma {g:g}: the receiver range [{lo:g}, {hi:g}] has no room for the "
+                    f"{kind} point away from the others: widen the range")
+            notes.append(f"gamma {g:g}: {kind} theta {wanted:g} clamped to {value:g} coincides "
+                         f"with another point of that gamma; replaced by {other:g}, the "
+                         f"reachable angle farthest from the mirror direction {mirror:g}")
+            value, adj = other, "replaced"
         taken.setdefault(g, []).append(value)
         gamma_out.append(g)
         theta_out.append(value)
         purpose.append(kind)
         requested.append(wanted)
         adjustment.append(adj)
+    gamma_arr, theta_arr = np.array(gamma_out, float), np.array(theta_out, float)
+    placed = lobe_placement(gamma_arr, theta_arr, purpose)
+    settings = {"gammas_deg": [float(g1), float(g2), float(g3)],
+                "designed_lobe_offsets_deg": {f"{g:g}": round(w, 4) for g, w in offsets.items()},
+                "lobe_offsets_deg": {f"{g:g}": [round(x, 4) for x in placed[g]["lobe"]]
+                                     for g in (g1, g2, g3)},
+                "mirror_offsets_deg": {f"{g:g}": round(placed[g]["mirror"], 4)
+                                       for g in (g1, g2, g3)},
+                "wide_offset": wide_offset, "central_offset": central_offset,
+                "min_lobe_offset": min_lobe_offset, "max_lobe_offset": max_lobe_offset,
+                "layout": layout, "snapped_to_pilot": available is not None}
+    if available is not None:
+        # points clamped to the receiver range have their own notes: the grid is judged on
+        # the others
+        free = ~np.array(clamped, bool)
+        problem = _placement_problem(
+            offsets, lobe_placement(gamma_arr[free], theta_arr[free],
+                                    [p for p, f in zip(purpose, free, strict=True) if f]),
+            available)
+        if problem is not None:
+            text, step = problem
+            notes.append(text)
+            settings["placement_warning"] = text
+            settings["receiver_step_needed_deg"] = floor_sig(step)
     return Protocol(
-        gamma_deg=np.array(gamma_out, float),
-        theta_deg=np.array(theta_out, float),
+        gamma_deg=gamma_arr,
+        theta_deg=theta_arr,
         purpose=tuple(purpose),
         requested_theta_deg=np.array(requested, float),
         adjustment=tuple(adjustment),
@@ -585,15 +635,88 @@ def glossy_protocol(gammas_deg, theta_min: float = -70.0, theta_max: float = 70.
         theta_max=hi,
         kind="glossy",
         rule=GLOSSY_RULE,
-        settings={"gammas_deg": [float(g1), float(g2), float(g3)],
-                  "lobe_offsets_deg": {f"{g:g}": round(w, 4) for g, w in offsets.items()},
-                  "wide_offset": wide_offset, "central_offset": central_offset,
-                  "min_lobe_offset": min_lobe_offset, "max_lobe_offset": max_lobe_offset,
-                  "layout": layout, "snapped_to_pilot": available is not None},
+        settings=settings,
         order="paper",
         notes=tuple(notes),
         name=name,
     )
+
+
+def lobe_placement(gamma_deg, theta_deg, purpose) -> dict[float, dict]:
+    """Where a protocol's mirror and lobe-width points stand, as written: per angle of
+    incidence ``gamma`` (degrees), ``{"mirror": |theta - (-gamma)| of its mirror point (NaN
+    without one), "lobe": sorted |theta - (-gamma)| of its lobe_width points}``."""
+    gamma_deg = np.asarray(gamma_deg, float)
+    theta_deg = np.asarray(theta_deg, float)
+    out = {}
+    for g in np.unique(gamma_deg):
+        sel = gamma_deg == g
+        off = np.abs(theta_deg[sel] + g)
+        kinds = [p for p, s in zip(purpose, sel, strict=True) if s]
+        mirror = [o for o, k in zip(off, kinds, strict=True) if k == "mirror"]
+        out[float(g)] = {"mirror": float(min(mirror)) if mirror else float("nan"),
+                         "lobe": sorted(float(_clean(o)) for o, k in zip(off, kinds, strict=True)
+                                        if k == "lobe_width")}
+    return out
+
+
+def _placement_problem(designed: dict, placed: dict, available: dict):
+    """``(warning, receiver step needed)`` when a pilot's receivers cannot place the designed
+    points (a lobe-width point outside ``[w/2, 3w/2]`` of the mirror, or a mirror point more
+    than ``w/2`` off it, ``w`` the designed offset), else None. A receiver grid of step
+    ``w`` has a receiver within ``w/2`` of any target, so ``w`` is the step needed."""
+    bad = []
+    for g, w in designed.items():
+        where = placed.get(float(g))
+        if where is None:
+            continue
+        lobe_off = [o for o in where["lobe"] if not 0.5 * w - _EPS <= o <= 1.5 * w + _EPS]
+        mirror_off = where["mirror"] > 0.5 * w + _EPS
+        if lobe_off or mirror_off:
+            bad.append(g)
+    if not bad:
+        return None
+    w_bad = [designed[g] for g in bad]
+    lobes = [o for g in bad for o in placed[float(g)]["lobe"]]
+    mirrors = [placed[float(g)]["mirror"] for g in bad if np.isfinite(placed[float(g)]["mirror"])]
+    gaps = []
+    for g in bad:
+        thetas = None
+        for key, values in available.items():
+            if abs(float(key) - g) <= 1e-6:
+                thetas = np.sort(np.asarray(values, float))
+        if thetas is not None and thetas.size >= 2:
+            gap = _gap_at(thetas, -g)
+            if np.isfinite(gap):
+                gaps.append(gap)
+    step = min(w_bad)
+
+    def span(values, digits=3):
+        lo, hi = f"{min(values):.{digits}g}", f"{max(values):.{digits}g}"
+        return lo if lo == hi else f"{lo}-{hi}"
+
+    text = (f"the pilot's receiver grid cannot place the designed points at gamma "
+            f"{', '.join(f'{g:g}' for g in bad)}: lobe-width points designed {span(w_bad)} deg "
+            "from the mirror stand " + (f"{span(lobes)} deg from it" if lobes else "nowhere")
+            + (f", mirror points up to {max(mirrors):.3g} deg off it" if mirrors else "")
+            + (f" (the pilot's receivers are {span(gaps)} deg apart at the mirror)" if gaps
+               else "")
+            + f"; placing them needs a receiver step of at most {floor_sig(step):g} deg within "
+            f"+-{2 * max(w_bad):.2g} deg of the mirror. The file holds the placed points")
+    return text, step
+
+
+def _gap_at(thetas: np.ndarray, target: float) -> float:
+    """The spacing of sorted receiver angles around ``target``: the gap that brackets it
+    (the larger neighbouring gap when a receiver stands on it)."""
+    i = int(np.searchsorted(thetas, target))
+    if i < thetas.size and abs(thetas[i] - target) <= _EPS:
+        left = thetas[i] - thetas[i - 1] if i > 0 else 0.0
+        right = thetas[i + 1] - thetas[i] if i + 1 < thetas.size else 0.0
+        return float(max(left, right))
+    if i == 0 or i == thetas.size:
+        return float("inf")
+    return float(thetas[i] - thetas[i - 1])
 
 
 def _diffuse_angles(gamma: float, width: float, lo: float, hi: float,

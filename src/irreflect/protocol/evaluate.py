@@ -27,51 +27,21 @@ from ..errors import FitError, FitWarning, IrreflectError, unknown_name
 from ..fitting import FitResult, fit
 from ..models import get_model, lobe_profile
 from ..validation import short_list
+from .advice import (  # the coefficient checks and the rule live in .advice (re-exported)
+    CORRELATION_LIMIT,  # noqa: F401
+    MIN_DOF,
+    RELATIVE_ERROR_LIMIT,  # noqa: F401
+    ProtocolVerdict,
+    adaptive_remedy,
+    assess,
+    coefficient_scale,  # noqa: F401
+    ill_determined,
+    protocol_fails,  # noqa: F401
+)
 from .core import Protocol, glossy_protocol, lobe_half_width_deg, paper_protocol
 from .export import as_protocol
 
 METHODS = ("interpolate", "snap")
-#: Two fitted coefficients whose |correlation| exceeds this are called ill-determined.
-CORRELATION_LIMIT = 0.99
-#: A coefficient whose standard error (or Monte Carlo spread) exceeds this multiple of
-#: its magnitude is called ill-determined.
-RELATIVE_ERROR_LIMIT = 1.0
-
-
-def coefficient_scale(model, values) -> np.ndarray:
-    """Scale against which a coefficient's uncertainty is judged: ``|value|``, but at
-    least 1 for dimensionless coefficients that may change sign (the exponents ``v_*``,
-    orientations ``t_*``), for which a value near 0 is not a small quantity."""
-    model = get_model(model)
-    values = np.abs(np.asarray(values, float))
-    floor = np.array([1.0 if (p.unit == "1" and p.lower < 0) else 0.0 for p in model.params])
-    return np.maximum(values, floor)
-
-
-def ill_determined(model, values, spread, correlation, *, relative_limit=RELATIVE_ERROR_LIMIT,
-                   correlation_limit=CORRELATION_LIMIT) -> list[str]:
-    """Reasons why coefficients are ill-determined (empty list if none).
-
-    ``spread``: standard errors or Monte Carlo spreads (k,); ``correlation``: (k, k).
-    """
-    model = get_model(model)
-    names = model.param_names
-    reasons = []
-    scale = coefficient_scale(model, values)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        rel = np.asarray(spread, float) / scale
-    for name, r in zip(names, rel, strict=True):
-        if not np.isfinite(r) or r > relative_limit:
-            reasons.append(f"{name}: uncertainty {r * 100:.0f}% of its value" if np.isfinite(r)
-                           else f"{name}: uncertainty not finite")
-    corr = np.asarray(correlation, float)
-    k = len(names)
-    for i in range(k):
-        for j in range(i + 1, k):
-            c = corr[i, j]
-            if np.isfinite(c) and abs(c) > correlation_limit:
-                reasons.append(f"{names[i]} and {names[j]}: correlation {c:+.3f}")
-    return reasons
 
 
 @dataclass(frozen=True)
@@ -100,13 +70,21 @@ class ProtocolEvaluation:
     ill_determined: tuple[str, ...]
     notes: tuple[str, ...] = ()
     fit: FitResult | None = field(default=None, repr=False, compare=False)
-    #: why the protocol fails this material ("" when its R^2 on all points is within
-    #: :data:`FAILURE_MARGIN` of the all-points fit's)
-    failure: str = ""
+    #: pass / marginal / fails, its causes and remedies (:func:`.advice.assess`)
+    verdict: ProtocolVerdict | None = field(default=None, compare=False)
+
+    @property
+    def status(self) -> str:
+        return "" if self.verdict is None else self.verdict.status
 
     @property
     def failed(self) -> bool:
-        return bool(self.failure)
+        return self.status == "fails"
+
+    @property
+    def failure(self) -> str:
+        """Why the protocol fails this material ("" unless it fails)."""
+        return self.verdict.summary() if self.failed else ""
 
     def summary(self) -> str:
         lines = [
@@ -139,8 +117,8 @@ class ProtocolEvaluation:
         if self.ill_determined:
             lines.append("ill-determined coefficients: " + "; ".join(self.ill_determined))
         lines += [f"note: {n}" for n in self.notes]
-        if self.failure:
-            lines.append(f"PROTOCOL FAILS: {self.failure}")
+        if self.verdict is not None:
+            lines += self.verdict.lines()
         return "\n".join(lines)
 
     def to_dict(self) -> dict:
@@ -158,6 +136,7 @@ class ProtocolEvaluation:
             "points": self.points.to_dict(orient="records"),
             "notes": list(self.notes),
             "failed": self.failed, "failure": self.failure,
+            "verdict": None if self.verdict is None else self.verdict.to_dict(),
         }
 
 
@@ -232,7 +211,8 @@ def sample_protocol(protocol, dense, *, tolerance_deg: float = 5.0,
 
 def evaluate_protocol(protocol, dense, model="two-lobe", *, tolerance_deg: float = 5.0,
                       method: str = "interpolate", seed: int = 0,
-                      reference: FitResult | None = None) -> ProtocolEvaluation:
+                      reference: FitResult | None = None,
+                      what: str = "the protocol") -> ProtocolEvaluation:
     """Fit ``model`` on the protocol's points of ``dense`` and judge it on all its points.
 
     Parameters
@@ -250,11 +230,24 @@ def evaluate_protocol(protocol, dense, model="two-lobe", *, tolerance_deg: float
         Seed of the fits' random extra starts.
     reference : FitResult, optional
         A fit of the same model on all dense points (computed when not given).
+    what : str
+        How the verdict names the protocol ("the paper's 12-point protocol", ...).
+
+    The result's ``verdict`` (:func:`.advice.assess`) says pass, marginal or fails, with
+    the causes found in the evidence and the remedies.
     """
     protocol = as_protocol(protocol)
     dense = as_measurements(dense)
     model_obj = get_model(model)
     meas, frame = sample_protocol(protocol, dense, tolerance_deg=tolerance_deg, method=method)
+    distinct = len(frame.drop_duplicates(["gamma_deg", "theta_deg"]))
+    if distinct <= model_obj.n_params:
+        raise IrreflectError(
+            f"verdict: PROTOCOL FAILS on {dense.name}: too few degrees of freedom: {what} has "
+            f"{distinct} distinct settings for the {model_obj.n_params} coefficients of "
+            f"'{model_obj.name}', which a fit needs at least {model_obj.n_params + 1} for; "
+            f"remedy: measure at least {model_obj.n_params + MIN_DOF} distinct settings, or "
+            + adaptive_remedy(dense))
     result = fit(meas, model_obj, seed=seed)
     if reference is None or reference.model != model_obj.name:
         reference = fit(dense, model_obj, seed=seed)
@@ -283,8 +276,7 @@ def evaluate_protocol(protocol, dense, model="two-lobe", *, tolerance_deg: float
     r2_within = (float(metrics.r2(dense.power[within], predicted[within]))
                  if within.sum() >= 2 else float("nan"))
     r2_all = float(metrics.r2(dense.power, predicted))
-    failure = protocol_failure(protocol, dense, frame, r2_all, float(reference.r2), r2_within,
-                               reference, reasons)
+    verdict = assess(dense, result, reference, frame, ill=reasons, what=what)
     return ProtocolEvaluation(
         protocol=protocol.name, dataset=dense.name, model=model_obj.name,
         n_protocol_points=protocol.n_points, n_dense_points=dense.n_points,
@@ -294,26 +286,8 @@ def evaluate_protocol(protocol, dense, model="two-lobe", *, tolerance_deg: float
         polar_errors=polar, params=result.params, stderrs=result.stderrs,
         reference_r2=float(reference.r2), reference_rmse=float(reference.rmse),
         r2_within=r2_within, n_within=int(within.sum()), points=frame, n_interpolated=n_moved, method=method, tolerance_deg=float(tolerance_deg),
-        ill_determined=tuple(reasons), notes=tuple(notes), fit=result, failure=failure,
+        ill_determined=tuple(reasons), notes=tuple(notes), fit=result, verdict=verdict,
     )
-
-
-#: A protocol fails a material when its fit's R^2 on all points falls more than this below
-#: the all-points fit's (or more than 5 times the all-points fit's own 1 - R^2).
-FAILURE_MARGIN = 0.02
-
-
-def protocol_fails(r2: float, reference_r2: float) -> bool:
-    """Whether a protocol whose fit has ``r2`` on all points fails the material whose
-    all-points fit has ``reference_r2``: more than :data:`FAILURE_MARGIN` below it (or
-    more than 5 times the all-points fit's own 1 - R^2)."""
-    return bool(np.isfinite(r2) and r2 < reference_r2 - failure_margin(reference_r2))
-
-
-def failure_margin(reference_r2: float) -> float:
-    """How far below the all-points fit's R^2 a protocol's may fall before it fails:
-    :data:`FAILURE_MARGIN`, or 5 times the all-points fit's own 1 - R^2 if larger."""
-    return max(FAILURE_MARGIN, 5.0 * (1.0 - reference_r2))
 
 
 def specular_half_widths(dense, reference: FitResult | None = None) -> dict[float, float]:
@@ -336,56 +310,6 @@ def specular_half_widths(dense, reference: FitResult | None = None) -> dict[floa
     return out
 
 
-def protocol_failure(protocol, dense, frame, r2, reference_r2, r2_within, reference=None,
-                     ill=()) -> str:
-    """Why a protocol's fit predicts a material much worse than the all-points fit (empty
-    when it does not): the likely cause first.
-
-    * the mirror point was not measured (interpolated or snapped over a gap wider than the
-      specular lobe);
-    * the lobe-width points lie beyond the lobe (offset more than twice its half width);
-    * the fit extrapolates beyond the protocol's angles of incidence;
-    * the protocol leaves coefficients ill-determined.
-    """
-    if not protocol_fails(r2, reference_r2):
-        return ""
-    margin = failure_margin(reference_r2)
-    head = (f"its fit's R^2 on all points is {r2:.4g}, the all-points fit's {reference_r2:.4g}")
-    widths = specular_half_widths(dense, reference)
-    causes = []
-    for g in np.unique(protocol.gamma_deg):
-        w = next((v for k, v in widths.items() if abs(k - g) < 1e-6), None)
-        if w is None or not np.isfinite(w):
-            continue
-        rows = frame[np.abs(frame["gamma_deg"] - g) < 1e-6]
-        mirror = rows[rows["purpose"] == "mirror"]
-        if len(mirror) and float(mirror["gap_deg"].max()) > w:
-            causes.append(
-                f"at gamma {g:g} the mirror direction was not measured: "
-                f"{mirror['source'].iloc[0]} over {float(mirror['gap_deg'].max()):.2g} deg "
-                f"across a specular lobe {w:.2g} deg wide (half width at half maximum)")
-        lobe = rows[rows["purpose"] == "lobe_width"]
-        if len(lobe):
-            offset = float(np.min(np.abs(lobe["theta_deg"] + g)))
-            if offset > 2.0 * w:
-                fix = ("the receiver positions cannot resolve it: measure with a finer receiver "
-                       "step near the mirror" if protocol.kind == "glossy" else
-                       "use the glossy-aware protocol (irreflect protocol --specular-index N "
-                       "or --lobe-from PILOT)")
-                causes.append(
-                    f"at gamma {g:g} the specular lobe (half width {w:.2g} deg) is narrower "
-                    f"than the protocol's lobe offsets ({offset:.3g} deg): {fix}")
-    if not causes and np.isfinite(r2_within) and r2_within > r2 + margin:
-        mags = np.abs(protocol.gamma_deg)
-        causes.append(
-            f"the fit extrapolates beyond the protocol's angles of incidence "
-            f"(|gamma| {mags.min():g}-{mags.max():g} deg): R^2 {r2_within:.4g} within them")
-    if not causes and ill:
-        causes.append("the protocol's points leave coefficients ill-determined: "
-                      + "; ".join(ill))
-    return head + ": " + ("; ".join(causes) if causes else "cause not identified")
-
-
 def glossy_protocol_for(dense, reference: FitResult | None = None, *,
                         preferred=(-20.0, -40.0, -60.0), theta_min=None, theta_max=None,
                         seed: int = 0, n_triples: int = 3, lobe_factors=(0.5, 1.0, 2.0),
@@ -397,7 +321,9 @@ def glossy_protocol_for(dense, reference: FitResult | None = None, *,
     the scan measured (:func:`~.core.glossy_protocol` with ``available``: the tool stands
     only where the pilot's receivers stood). Angle-of-incidence triples are tried as in
     :func:`paper_protocol_for` (the paper's -20/-40/-60 if present, else the widest spread;
-    never below 5 deg, where the mirror is the source's direction), the first
+    near normal incidence the mirror is the source's direction, where a tool's receiver
+    may not stand: the point goes to the nearest angle the pilot measured, and the
+    placement warning says how far that is), the first
     ``n_triples`` that work, each in every layout with lobe offsets of ``lobe_factors``
     times the half width; the variant whose 12-point fit predicts the pilot best (R^2 on
     all its points) is returned, its score in ``settings["pilot_r2"]``. ``kwargs`` go to

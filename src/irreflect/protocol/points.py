@@ -7,12 +7,16 @@ and the report.
 
 from __future__ import annotations
 
+import warnings
+
 import numpy as np
 import pandas as pd
 
 from ..data import Measurements
-from ..errors import IrreflectError
+from ..errors import FitWarning, IrreflectError
+from ..fitting import fit
 from ..paper import TABLE1
+from .advice import ProtocolVerdict, assess
 from .evaluate import paper_protocol_for
 
 
@@ -93,3 +97,33 @@ def protocol_mask(meas: Measurements, points=None):
     snaps = [(r.gamma_requested, r.theta_requested, r.gamma_deg, r.theta_deg)
              for r in moved.itertuples()]
     return mask, snaps
+
+
+def assess_subset(meas: Measurements, points=None, reference=None, *, subset_fit=None,
+                  model="two-lobe", seed: int = 0,
+                  what: str = "the paper's 12-point protocol") -> ProtocolVerdict:
+    """The verdict (:func:`.advice.assess`) of protocol points snapped to the measured
+    points of a dense table, as the selection's Method 12 and the report's Table 2 score
+    them: the model fitted on the snapped points (``subset_fit``, fitted with
+    ``fit(meas.subset(mask), model, seed=seed)`` when not given), judged on all points
+    against ``reference`` (the fit on all points; fitted when not given).
+
+    ``points``: ``(gamma_deg, theta_deg)`` pairs or a frame (default: the paper's
+    protocol, :func:`paper_protocol_points`).
+    """
+    snapped = snap_points(meas, paper_protocol_points(meas) if points is None else points)
+    mask = np.zeros(meas.n_points, bool)
+    mask[snapped["index"].to_numpy()] = True
+    with warnings.catch_warnings():  # the verdict reports what these fits' warnings say
+        warnings.simplefilter("ignore", FitWarning)
+        if subset_fit is None:
+            subset_fit = fit(meas.subset(mask), model, seed=seed)
+        if reference is None:
+            reference = fit(meas, model, seed=seed)
+    frame = pd.DataFrame({
+        "gamma_deg": snapped["gamma_deg"].to_numpy(float),
+        "theta_deg": snapped["theta_deg"].to_numpy(float),
+        "source": np.where(snapped["distance_deg"] > 1e-9, "snapped", "measured"),
+        "gap_deg": snapped["distance_deg"].to_numpy(float),
+    })
+    return assess(meas, subset_fit, reference, frame, what=what)

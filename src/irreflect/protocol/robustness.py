@@ -12,8 +12,8 @@ The model is fitted to the *nominal* angles and these powers, as the technician 
 for every trial in one batch (:func:`irreflect.fitting.fit_subsets`). The result is the
 spread of every coefficient and of R^2 (measured against the dense points), and a flag
 when the protocol leaves coefficients ill-determined: a robust spread (IQR / 1.349)
-larger than :data:`~.evaluate.RELATIVE_ERROR_LIMIT` times the coefficient's scale, or a
-rank correlation between two coefficients beyond :data:`~.evaluate.CORRELATION_LIMIT`.
+larger than :data:`~.advice.RELATIVE_ERROR_LIMIT` times the coefficient's scale, or a
+rank correlation between two coefficients beyond :data:`~.advice.CORRELATION_LIMIT`.
 The same seed gives the same draws, and the draws are the same standard variates scaled
 by ``angle_error``, so runs that differ only in the error size are directly comparable.
 """
@@ -33,7 +33,7 @@ from ..data import Measurements, as_measurements
 from ..errors import FitError, FitWarning, IrreflectError
 from ..fitting import FitResult, fit, fit_subsets
 from ..models import get_model
-from .evaluate import (
+from .advice import (
     CORRELATION_LIMIT,
     RELATIVE_ERROR_LIMIT,
     coefficient_scale,

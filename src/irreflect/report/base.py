@@ -50,7 +50,8 @@ class ReportContext:
     out_dir : the report folder; write figures with :meth:`figure_path`
     quick : small budgets (tests); sections must finish in seconds when set
     seed : seed for everything random
-    paper_dir : ``../shared/paper/tables`` when present, else None
+    paper_dir : the paper's published tables (:func:`irreflect.paper.paper_tables_dir`,
+        shipped with the package); None leaves the paper's columns out
     progress : callable(str) that advances the run's progress display
     reconstructions : names of the datasets that are the bundled reconstructions (the
         paper's Table 3 model plus Gaussian noise); every other dataset was measured

@@ -6,7 +6,12 @@ import numpy as np
 import pandas as pd
 
 from ..diagnose.hidden import KINDS, OUTSIDE, hidden_case
-from ..diagnose.workflow import EFFECTS_FOUND, NO_MISSING_EFFECT, UNEXPLAINED, diagnose
+from ..diagnose.workflow import (
+    EFFECTS_FOUND,
+    NO_MISSING_EFFECT,
+    UNEXPLAINED,
+    diagnose,
+)
 from ..errors import IrreflectError
 from ..plots import save_figure
 from ..plots.diagnose import plot_diagnosis_residuals
@@ -14,11 +19,13 @@ from .base import Finding, ReportContext, Section
 
 
 def _effects_text(d) -> str:
-    if not d.effects:
-        return "-"
-    return "; ".join(
+    text = "; ".join(
         f"{e.name} (" + ", ".join(f"{k} = {v:.3g}" for k, v in e.params.items())
-        + f", dBIC {e.delta_bic:.0f})" for e in d.effects)
+        + (f", LR {e.lr:.0f})" if np.isfinite(e.lr) else ")") for e in d.effects)
+    if d.alternatives:
+        alts = " or ".join(" + ".join(a) for a in d.alternatives)
+        text = (text + "; " if text else "") + f"ambiguous: {alts}"
+    return text or "-"
 
 
 def section(ctx: ReportContext) -> Section:
@@ -49,8 +56,10 @@ def section(ctx: ReportContext) -> Section:
         if d.candidates:
             for c in d.candidates[0]:
                 cand_rows.append({"dataset": name, "candidate": c.name,
-                                  "delta BIC": round(c.delta_bic, 1)
-                                  if np.isfinite(c.delta_bic) else None,
+                                  "likelihood ratio": round(c.lr, 1)
+                                  if np.isfinite(c.lr) else None,
+                                  "p": float(f"{c.p_value:.2g}")
+                                  if np.isfinite(c.p_value) else None,
                                   "share of excess explained": round(c.share_explained, 2),
                                   "decision": c.reason})
     tables = {"diagnose_summary": pd.DataFrame(rows),
@@ -71,7 +80,7 @@ def section(ctx: ReportContext) -> Section:
                 f"{added}the two-lobe model leaves structure no catalogue effect explains "
                 f"(chi2/dof {d.after.lack_of_fit.ratio:.3g}; all-points RMSE {misfit:.0f} "
                 "times the noise)" + (f": {d.where[0]}" if d.where else ""))))
-        elif d.effects:
+        elif d.effects or d.alternatives:
             findings.append(Finding(2, name, "missing effect found: " + _effects_text(d)))
 
     figures = {}
@@ -93,13 +102,16 @@ def section(ctx: ReportContext) -> Section:
         )
     markdown = (
         "For each dataset the two-lobe fit is judged against the measurement noise (the "
-        "table's `sigma` column when present, otherwise a difference-based estimate along "
-        "theta): lack of fit (chi2/dof, 1 = noise only), runs and clusters of the normalised "
-        "residuals by gamma, theta, distance from the mirror and from the source direction. "
-        "Each catalogue extension (incidence-dependent K, off-specular peak, retroreflection, "
-        "receiver-angle offset, background, specular halo) is fitted on top and ranked by "
-        "BIC; one is added only if BIC drops by more than 10, it explains at least half of "
-        "the excess residual and it beats the runner-up by 6."
+        "table's `sigma` column when present, otherwise estimated from differences along "
+        "theta, with a part proportional to the power when the data show one): lack of fit "
+        "(chi2/dof, 1 = noise only), runs and clusters of the normalised residuals by gamma, "
+        "theta, distance from the mirror and from the source direction. Explanations made "
+        "of catalogue effects (incidence-dependent K, off-specular peak, retroreflection, "
+        "receiver-angle offset, background, specular halo; one, then two, ...) are fitted "
+        "on top and compared by likelihood ratio: the smallest explanations no further "
+        "effect improves significantly (level 0.01, Bonferroni) are named; when several "
+        "fit equally well the diagnosis says which, and where to measure to separate them "
+        "(method: docs/diagnose.md)."
         + (" Quick run: at most one effect per dataset." if ctx.quick else "")
         + "\n\n{table:diagnose_summary}\n\nWhat each diagnosis found and where the "
         "residual structure lies:\n\n" + "\n".join(where_md)

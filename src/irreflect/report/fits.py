@@ -18,8 +18,7 @@ from ..plots import (
     robust_limits,
     save_figure,
 )
-from ..protocol.evaluate import FAILURE_MARGIN
-from ..protocol.points import protocol_mask
+from ..protocol.points import assess_subset, protocol_mask
 from .base import Finding, ReportContext, Section
 
 TITLE = "Fit quality, coefficients and fit time (Tables 2-4, Figs. 15-17, 20-23)"
@@ -46,20 +45,13 @@ fits:"""
 
 
 
-def protocol_fails(r2: float, reference_r2: float) -> bool:
-    """The rule of :func:`irreflect.protocol.evaluate.protocol_failure`: a fit on a
-    protocol's points fails a material when its R^2 on all points falls more than
-    ``max(0.02, 5 (1 - R^2_A))`` below the all-points fit's."""
-    margin = max(FAILURE_MARGIN, 5.0 * (1.0 - reference_r2))
-    return bool(not np.isfinite(r2) or r2 < reference_r2 - margin)
-
-
 def section(ctx: ReportContext) -> Section:
     """Tables 2-4 and Figs. 15-17, 20-23 from the two-lobe fits."""
     t2_paper = ctx.paper_table("table2_fit_quality_12pt.csv")
     t3_paper = ctx.paper_table("table3_parameters.csv")
     t4_paper = ctx.paper_table("table4_fit_time_ms.csv")
     rows2, rows3, rows4, figures, notes, findings = [], [], [], {}, [], []
+    verdicts = {}  # material -> the paper protocol's verdict (protocol.advice.assess)
     repeats = 5 if ctx.quick else 50
     md = []
     for name, meas in ctx.datasets.items():
@@ -83,7 +75,8 @@ def section(ctx: ReportContext) -> Section:
                 "MSE paper": paper2["mse"] if paper2 is not None else np.nan,
                 "R^2 all-points fit": round(r2_all, 4),
             })
-            if protocol_fails(r2_12, r2_all):
+            verdicts[name] = assess_subset(meas, subset_fit=twelve, reference=full)
+            if verdicts[name].failed:
                 far = max((np.hypot(g - g2, t - t2) for g, t, g2, t2 in snaps), default=0.0)
                 findings.append(Finding(0, name, (
                     "the paper's 12-point protocol fails: fitted on its 12 points (Tables 2 "
@@ -150,7 +143,7 @@ def section(ctx: ReportContext) -> Section:
               "scored on every point of the dataset, as in the paper; the last column is the "
               "fit on all points.\n\n{table:table2_fit_quality}\n")
     if rows2:
-        md.append(_table2_note(pd.DataFrame(rows2), ctx))
+        md.append(_table2_note(pd.DataFrame(rows2), ctx, verdicts))
     md.append("\n### Table 3: model coefficients\n\n{table:table3_coefficients}\n\n"
               "The `std. error` rows are the fits' standard errors (from the covariance of "
               "the least-squares fit; the paper gives none). ")
@@ -192,7 +185,7 @@ def section(ctx: ReportContext) -> Section:
     return Section("fits", TITLE, "".join(md), tables, figures, findings=findings)
 
 
-def _table2_note(df: pd.DataFrame, ctx: ReportContext) -> str:
+def _table2_note(df: pd.DataFrame, ctx: ReportContext, verdicts: dict) -> str:
     lines = []
     for _, row in df.iterrows():
         if np.isfinite(row["R^2 paper"]):
@@ -210,13 +203,12 @@ def _table2_note(df: pd.DataFrame, ctx: ReportContext) -> str:
         out += "\nWhere the numbers differ: " + why + ". " + "; ".join(lines) + ".\n"
     failed = [f"{r['material']} (R^2 {r['R^2 ours']:.4g} against {r['R^2 all-points fit']:.4g} "
               "on all points)" for _, r in df.iterrows()
-              if protocol_fails(r["R^2 ours"], r["R^2 all-points fit"])]
+              if r["material"] in verdicts and verdicts[r["material"]].failed]
     if failed:
         out += ("\n**The paper's protocol fails** " + "; ".join(failed) + ": its 12 points "
-                "do not pin the model down on these materials (a narrow specular lobe between "
-                "the protocol's receiver angles, or angles the table lacks). The protocol "
-                "section below names the cause per material and tries a glossy-aware "
-                "protocol.\n")
+                "do not pin the model down on these materials (the rule and the causes: "
+                "docs/protocol.md). The protocol section below names the cause per material "
+                "and tries a glossy-aware protocol.\n")
     return out
 
 
@@ -236,7 +228,7 @@ def _fit_figures(ctx, name, meas, full, mask, twelve):
     ax = plot_residual_map(meas.gamma_deg, meas.theta_deg, resid,
                            title=f"{name}: residuals of the {which} "
                                  f"(R$^2$ = {r2:.4g} on all points)",
-                           label="measured - model (power)", robust=True)
+                           label="measured - model (table's power units)", robust=True)
     out[f"residuals_{name}"] = save_figure(ax.figure, ctx.figure_path(f"residuals_{name}"))
     with np.errstate(divide="ignore", invalid="ignore"):
         rel = 100 * resid / meas.power

@@ -13,11 +13,43 @@ from ..fitting import fit
 from ..paper import TABLE1_GAMMAS
 from ..plots import plot_polar_per_gamma, save_figure
 from ..plots.protocol import plot_protocol
+from ..protocol.advice import CAMPAIGN_DOC, FAIL_BAND, PASS_MARGIN, POLAR_EXCESS_LIMIT
 from ..protocol.core import lobe_half_width_deg, paper_protocol
 from ..protocol.evaluate import evaluate_protocol, glossy_protocol_for, paper_protocol_for
 from ..protocol.points import protocol_mask
 from ..protocol.robustness import protocol_robustness
 from .base import Finding, ReportContext, Section
+
+#: The pass / marginal / fails rule in one sentence (:func:`irreflect.protocol.advice.judge`).
+RULE_TEXT = (
+    f"a protocol passes when the model fitted on its points predicts all points within "
+    f"{PASS_MARGIN:g} of the all-points fit's R^2 (or within what the noise alone costs a fit on "
+    f"that few points, if more) and no angle of incidence's polar-area error is more than "
+    f"{POLAR_EXCESS_LIMIT:g} points above the all-points fit's; it fails beyond "
+    f"{PASS_MARGIN + FAIL_BAND:g} below (or at R^2 < 0); in between it is marginal"
+)
+
+
+def _kinds(ev) -> str:
+    """The kinds of an evaluation's causes ("" when it passes)."""
+    return ", ".join(c.kind for c in ev.verdict.causes) if ev.verdict is not None else ""
+
+
+def _first_cause(ev) -> str:
+    causes = ev.verdict.causes if ev.verdict is not None else ()
+    return causes[0].text if causes else "not identified"
+
+
+def _item(verdict) -> str:
+    """One bullet: the verdict, its causes and the remedy that applies."""
+    head = verdict.line().split(": ", 1)[1]
+    out = head + "."
+    if verdict.causes:
+        out += " Cause: " + "; ".join(c.text for c in verdict.causes) + "."
+    specific = [c.remedy for c in verdict.causes if c.remedy]
+    out += (" Remedy: " + "; ".join(specific + [f"measure adaptively (`irreflect next`, "
+                                                  f"{CAMPAIGN_DOC})"]) + ".")
+    return out
 
 
 def _table1(ctx: ReportContext) -> tuple[pd.DataFrame, bool | None]:
@@ -93,7 +125,8 @@ def compute(ctx: ReportContext) -> ProtocolResults:
         try:
             proto = paper_protocol_for(meas, preferred=TABLE1_GAMMAS)
             reference = ctx.fits.get(name) or fit(meas, "two-lobe", seed=ctx.seed)
-            ev = evaluate_protocol(proto, meas, "two-lobe", seed=ctx.seed, reference=reference)
+            ev = evaluate_protocol(proto, meas, "two-lobe", seed=ctx.seed, reference=reference,
+                                   what="the paper's protocol")
         except (IrreflectError, FitError) as exc:
             res.skipped.append(f"{name}: {exc}")
             continue
@@ -122,7 +155,8 @@ def _paper_rows(ctx, res, name, meas, proto, ev, papers):
         "R^2 protocol, its gamma range": round(ev.r2_within, 4),
         "RMSE protocol": float(f"{ev.rmse:.3g}"),
         "R^2 all points": round(ev.reference_r2, 4),
-        "fails": ev.failed,
+        "verdict": ev.status,
+        "cause": _kinds(ev),
     }
     if paper2 is not None and name in set(paper2["material"]):
         row["R^2 paper, 12 points"] = float(paper2.set_index("material").loc[name, "r2"])
@@ -132,15 +166,15 @@ def _paper_rows(ctx, res, name, meas, proto, ev, papers):
             row["R^2 paper, all points"] = float(a["r2"].iloc[0])
     eval_rows.append(row)
     worst_g, worst_e = max(ev.polar_errors.items(), key=lambda kv: (np.nan_to_num(kv[1]), kv[0]))
+    if not ev.verdict.passed:
+        failures.append(f"**{name}**: {_item(ev.verdict)}")
     if ev.failed:
-        failures.append(f"**{name}**: the paper's protocol fails: {ev.failure}.")
         snapped = _snapped_r2(meas, ctx.seed)
         findings.append(Finding(0, name, (
             f"the paper's protocol (gammas {gammas} deg) with the power interpolated at "
             f"its exact angles (protocol evaluation) gives R^2 = {ev.r2:.4g} against "
             f"{ev.reference_r2:.4g}, polar-area error up to {worst_e:.4g} % (at |gamma| "
-            f"{worst_g:g} deg); cause: "
-            + ev.failure.split(": ", 1)[-1].split("; ")[0]), key="paper-protocol"))
+            f"{worst_g:g} deg); cause: " + _first_cause(ev)), key="paper-protocol"))
         if snapped is not None and abs(snapped - ev.r2) > 0.05:
             differ.append(f"{name}: R^2 {snapped:.4g} with the points snapped (Tables 2 "
                           f"and 5) and {ev.r2:.4g} with the power interpolated at the "
@@ -154,7 +188,8 @@ def _glossy_rows(ctx, res, name, meas, ev, reference):
         res.skipped
     try:
         gp = glossy_protocol_for(meas, reference, seed=ctx.seed)
-        ev_g = evaluate_protocol(gp, meas, "two-lobe", seed=ctx.seed, reference=reference)
+        ev_g = evaluate_protocol(gp, meas, "two-lobe", seed=ctx.seed, reference=reference,
+                                 what="the glossy-aware protocol")
     except (IrreflectError, FitError) as exc:
         skipped.append(f"{name} (glossy-aware protocol): {exc}")
     else:
@@ -165,25 +200,26 @@ def _glossy_rows(ctx, res, name, meas, ev, reference):
                 f"{w:.2g}" for w in _half_widths(reference, gp.settings["gammas_deg"])),
             "R^2 all points": round(ev.reference_r2, 4),
             "R^2 paper protocol": round(ev.r2, 4),
-            "paper protocol fails": ev.failed,
+            "paper protocol": ev.status,
             "R^2 glossy-aware": round(ev_g.r2, 4),
-            "glossy-aware fails": ev_g.failed,
+            "glossy-aware": ev_g.status,
+            "glossy-aware cause": _kinds(ev_g),
             "glossy gammas (deg)": g_gammas,
             "layout": gp.settings["layout"],
         })
-        if ev_g.failed:
-            failures.append(f"**{name}**: the glossy-aware protocol also falls short: "
-                            f"{ev_g.failure}.")
-            if ev.failed:
+        if not ev_g.verdict.passed:
+            failures.append(f"**{name}** (glossy-aware, gammas {g_gammas} deg, designed from "
+                            f"this scan): {_item(ev_g.verdict)}")
+            if ev.failed and ev_g.failed:
                 findings.append(Finding(0, name, (
-                    f"the glossy-aware protocol (gammas {g_gammas} deg) also falls short: "
-                    f"R^2 {ev_g.r2:.4g}; " + ev_g.failure.split(": ", 1)[-1].split("; ")[0])))
+                    f"the glossy-aware protocol (gammas {g_gammas} deg) also fails: "
+                    f"R^2 {ev_g.r2:.4g}; cause: " + _first_cause(ev_g))))
         elif ev.failed:
             findings.append(Finding(1, name, (
                 f"the glossy-aware protocol (gammas {g_gammas} deg, lobe points at the "
-                f"specular lobe's half width) reaches R^2 {ev_g.r2:.4g} where the paper's "
-                f"gives {ev.r2:.4g}: measure this material with "
-                "`irreflect protocol --lobe-from PILOT`")))
+                f"specular lobe's half width, designed from this scan) passes with R^2 "
+                f"{ev_g.r2:.4g} where the paper's gives {ev.r2:.4g}; without a dense scan "
+                f"to design from, measure adaptively (`irreflect next`, {CAMPAIGN_DOC})")))
 
 
 def _robustness_rows(ctx, res, name, meas, proto, ev, reference, worst_e):
@@ -260,8 +296,8 @@ def _markdown(ctx: ReportContext, res: ProtocolResults) -> list[str]:
         "",
     ]
     if failures:
-        md += ["**Where a protocol fails a material** (its fit predicts all points much worse "
-               "than the all-points fit; the likely cause is named):", ""]
+        md += ["**Where a protocol does not pass a material** (" + RULE_TEXT + "; the causes "
+               "are found in the evidence, see docs/protocol.md):", ""]
         md += [f"- {f}" for f in failures] + [""]
         if differ:
             md += ["The same protocol can score very differently here and in Tables 2 and 5: "
@@ -270,9 +306,7 @@ def _markdown(ctx: ReportContext, res: ProtocolResults) -> list[str]:
                    "a fraction of a degree decides how much of the lobe the 12 points see ("
                    + "; ".join(differ) + ").", ""]
     elif eval_rows:
-        md += ["The paper's protocol does not fail any dataset of this run: every protocol "
-               "fit predicts all points within max(0.02, 5 (1 - R^2)) of the all-points "
-               "fit's R^2.", ""]
+        md += ["Every protocol of this run passes every dataset (" + RULE_TEXT + ").", ""]
     if glossy_rows:
         md += [
             "The paper's lobe-width points sit 10 deg either side of the mirror direction. A "
@@ -340,14 +374,14 @@ def _data_note(ctx: ReportContext, rows: list[dict]) -> str:
                 "loses more.")
     measured = [r for r in rows if not ctx.is_reconstruction(r["dataset"])]
     if measured:
-        failed = [r["dataset"] for r in measured if r["fails"]]
+        failed = [r["dataset"] for r in measured if r["verdict"] == "fails"]
         out += (f" On the measured tables the protocol fails {len(failed)} of {len(measured)}"
                 + (f" ({', '.join(failed)})" if failed else "") + ".")
     return out
 
 
 def _polar_note(polar_rows: list[dict], eval_rows: list[dict]) -> str:
-    failed = {r["dataset"] for r in eval_rows if r["fails"]}
+    failed = {r["dataset"] for r in eval_rows if r["verdict"] == "fails"}
     worst = [(r["dataset"], r["worst"]) for r in polar_rows if r["dataset"] in failed]
     if not worst:
         return ":"

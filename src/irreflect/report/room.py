@@ -123,7 +123,7 @@ def section(ctx: ReportContext) -> Section:
     variants, glossy_note = _variants(scene, ctx.quick)
     results = []
     for label, variant in variants:
-        ctx.progress(f"room: {label[:30]}")
+        ctx.progress(f"room: {label}")  # whole: a line per step through a pipe
         res = simulate(variant, method="montecarlo", bounces=bounces, rays=rays, seed=ctx.seed)
         results.append((label, res, summary_table(res)))
     rows = []

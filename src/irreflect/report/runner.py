@@ -17,7 +17,6 @@ import warnings
 from pathlib import Path
 
 import markdown as markdown_lib
-import pandas as pd
 
 from .. import __version__
 from .._atomic import atomic_directory, atomic_path, claim_output
@@ -29,6 +28,7 @@ from ..paper import paper_tables_dir as _paper_tables_dir
 from ..room.checks import material_notes
 from ..room.scene import load_scene
 from ..validation import check_points_budget, check_seed, short_list
+from . import fit_warnings
 from .base import SEVERITIES, Finding, ReportContext, Section, format_table, markdown_table
 from .sections import SCENE_SECTIONS, SECTIONS
 
@@ -38,9 +38,11 @@ def how_to_read(ctx: ReportContext, source: str) -> str:
     text = ("**How to read this.** The findings come first: what failed and where, then "
             "one section per question: does the two-component model fit (fit quality, "
             "coefficients, figures), which measurement points matter (the optimiser), what a "
-            "technician should measure (the protocol), how the model compares with the "
+            "technician should measure (the protocol), how many readings a new material needs "
+            "without a dense scan (adaptive campaigns), how the model compares with the "
             "literature's, and what it still misses (diagnostics). Columns headed *paper* are "
-            "copied from the paper's tables (`../shared/paper/tables/`); columns headed *ours* "
+            "copied from the paper's published tables (shipped with irreflect in "
+            "`irreflect/paper_tables/`; `irreflect datasets` lists them); columns headed *ours* "
             "are measured by this run. ")
     recon = [n for n in ctx.datasets if ctx.is_reconstruction(n)]
     measured = ctx.measured
@@ -123,7 +125,7 @@ def _reproduce(out_dir: Path, data_dir, quick, seed, progress, t_start, scene=No
     bar = progress_display(total=steps, desc="reproduce", unit="step", enabled=progress)
 
     def advance(message: str) -> None:
-        bar.set_postfix_str(message[:60])
+        bar.set_postfix_str(message)  # whole: a line per step through a pipe
         bar.update(1)
 
     sections: list[Section] = []
@@ -144,9 +146,17 @@ def _run_report(out_dir, datasets, recon, quick, seed, data_dir, t_start, bar, a
                 sections, caught, scene=None, allow_unphysical=False) -> dict:
     with atomic_directory(out_dir, command="reproduce") as tmp:
         fits = {}
+        tagged = []  # (step of the run, fit warning)
+
+        def tag(stage: str, start: int) -> None:
+            tagged.extend((stage, str(w.message)) for w in caught[start:]
+                          if issubclass(w.category, FitWarning))
+
+        start = len(caught)
         for name, meas in datasets.items():
             advance(f"fit {name}")
             fits[name] = fit(meas, seed=seed)
+        tag("fit", start)
         ctx = ReportContext(datasets=datasets, fits=fits, out_dir=tmp, quick=quick, seed=seed,
                             paper_dir=_paper_tables_dir(), progress=advance,
                             reconstructions=recon, scene=scene,
@@ -154,36 +164,43 @@ def _run_report(out_dir, datasets, recon, quick, seed, data_dir, t_start, bar, a
         run = dict(SECTIONS) | (dict(SCENE_SECTIONS) if scene is not None else {})
         for key, section in run.items():
             advance(key)
+            start = len(caught)
             sections.append(section(ctx))
-        fit_warnings = list(dict.fromkeys(str(w.message) for w in caught
-                                          if issubclass(w.category, FitWarning)))
-        sections.append(_warnings_section(fit_warnings))
-        sections.insert(0, findings_section(sections, ctx))
+            tag(key, start)
+        notes = fit_warnings.collect(tagged)
+        sections.append(_warnings_section(notes, list(datasets)))
+        sections.insert(0, findings_section(
+            sections, ctx, extra=fit_warnings.findings(notes, list(datasets))))
         seconds = time.perf_counter() - t_start
         source = ("the bundled reconstructions, datasets/" if data_dir is None
                   else f"the tables of {data_dir}")
         _write_outputs(tmp, sections, ctx, seconds, quick, source)
     bar.close()
     seconds = time.perf_counter() - t_start
-    n_warn = len(sections[-1].tables.get("fit_warnings", ()))
+    n_groups = len(sections[-1].tables.get("fit_warnings", ()))
     n_fail = sum(f.severity == 0 for s in sections for f in s.findings)
     print(f"irreflect reproduce: wrote {out_dir}/report.md and {out_dir}/report.html "
           f"({sum(len(s.tables) for s in sections)} tables, "
           f"{sum(len(s.figures) for s in sections)} figures) in {seconds:.1f} s"
           + (f"; {n_fail} failure(s) listed first in the report" if n_fail else "")
-          + (f"; {n_warn} fit warning(s), listed in the report's last section" if n_warn else ""),
+          + (f"; {len(notes)} fit warning(s) in {n_groups} group(s) (by table, model and "
+             "kind), counted in the findings and listed in the report's last section"
+             if notes else ""),
           file=sys.stderr)
     return {"seconds": seconds, "sections": [s.key for s in sections],
             "failures": [f"{f.dataset}: {f.text}" for s in sections for f in s.findings
                          if f.severity == 0]}
 
 
-def findings_section(sections: list[Section], ctx: ReportContext) -> Section:
-    """What the run found, failures first: every section's findings in one list."""
-    items = [f for s in sections for f in s.findings]
+def findings_section(sections: list[Section], ctx: ReportContext, extra=()) -> Section:
+    """What the run found, failures first: every section's findings in one list, and
+    ``extra`` ones (the run's fit warnings, counted per table:
+    :func:`irreflect.report.fit_warnings.findings`). It says that nothing failed only when
+    nothing failed and nothing warned."""
+    items = [f for s in sections for f in s.findings] + list(extra)
     if not items:
         return Section("findings", "What this run found",
-                       "Nothing failed; the sections below give the numbers.")
+                       "Nothing failed and no fit warned; the sections below give the numbers.")
     order = {name: i for i, name in enumerate(ctx.datasets)}
     merged: dict = {}
     for f in items:  # one item per (dataset, key): the most severe first, texts joined
@@ -204,21 +221,32 @@ def findings_section(sections: list[Section], ctx: ReportContext) -> Section:
         md.append(f"**{label}**\n")
         md += [f"- {'**' + f.dataset + '**: ' if f.dataset else ''}{f.text}" for f in group]
         md.append("")
-    if not any(f.severity == 0 for f in items):
-        md.insert(0, "Nothing failed on these data.\n")
+    failed = sum(f.severity == 0 for f in items)
+    cautions = sum(f.severity == 1 for f in items)
+    if not failed:
+        md.insert(0, ("No protocol or fit failed outright, but "
+                      f"{cautions} result(s) need care (below, with the fit warnings counted "
+                      "per table; every warning is in the [fit warnings](#sec-warnings))."
+                      if cautions else "Nothing failed and no fit warned on these data.")
+                  + "\n")
     return Section("findings", "What this run found", "\n".join(md))
 
 
-def _warnings_section(messages: list[str]) -> Section:
-    """Every distinct fit warning of the run (which fit, what is doubtful about it)."""
-    if not messages:
+def _warnings_section(notes: list, names: list[str]) -> Section:
+    """The run's fit warnings grouped by table, model, kind and coefficients, counted."""
+    if not notes:
         return Section("warnings", "Fit warnings", "No fit of this run raised a warning.")
-    table = pd.DataFrame({"warning": messages})
+    table = fit_warnings.group(notes, names)
     return Section(
         "warnings", "Fit warnings",
-        "Every fit of this run that is not all it seems (not converged, a coefficient at a "
-        "bound of its physical range, ill-determined coefficients, an unphysical share), one "
-        "line each, as the commands print them:\n\n{table:fit_warnings}\n",
+        f"{len(notes)} fits of this run are not all they seem (not converged, a coefficient "
+        "at a bound of its physical range, ill-determined coefficients, an unphysical "
+        f"share). They are grouped here into {len(table)} rows: one per table, model, kind "
+        "of warning and coefficients concerned, with how many fits raised it, in which steps "
+        "of the run, and the first one's detail as the commands print it. A table named "
+        "'<what> on <dataset>' is a subset of that dataset (e.g. the protocol's 12 points); "
+        "the others are tables a section generated or added (the diagnosis's blind test, a "
+        "reference material).\n\n{table:fit_warnings}\n",
         tables={"fit_warnings": table})
 
 

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 
-from . import compare, diagnose, fits, protocol, room, selection
+from . import campaign, compare, diagnose, fits, protocol, room, selection
 from .base import ReportContext, Section
 
 SectionFunction = Callable[[ReportContext], Section]
@@ -18,6 +18,7 @@ SECTIONS: dict[str, SectionFunction] = {
     "fits": fits.section,
     "selection": selection.section,
     "protocol": protocol.section,
+    "campaign": campaign.section,
     "compare": compare.section,
     "diagnose": diagnose.section,
 }

@@ -8,7 +8,13 @@ from ..errors import FitError, IrreflectError
 from ..plots import save_figure
 from ..plots.selection import plot_points, plot_selection
 from ..protocol.points import protocol_points_mask
-from ..selection.run import PAPER_N, compare_methods, run_selection
+from ..selection.run import (
+    DEFAULT_GENERATIONS,
+    DEFAULT_POP_SIZE,
+    PAPER_N,
+    compare_methods,
+    run_selection,
+)
 from .base import Finding, ReportContext, Section
 
 TITLE = "Which points matter: Pareto frontier, knee, Method A / B / 12 (Table 5, Figs. 18-19)"
@@ -16,13 +22,38 @@ TITLE = "Which points matter: Pareto frontier, knee, Method A / B / 12 (Table 5,
 #: The knees the paper reports in its text (section 4.3): 12 for terrazzo, 11 for the others.
 PAPER_KNEE = {"terrazzo": 12, "plasterboard": 11, "foam_board": 11}
 
-#: Optimiser budgets of the section (parameters: a faster fitter can afford more).
+#: Optimiser budgets of the section. The full report uses ``irreflect select``'s defaults,
+#: so that both give one answer (knee, enough points) for the same table and seed; the quick
+#: one (tests, ``--quick``) says which ``select`` command gives its answers.
 QUICK = dict(pop_size=30, generations=25, max_points=24)
-FULL = dict(pop_size=100, generations=100)
+FULL = dict(pop_size=DEFAULT_POP_SIZE, generations=DEFAULT_GENERATIONS)
 
 
 def _budget(ctx: ReportContext) -> dict:
     return dict(QUICK if ctx.quick else FULL)
+
+
+def settings_text(budget: dict, seed: int) -> str:
+    """The search's settings in words, e.g. 'NSGA-II, population 100, 200 generations,
+    all points, seed 0'."""
+    limit = (f"at most {budget['max_points']} points" if budget.get("max_points")
+             else "all points")
+    return (f"NSGA-II, population {budget['pop_size']}, {budget['generations']} generations, "
+            f"{limit}, seed {seed}")
+
+
+def select_command(budget: dict, seed: int, data: str = "DATA") -> str:
+    """The ``irreflect select`` command that gives the same answers as ``budget``."""
+    argv = [f"irreflect select {data}"]
+    if budget["pop_size"] != DEFAULT_POP_SIZE:
+        argv.append(f"--pop-size {budget['pop_size']}")
+    if budget["generations"] != DEFAULT_GENERATIONS:
+        argv.append(f"--generations {budget['generations']}")
+    if budget.get("max_points"):
+        argv.append(f"--max-points {budget['max_points']}")
+    if seed:
+        argv.append(f"--seed {seed}")
+    return " ".join(argv + ["--out DIR"])
 
 
 def section(ctx: ReportContext) -> Section:
@@ -63,6 +94,7 @@ def section(ctx: ReportContext) -> Section:
             "completion fits": res.front_summary.completion_fits,
             "failed fits": res.failed_fits, "fits/s": round(res.fits_per_second),
             "hypervolume": round(res.hypervolume, 5), "seconds": round(res.seconds, 1),
+            "search settings": settings_text(budget, ctx.seed),
         })
         for key in ("A", "B", "12"):
             row = {"dataset": name, "method": key,
@@ -74,7 +106,7 @@ def section(ctx: ReportContext) -> Section:
                 row["R^2 paper"] = float(hit["r2"].iloc[0]) if len(hit) else None
             row["A >= B >= 12"] = "holds" if m["order_holds"] else "violated"
             table5_rows.append(row)
-        findings += _findings(name, res, m)
+        findings += _findings(name, res, m, settings_text(budget, ctx.seed))
     fronts = pd.DataFrame(front_rows)
     table5 = pd.DataFrame(table5_rows)
 
@@ -99,9 +131,14 @@ def section(ctx: ReportContext) -> Section:
     md = [
         "The optimiser searches subsets of each dense set for the fewest points whose fit "
         "(on those points only) still describes all points: objectives N and 1 - R^2, "
-        f"NSGA-II (pymoo), population {budget['pop_size']}, {budget['generations']} "
-        f"generations, seed {ctx.seed}"
-        + (f", at most {budget['max_points']} points" if "max_points" in budget else "")
+        f"{settings_text(budget, ctx.seed)} (pymoo): "
+        + ("the defaults of `irreflect select`, which therefore gives the same knee and "
+           "enough points for the same table and seed"
+           if budget == FULL else
+           f"a quick budget; `{select_command(budget, ctx.seed)}` gives the same answers, "
+           "while `irreflect select`'s defaults (population "
+           f"{DEFAULT_POP_SIZE}, {DEFAULT_GENERATIONS} generations, all points) search "
+           "longer and can give others")
         + ". Every subset on the frontier was fitted again with the full fitter's global "
         "search before being reported, and the frontier was completed for every N from 8 "
         f"to the larger of the knee and {PAPER_N} (the best subset of N - 1 points grown by "
@@ -209,7 +246,7 @@ def _dataset_text(name: str, res, m: dict, ctx: ReportContext) -> str:
     return "; ".join(parts) + "."
 
 
-def _findings(name: str, res, m: dict) -> list:
+def _findings(name: str, res, m: dict, settings: str = "") -> list:
     out = []
     e = res.enough
     if e is not None and e.n is None:
@@ -222,7 +259,8 @@ def _findings(name: str, res, m: dict) -> list:
             + (f", enough points {e.n} (range {_range(e)})" if e is not None and e.n else "")
             + (f", best {PAPER_N} points R^2 {1 - res.best_score(PAPER_N):.5f}"
                if res.best_mask(PAPER_N) is not None else "")
-            + f", all points {m['A']['r2']:.5f}")
+            + f", all points {m['A']['r2']:.5f}"
+            + (f" ({settings})" if settings else ""))
     out.append(Finding(2, name, text))
     return out
 

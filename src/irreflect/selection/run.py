@@ -12,6 +12,7 @@ all points.
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import hashlib
 import numbers
 import time
@@ -46,6 +47,10 @@ from .selectors import SELECTORS, SearchSpec, get_selector
 HV_REFERENCE = (1.0, 1.0)
 #: The paper's protocol size (Method B uses the GA's best subset of this size).
 PAPER_N = 12
+#: The search's default budget, shared by ``irreflect select`` and the full report, so that
+#: both give the same knee and "enough points" for the same table and seed.
+DEFAULT_POP_SIZE = 100
+DEFAULT_GENERATIONS = 200
 
 
 # ----------------------------------------------------------------------------- front tools
@@ -225,13 +230,19 @@ class _Progress:
             self.bar.close()
 
 
-def run_selection(measurements, model="two-lobe", selector: str = "nsga2", pop_size: int = 100,
-                  generations: int = 200, seed: int = 0, max_points: int | None = None,
+def run_selection(measurements, model="two-lobe", selector: str = "nsga2",
+                  pop_size: int = DEFAULT_POP_SIZE, generations: int = DEFAULT_GENERATIONS,
+                  seed: int = 0, max_points: int | None = None,
                   candidates=None, progress: bool = False, checkpoint=None, *,
                   initial=None, checkpoint_every: int = 10,
                   search_fit: FitSettings = SEARCH_FIT, verify_fit: FitSettings = VERIFY_FIT,
                   include_all_points: bool = True, enough: bool = True) -> SelectionResult:
     """Find the Pareto frontier of (number of points N, 1 - R^2) over subsets of a dense set.
+
+    The frontier is completed for every N from the smallest to ``max(knee, 12)``
+    (:func:`.front.complete_front`) and the knee taken in a fixed normalisation
+    (:func:`.front.knee_index`), so neither depends on how far the search's frontier
+    happens to extend.
 
     Parameters
     ----------
@@ -253,11 +264,6 @@ def run_selection(measurements, model="two-lobe", selector: str = "nsga2", pop_s
     include_all_points : put the full candidate set in the first population (NSGA-II)
         when ``max_points`` allows it, so the frontier ends at Method A
     enough : also find the noise-aware "enough points" (:func:`.front.enough_points`)
-
-    The frontier is completed for every N from the smallest to ``max(knee, 12)``
-    (:func:`.front.complete_front`) and the knee taken in a fixed normalisation
-    (:func:`.front.knee_index`), so neither depends on how far the search's frontier
-    happens to extend.
 
     Returns
     -------
@@ -387,8 +393,11 @@ def _verify(ev: SubsetEvaluator, settings: FitSettings):
 
 
 # ----------------------------------------------------------------------------- methods A/B/12
-def _r2_all(meas: Measurements, mask: np.ndarray, model, seed: int) -> float:
-    res = fit(meas.subset(mask), model, seed=seed)
+def _r2_all(meas: Measurements, mask: np.ndarray, model, seed: int, what: str = "") -> float:
+    sub = meas.subset(mask)
+    if what and not mask.all():  # a warning names the subset, not the whole table
+        sub = dataclasses.replace(sub, name=f"{what} on {meas.name}")
+    res = fit(sub, model, seed=seed)
     return float(metrics.r2(meas.power, res.predict(meas.gamma_deg, meas.theta_deg)))
 
 
@@ -417,7 +426,8 @@ def compare_methods(meas: Measurements, result: SelectionResult | None = None,
     out = {"A": {"r2": r2_a, "n_points": meas.n_points}}
     mask_b = None if result is None else result.best_mask(PAPER_N)
     if mask_b is not None:
-        out["B"] = {"r2": _r2_all(meas, mask_b, model, seed), "n_points": int(mask_b.sum())}
+        out["B"] = {"r2": _r2_all(meas, mask_b, model, seed, f"best-{PAPER_N}"),
+                    "n_points": int(mask_b.sum())}
     else:
         out["B"] = {"r2": None, "n_points": None}
     points = paper_protocol_points(meas) if protocol_points is None else protocol_points
@@ -433,7 +443,8 @@ def compare_methods(meas: Measurements, result: SelectionResult | None = None,
     mask_12[snapped["index"].to_numpy()] = True
     gammas = sorted({float(g) for g in snapped["gamma_requested"]}, key=abs)
     moved = snapped["distance_deg"] > 1e-9
-    out["12"] = {"r2": _r2_all(meas, mask_12, model, seed), "n_points": int(mask_12.sum()),
+    out["12"] = {"r2": _r2_all(meas, mask_12, model, seed, "paper-12pt"),
+                 "n_points": int(mask_12.sum()),
                  "gammas": gammas,
                  "max_snap_deg": float(snapped["distance_deg"].max()),
                  "n_snapped": int(moved.sum()),

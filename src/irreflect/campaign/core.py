@@ -1,0 +1,527 @@
+"""The adaptive measurement campaign: :class:`Campaign` (propose, add, verdict).
+
+A campaign starts with an :class:`~.instrument.Instrument` and nothing (or a few readings)
+measured. ``propose(k)`` gives the next ``k`` settings, each with why; ``add(rows)`` takes
+the readings; ``verdict()`` says whether to stop, with the predicted R^2 band of the
+current fit over the whole range and the coefficients still ill-determined. The same seed
+gives the same proposals. A scripted instrument::
+
+    from irreflect.campaign import Campaign, Instrument
+    tool = Instrument(gammas_deg=(-10, -20, -30, -40, -50, -60, -70), theta_min=-80,
+                      theta_max=80, theta_step=0.5)
+    campaign = Campaign(tool, seed=0)
+    while not campaign.verdict().stop:
+        settings = campaign.propose(3)
+        powers = [measure(g, t) for g, t in zip(settings.gamma_deg, settings.theta_deg)]
+        campaign.add(settings.assign(power=powers))
+    result = campaign.fit   # the two-lobe fit of the readings
+"""
+
+from __future__ import annotations
+
+import os
+import warnings
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from .. import metrics
+from ..data import Measurements, read_measurements, validate_table
+from ..errors import DataError, FitError, FitWarning, IrreflectError
+from ..fitting import FitResult, fit
+from ..models import get_model
+from ..validation import check_int, check_seed, short_list
+from .design import (
+    DEFAULT_RULE,
+    DesignRule,
+    build_prior,
+    coefficient_gain,
+    leave_one_out,
+    natural_jacobian,
+    opening_design,
+    posterior,
+    posterior_error,
+    region,
+    specular_half_width,
+)
+from .instrument import Instrument, thin_settings
+
+#: The verdict stops when the fits without the last readings (see :data:`STOP_HOLD`)
+#: predict the whole range within this share of the current fit's variance over it.
+STOP_TOLERANCE = 0.005
+#: ... and no sooner than this many readings beyond the model's coefficients.
+STOP_MIN_EXTRA = 3
+#: The fits without the last one to ``STOP_HOLD + 1`` readings must all agree (the curve has
+#: held for that many readings).
+STOP_HOLD = 2
+
+
+@dataclass(frozen=True)
+class Verdict:
+    """Whether to stop measuring.
+
+    stop : the readings pin the predicted curve down (see :data:`STOP_TOLERANCE`)
+    n_measured : readings so far
+    r2_band : (low, high) predicted R^2 of the current fit against the whole range (NaN
+        before a fit)
+    stability : how far the fits without the last readings lie from the current fit over
+        the whole range, as a share of its variance (NaN before a fit)
+    ill_determined, at_bound : the current fit's coefficients that the readings do not pin
+        down / that sit on a bound of their range
+    reasons : why it continues (or, when it stops, how little the last readings moved the
+        predicted curve)
+    """
+
+    stop: bool
+    n_measured: int
+    r2_band: tuple[float, float]
+    stability: float
+    ill_determined: tuple[str, ...] = ()
+    at_bound: tuple[str, ...] = ()
+    reasons: tuple[str, ...] = ()
+
+    @property
+    def text(self) -> str:
+        """One line: ``stop: ...`` or ``continue: ...``."""
+        head = "stop" if self.stop else "continue"
+        parts = [f"{self.n_measured} readings"]
+        if np.isfinite(self.r2_band[0]):
+            parts.append(f"predicted R^2 on the whole range between {self.r2_band[0]:.4f} and "
+                         f"{self.r2_band[1]:.4f}")
+        if self.ill_determined:
+            parts.append(f"ill-determined: {', '.join(self.ill_determined)}")
+        if self.reasons:
+            parts.append("; ".join(self.reasons))
+        return f"{head}: " + "; ".join(parts)
+
+    def to_dict(self) -> dict:
+        return {"stop": self.stop, "verdict": "stop" if self.stop else "continue",
+                "n_measured": self.n_measured, "r2_low": self.r2_band[0],
+                "r2_high": self.r2_band[1], "stability": self.stability,
+                "ill_determined": list(self.ill_determined),
+                "at_bound": list(self.at_bound), "reasons": list(self.reasons),
+                "text": self.text}
+
+
+@dataclass
+class _State:
+    """What the current readings give (recomputed when they change)."""
+
+    fit: FitResult | None = None
+    error: str = ""
+    loo: np.ndarray | None = None  # (m, n) leave-one-out refits on the range
+    loo_own: np.ndarray | None = None
+    range_pred: np.ndarray | None = None
+    verdict: Verdict | None = None
+    extra: dict = field(default_factory=dict)
+
+
+class Campaign:
+    """An adaptive measurement campaign on one material (see the module docstring).
+
+    Parameters
+    ----------
+    instrument : Instrument
+        What the goniometer can set; its settings are the candidates and the range.
+    measured : Measurements, DataFrame, path or None
+        Readings taken so far (``gamma_deg, theta_deg, power[, sigma]``); None: none.
+    model : str
+        The reflection model the campaign is for (default ``two-lobe``).
+    seed : int
+        Seeds the fits; the same seed gives the same proposals.
+    rule : DesignRule
+        The adaptive rule's settings.
+    stop_tolerance : float
+        See :data:`STOP_TOLERANCE`.
+    """
+
+    def __init__(self, instrument: Instrument, measured=None, *, model: str = "two-lobe",
+                 seed: int = 0, rule: DesignRule = DEFAULT_RULE,
+                 stop_tolerance: float = STOP_TOLERANCE, name: str = "campaign"):
+        if not isinstance(instrument, Instrument):
+            raise IrreflectError(f"expected an Instrument; found {type(instrument).__name__}")
+        self.instrument = instrument
+        self.model = get_model(model)
+        self.seed = check_seed(seed)
+        self.rule = rule
+        self.stop_tolerance = float(stop_tolerance)
+        self.name = name
+        settings = instrument.settings()
+        width = np.full(len(settings), 10.0)
+        near = np.abs(settings[:, 0] + settings[:, 1]) <= 5.0 * np.minimum(width, 2.0)
+        self._settings = settings[thin_settings(settings, keep=near)]
+        self._rows = pd.DataFrame(columns=["gamma_deg", "theta_deg", "power"])
+        self._sigma: bool | None = None
+        self._state: _State | None = None
+        self._previous: dict[int, np.ndarray | None] = {}  # range predictions by readings
+        if measured is not None:
+            self.add(measured)
+
+    # ------------------------------------------------------------------ readings
+    @property
+    def n_measured(self) -> int:
+        return len(self._rows)
+
+    @property
+    def measurements(self) -> Measurements | None:
+        """The readings so far (None when there are none)."""
+        if not len(self._rows):
+            return None
+        r = self._rows
+        return Measurements(gamma_deg=r["gamma_deg"].to_numpy(float),
+                            theta_deg=r["theta_deg"].to_numpy(float),
+                            power=r["power"].to_numpy(float),
+                            sigma=r["sigma"].to_numpy(float) if self._sigma else None,
+                            name=self.name)
+
+    def add(self, rows) -> Campaign:
+        """Add readings: Measurements, a DataFrame or path with ``gamma_deg, theta_deg,
+        power[, sigma]``, or a list of ``(gamma, theta, power)``. A reading at a setting
+        already measured is refused (average them first)."""
+        new = _as_rows(rows)
+        if not len(new):
+            return self
+        has_sigma = "sigma" in new.columns
+        if self._sigma is not None and len(self._rows) and has_sigma != self._sigma:
+            raise DataError("the readings mix rows with and without sigma: give sigma for "
+                            "every reading or for none")
+        combined = pd.concat([self._rows, new], ignore_index=True) if len(self._rows) else new
+        key = combined[["gamma_deg", "theta_deg"]].round(9)
+        dup = key.duplicated(keep=False)
+        if dup.any():
+            i = int(np.flatnonzero(dup)[0])
+            raise DataError(
+                f"reading ({combined['gamma_deg'].iloc[i]:g}, "
+                f"{combined['theta_deg'].iloc[i]:g}) is given twice: average the "
+                "repeated readings into one row, or remove one")
+        frame = combined.copy()
+        validate_table(frame, self.name)  # the table's own checks (signs, power, sigma)
+        self._rows = combined.reset_index(drop=True)
+        self._sigma = has_sigma
+        if self._state is not None and self._state.fit is not None:
+            self._previous[len(self._rows) - len(new)] = self._state.range_pred
+        self._state = None
+        return self
+
+    # ------------------------------------------------------------------ the fit
+    def _current(self) -> _State:
+        if self._state is not None:
+            return self._state
+        state = _State()
+        meas = self.measurements
+        if meas is not None and meas.n_points > self.model.n_params:
+            try:
+                with warnings.catch_warnings():
+                    warnings.simplefilter("ignore", FitWarning)
+                    state.fit = fit(meas, self.model, seed=self.seed)
+            except (FitError, DataError) as exc:
+                state.error = " ".join(str(exc).split())
+        if state.fit is not None:
+            g = np.concatenate([self._settings[:, 0], meas.gamma_deg])
+            t = np.concatenate([self._settings[:, 1], meas.theta_deg])
+            with np.errstate(all="ignore"):
+                state.range_pred = self.model.predict_deg(state.fit.values,
+                                                          self._settings[:, 0],
+                                                          self._settings[:, 1])
+            # the leave-one-out refits on the settings, then on the readings
+            state.loo, state.loo_own = leave_one_out(self.model, meas, state.fit.values, g, t,
+                                                     seed=self.seed)
+        self._state = state
+        self._previous[self.n_measured] = state.range_pred
+        return state
+
+    def _range_prediction(self, n: int) -> np.ndarray | None:
+        """The range prediction of the fit on the first ``n`` readings (in the order they
+        were added), from the campaign's history or refitted."""
+        if n in self._previous:
+            return self._previous[n]
+        pred = None
+        if n > self.model.n_params:
+            first = self.measurements.subset(np.arange(self.n_measured) < n)
+            try:
+                with warnings.catch_warnings():
+                    warnings.simplefilter("ignore", FitWarning)
+                    res = fit(first, self.model, seed=self.seed)
+                with np.errstate(all="ignore"):
+                    pred = self.model.predict_deg(res.values, self._settings[:, 0],
+                                                  self._settings[:, 1])
+            except (FitError, DataError):
+                pred = None
+        self._previous[n] = pred
+        return pred
+
+    @property
+    def fit(self) -> FitResult | None:
+        """The model fitted to the readings so far (None before there are enough, or when
+        no fit beats a constant)."""
+        return self._current().fit
+
+    # ------------------------------------------------------------------ proposals
+    def propose(self, k: int = 1) -> pd.DataFrame:
+        """The next ``k`` settings: a table with ``gamma_deg, theta_deg, why, new_gamma,
+        gain`` (gain: the share of the range's predicted-curve uncertainty the reading
+        removes, given the proposals before it), in measurement order (each angle of
+        incidence set once, the receiver sweeping)."""
+        k = check_int(k, "k", 1)
+        state = self._current()
+        taken = self._taken()
+        if state.fit is None:
+            rows = self._opening(k, taken)
+        else:
+            rows = self._adaptive(k, state, taken)
+        out = pd.DataFrame(rows, columns=["gamma_deg", "theta_deg", "why", "new_gamma", "gain"])
+        if len(out):
+            order = np.lexsort((out["theta_deg"].to_numpy(), np.abs(out["gamma_deg"].to_numpy())))
+            out = out.iloc[order].reset_index(drop=True)
+            measured = {round(g, 6) for g, _ in taken}
+            key = out["gamma_deg"].round(6)
+            out["new_gamma"] = ~key.isin(measured) & ~key.duplicated()
+        return out
+
+    def _taken(self) -> list[tuple[float, float]]:
+        return [(float(g), float(t)) for g, t in zip(self._rows["gamma_deg"],
+                                                     self._rows["theta_deg"], strict=True)]
+
+    def _free_mask(self, taken) -> np.ndarray:
+        s = self._settings
+        free = np.ones(len(s), bool)
+        sep = max(self.instrument.min_separation, 1e-9)
+        for g, t in taken:
+            free &= ~((np.abs(s[:, 0] - g) < 1e-6) & (np.abs(s[:, 1] - t) <= sep + 1e-9))
+        limit = self.instrument.max_gamma_settings
+        if limit:
+            used = {round(g, 6) for g, _ in taken}
+            if len(used) >= limit:
+                free &= np.isin(np.round(s[:, 0], 6), list(used))
+        return free
+
+    def _is_free(self, gamma: float, theta: float, taken) -> bool:
+        """Whether the setting is neither measured (within the separation) nor beyond the
+        allowed number of angle-of-incidence settings."""
+        sep = max(self.instrument.min_separation, 1e-9)
+        if any(abs(g - gamma) < 1e-6 and abs(t - theta) <= sep + 1e-9 for g, t in taken):
+            return False
+        limit = self.instrument.max_gamma_settings
+        used = {round(g, 6) for g, _ in taken}
+        return not (limit and len(used) >= limit and round(gamma, 6) not in used)
+
+    def _opening(self, k: int, taken) -> list:
+        plan = opening_design(self.instrument, self.model.n_params + 1 + 7)
+        rows = []
+        measured_g = {round(g, 6) for g, _ in taken}
+        for g, t, why in plan:
+            if len(rows) == k:
+                break
+            if not self._is_free(g, t, taken):
+                continue
+            rows.append((g, t, f"opening design: {why}", round(g, 6) not in measured_g, np.nan))
+            taken = taken + [(g, t)]
+            measured_g.add(round(g, 6))
+        while len(rows) < k:  # beyond the opening: spread out over the range
+            free = self._free_mask(taken)
+            if not free.any():
+                break
+            j = _farthest(self._settings, free, taken)
+            g, t = (float(x) for x in self._settings[j])
+            rows.append((g, t, "opening design: the setting farthest from every other reading",
+                         round(g, 6) not in measured_g, np.nan))
+            taken = taken + [(g, t)]
+            measured_g.add(round(g, 6))
+        return rows
+
+    def _prior(self, state: _State):
+        """The design's prior around the current fit (computed once per set of readings)."""
+        if "prior" not in state.extra:
+            s = self._settings
+            state.extra["prior"] = build_prior(self.model, state.fit, self.measurements,
+                                               s[:, 0], s[:, 1], self.rule, loo=state.loo,
+                                               loo_own=state.loo_own)
+        return state.extra["prior"]
+
+    def _adaptive(self, k: int, state: _State, taken) -> list:
+        meas = self.measurements
+        res = state.fit
+        s = self._settings
+        prior = self._prior(state)
+        if meas.sigma is not None:
+            noise_m = meas.sigma ** 2
+        else:
+            noise_m = (self.rule.noise * prior.scale[len(s):]) ** 2
+        post = posterior(prior, len(s), np.maximum(noise_m, 1e-300), self.rule)
+        total = float(np.sum(np.clip(np.diag(post.cov), 0, None)))
+        names = self.model.param_names
+        jn_meas = natural_jacobian(self.model, res.values, meas.gamma_deg, meas.theta_deg)
+        noise_meas = np.maximum(noise_m, 1e-300)
+        measured_g = {round(g, 6) for g in meas.gamma_deg}
+        width = specular_half_width(self.model, res.values, s[:, 0])
+        mags = np.abs(meas.gamma_deg)
+        rows = []
+        extra_rows, extra_noise = [], []
+        for _ in range(k):
+            free = self._free_mask(taken)
+            if not free.any():
+                break
+            gains = post.gains()
+            new = ~np.isin(np.round(s[:, 0], 6), list(measured_g))
+            gains = np.where(new, gains / (1.0 + self.instrument.gamma_change_cost), gains)
+            gains = np.where(free, gains, -np.inf)
+            j = int(np.argmax(gains))
+            g, t = float(s[j, 0]), float(s[j, 1])
+            row = natural_jacobian(self.model, res.values, np.array([g]), np.array([t]))[0]
+            jm = np.vstack([jn_meas, *extra_rows]) if extra_rows else jn_meas
+            nm = np.concatenate([noise_meas, extra_noise]) if extra_noise else noise_meas
+            coef, drop = coefficient_gain(jm, row, names, res.values, nm, post.noise[j])
+            why = region(g, t, float(width[j]), measured_g)
+            if round(g, 6) not in measured_g:
+                lo, hi = float(np.min(mags)), float(np.max(mags))
+                if abs(g) > hi or abs(g) < lo:
+                    why += (f"; a new angle of incidence: the fit would extrapolate from "
+                            f"|gamma| {lo:g}-{hi:g} to {abs(g):g} deg")
+                else:
+                    why += f"; a new angle of incidence between the measured ones ({abs(g):g} deg)"
+            if drop > 0.01:
+                flag = " (ill-determined)" if coef in res.ill_determined else ""
+                why += f"; shrinks the standard error of {coef}{flag} by {drop:.0%}"
+            if "specular lobe" in why and "u_ns" in res.ill_determined:
+                why += "; brackets the specular lobe's width"
+            share = float(gains[j]) / total if total > 0 else float("nan")
+            rows.append((g, t, why, round(g, 6) not in measured_g, share))
+            post.condition(j)
+            extra_rows.append(row)
+            extra_noise.append(post.noise[j])
+            taken = taken + [(g, t)]
+            measured_g.add(round(g, 6))
+        return rows
+
+    # ------------------------------------------------------------------ verdict
+    def verdict(self) -> Verdict:
+        """Whether to stop: see :class:`Verdict`. Stops when the readings pin the predicted
+        curve down: the fits on the first n - 1, ..., n - 1 - :data:`STOP_HOLD` readings
+        predict the whole range within ``stop_tolerance`` of the current fit's variance
+        over it, with at least :data:`STOP_MIN_EXTRA` readings more than the model has
+        coefficients and no angle of incidence of the instrument outside the measured
+        ones' span. The predicted R^2 band is that of the design's posterior: the expected
+        squared difference between the material and the current fit at every setting."""
+        state = self._current()
+        if state.verdict is not None:
+            return state.verdict
+        n = self.n_measured
+        nan = (float("nan"), float("nan"))
+        if state.fit is None:
+            need = self.model.n_params + 1
+            why = (f"the first fit needs {need} readings ({n} so far)" if n < need else
+                   f"no usable fit yet ({state.error})")
+            v = Verdict(False, n, nan, float("nan"), reasons=(why,))
+        else:
+            v = self._judge(state)
+        state.verdict = v
+        return v
+
+    def _judge(self, state: _State) -> Verdict:
+        res = state.fit
+        meas = self.measurements
+        n = meas.n_points
+        f = state.range_pred
+        ss_pred = float(np.sum((f - f.mean()) ** 2))
+        # how far the fits on the first n - 1, n - 2 and n - 3 readings lie from this one
+        moves = []
+        for back in range(1, STOP_HOLD + 2):
+            before = self._range_prediction(n - back)
+            if before is None or not np.all(np.isfinite(before)) or ss_pred <= 0:
+                moves.append(float("inf"))
+            else:
+                moves.append(float(np.sum((before - f) ** 2)) / ss_pred)
+        stability = max(moves)
+        # the expected squared difference between the material and the fit over the range:
+        # the design's posterior (its variance, and its mean's departure from the fit)
+        s_ = self._settings
+        prior = self._prior(state)
+        noise_m = (meas.sigma ** 2 if meas.sigma is not None
+                   else (self.rule.noise * prior.scale[len(s_):]) ** 2)
+        expected = posterior_error(prior, len(s_), np.maximum(noise_m, 1e-300),
+                                   meas.power - res.fitted)
+        denom = ss_pred + expected
+        if denom > 0:
+            r2_mid = 1.0 - expected / denom
+            # the spread of the truth around the posterior's expectation, as measured on the
+            # real sets (experiments/bench_campaign.py): from 0.1 to 2 times it
+            r2_lo, r2_hi = 1.0 - 2.0 * expected / denom, 1.0 - 0.1 * expected / denom
+        else:
+            r2_lo = r2_hi = r2_mid = float("nan")
+        state.extra["r2_predicted"] = r2_mid
+        reasons = []
+        need = self.model.n_params + STOP_MIN_EXTRA
+        if n < need:
+            reasons.append(f"at least {need} readings before stopping")
+        if not np.isfinite(stability):
+            reasons.append(f"the curve must hold for {STOP_HOLD + 1} readings after the first "
+                           "fit")
+        elif not stability <= self.stop_tolerance:
+            reasons.append(f"the last {STOP_HOLD + 1} readings moved the predicted curve by "
+                           f"{min(stability, 9.99):.2%} of its variance (stop below "
+                           f"{self.stop_tolerance:.1%})")
+
+        mags = np.abs(meas.gamma_deg)
+        outside = [g for g in self.instrument.gammas
+                   if abs(g) > mags.max() + 1e-6 or abs(g) < mags.min() - 1e-6]
+        if outside:
+            reasons.append("angles of incidence outside the measured span: "
+                           + short_list([f"{g:g}" for g in outside], 4))
+        why = tuple(reasons) or (
+            f"the last {STOP_HOLD + 1} readings moved the predicted curve by {stability:.2%} "
+            f"of its variance (below {self.stop_tolerance:.1%})",)
+        return Verdict(not reasons, n, (float(r2_lo), float(r2_hi)), stability,
+                       tuple(res.ill_determined), tuple(res.at_bound), why)
+
+    # ------------------------------------------------------------------ scoring
+    def r2_against(self, dense) -> float:
+        """R^2 of the current fit against a dense table (for replays and checks)."""
+        res = self.fit
+        if res is None:
+            return float("nan")
+        with np.errstate(all="ignore"):
+            pred = res.predict(dense.gamma_deg, dense.theta_deg)
+        return float(metrics.r2(dense.power, pred))
+
+
+# ----------------------------------------------------------------------------- helpers
+def _farthest(settings, free, taken) -> int:
+    """The free setting farthest (in degrees, gamma and theta alike) from every reading."""
+    if not taken:
+        return int(np.flatnonzero(free)[0])
+    t = np.asarray(taken, float)
+    d = np.min((settings[:, None, 0] - t[None, :, 0]) ** 2
+               + (settings[:, None, 1] - t[None, :, 1]) ** 2, axis=1)
+    d = np.where(free, d, -np.inf)
+    return int(np.argmax(d))
+
+
+def _as_rows(rows) -> pd.DataFrame:
+    """Readings as a DataFrame ``gamma_deg, theta_deg, power[, sigma]``."""
+    if rows is None:
+        return pd.DataFrame(columns=["gamma_deg", "theta_deg", "power"])
+    if isinstance(rows, Measurements):
+        frame = rows.to_frame()
+    elif isinstance(rows, pd.DataFrame):
+        frame = rows
+    elif isinstance(rows, str | os.PathLike):
+        frame = read_measurements(Path(rows)).to_frame()
+    else:
+        try:
+            arr = np.asarray(list(rows), float)
+        except (TypeError, ValueError) as exc:
+            raise DataError(f"readings must be a table or (gamma, theta, power) rows; found "
+                            f"{type(rows).__name__}") from exc
+        if arr.size == 0:
+            return pd.DataFrame(columns=["gamma_deg", "theta_deg", "power"])
+        if arr.ndim != 2 or arr.shape[1] not in (3, 4):
+            raise DataError(f"readings must be (gamma, theta, power[, sigma]) rows; found "
+                            f"shape {arr.shape}")
+        cols = ["gamma_deg", "theta_deg", "power", "sigma"][: arr.shape[1]]
+        frame = pd.DataFrame(arr, columns=cols)
+    if not len(frame):
+        return pd.DataFrame(columns=["gamma_deg", "theta_deg", "power"])
+    meas = validate_table(frame.copy(), "readings")
+    return meas.to_frame().drop(columns=["material"], errors="ignore")

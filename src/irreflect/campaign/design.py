@@ -1,0 +1,463 @@
+"""Where to measure next: the opening design and the adaptive rule.
+
+The rule scores every setting the instrument can take by how much a reading there would
+shrink the uncertainty of the *predicted curve over the whole range* (every setting of
+the instrument, not only the ones measured): the sum over the range of the squared
+reduction of the predictive covariance (an integrated-variance, "I-optimal", criterion,
+computed for all candidates at once from one Gaussian-process posterior). What makes it
+work on real materials is the prior the posterior starts from; it is the sum of
+
+* **the model's coefficients** (their Jacobian at the current fit, with a broad prior):
+  readings that pin down ill-determined coefficients;
+* **other fits the data allow**: the leave-one-out refits of the measured readings (where
+  the fit hinges on a single reading, a new reading nearby settles it) and the current
+  fit with the specular lobe 10 and 100 times narrower or wider (its linear scales
+  refitted; weighted by how well each still explains the readings): the lobe is
+  bracketed while its width is ill-determined, the mirror direction being known before
+  any reading;
+* **the model's laws in the angle of incidence may not hold** (``u cos^v(gamma)`` for the
+  specular share, the lobe indices and the level): independent deviations of each, smooth
+  in gamma, so that an angle of incidence the model would only reach by extrapolation or
+  interpolation over a wide gap is worth a reading, in proportion to the power there;
+* **the model may misfit locally** (the lobe's shape, grazing receivers): a smooth
+  discrepancy whose size follows the predicted power (and the readings' misfit so far), in
+  a metric that resolves the specular lobe on the scale of its own width.
+
+A batch of ``k`` proposals is chosen greedily, each conditioned on the ones before (a
+Gaussian posterior does not need the readings' values to shrink). A new angle of incidence
+divides a reading's gain by ``1 + gamma_change_cost``. Each proposal says why: the region
+it samples and the coefficient whose standard error it shrinks most, or the angle of
+incidence it adds.
+
+Everything is deterministic for a given seed (the leave-one-out refits are seeded).
+"""
+
+from __future__ import annotations
+
+import warnings
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..errors import FitWarning
+from ..fitting import FitResult, fit_subsets
+from ..protocol.core import lobe_half_width_deg
+
+
+@dataclass(frozen=True)
+class DesignRule:
+    """The knobs of the adaptive rule (the defaults are what the benchmark ran).
+
+    coefficient_prior : weight of the model's coefficients (Jacobian, broad prior)
+    refits : weight of the leave-one-out refits
+    lobe_factors : the specular lobe index times these factors, as alternatives
+    law_sd : relative deviation (1 sigma) of each law in gamma: share, indices, level
+    law_gamma_scale : deg, how far in gamma a deviation of the laws extends
+    misfit_min : smallest relative local misfit assumed (the fit's relative residuals, and
+        ``loo_misfit`` times the leave-one-out refits' relative errors, raise it)
+    gamma_scale, theta_scale : deg, correlation lengths of the local misfit
+    lobe_scale : correlation length of the local misfit in asinh(phi / half width)
+    noise : relative noise of a reading (1 sigma) when the table gives no sigma
+    tail_sd : a specular lobe with heavier tails than cos^n (same peak and half width), per
+        angle of incidence (0: off; the benchmark found no gain)
+    shift_sd : the lobe shifted along theta by this share of its half width (an angle
+        offset or a tilted lobe; 0: off, no gain in the benchmark either)
+    loo_misfit : weight of the leave-one-out refits' relative errors in the local misfit
+    """
+
+    coefficient_prior: float = 1.0
+    refits: float = 1.0
+    lobe_factors: tuple[float, ...] = (0.01, 0.1, 10.0, 100.0)
+    law_sd: dict = field(default_factory=lambda: {"u_as": 0.3, "u_nd": 0.3, "u_ns": 0.4,
+                                                  "K": 0.1})
+    law_gamma_scale: float = 15.0
+    misfit_min: float = 0.03
+    gamma_scale: float = 15.0
+    theta_scale: float = 12.0
+    lobe_scale: float = 1.0
+    noise: float = 0.01
+    tail_sd: float = 0.0
+    shift_sd: float = 0.0
+    loo_misfit: float = 0.5
+
+
+DEFAULT_RULE = DesignRule()
+
+
+# ----------------------------------------------------------------------------- opening
+def opening_design(instrument, n: int) -> list[tuple[float, float, str]]:
+    """The first ``n`` readings when nothing is measured: ``(gamma, theta, why)``.
+
+    Three angles of incidence spanning the instrument's (the smallest and the largest
+    whose mirror direction it can reach, and the one nearest their middle; fewer if it
+    has fewer or ``max_gamma_settings`` says so), so that no later fit extrapolates in
+    gamma; at each the mirror direction (the specular peak: its height, and whether there
+    is a lobe at all); a reading on the lobe's body a degree (or 1.5 receiver steps) from the
+    mirror at the largest and the smallest angle, which starts bracketing the lobe's width;
+    and the diffuse lobe away from the mirror: on the source side, near the normal at
+    grazing incidence, and on the far side beyond the lobe.
+    """
+    settings = instrument.settings()
+    gammas = instrument.gammas
+    limit = instrument.max_gamma_settings or len(gammas)
+    reach = [g for g in gammas if _reachable(settings, g, -g, instrument)]
+    pool = reach if reach else list(gammas)
+    lo, hi = pool[0], pool[-1]
+    mid = pool[int(np.argmin([abs(abs(g) - (abs(lo) + abs(hi)) / 2) for g in pool]))]
+    chosen = list(dict.fromkeys([hi, lo, mid]))[:max(limit, 1)]
+    chosen = sorted(chosen, key=abs)
+    lo, hi = chosen[0], chosen[-1]
+    mid = chosen[len(chosen) // 2]
+    tmin, tmax = instrument.theta_min, instrument.theta_max
+    probe = max(1.0, 1.5 * instrument.theta_step)
+    plan = [(g, -g, "mirror direction: the specular peak") for g in chosen]
+    plan += [
+        (lo, max(tmin, -lo - 50.0), "diffuse lobe, source side"),
+        (hi, 0.0, "diffuse lobe near the normal, grazing incidence"),
+        (hi, -hi - probe, "the specular lobe's body, {off} deg from the mirror toward the "
+                          "normal: starts bracketing its width"),
+        (mid, min(tmax, -mid + 35.0), "far side beyond the specular lobe"),
+        (lo, -lo + probe, "the specular lobe's body, {off} deg from the mirror toward "
+                          "grazing: starts bracketing its width"),
+        (hi, max(tmin, hi - 10.0), "diffuse lobe, source side at grazing incidence"),
+        (mid, max(tmin, mid - 20.0), "diffuse lobe, source side"),
+        (lo, min(tmax, -lo + 25.0), "far side beyond the specular lobe"),
+        (hi, min(tmax, -hi + 12.0), "far side beyond the specular lobe at grazing incidence"),
+    ]
+    out, taken = [], []
+    for g, t, why in plan:
+        idx = _nearest_free(settings, g, t, taken, instrument.min_separation)
+        if idx is None:
+            continue
+        taken.append(idx)
+        g_, t_ = float(settings[idx, 0]), float(settings[idx, 1])
+        out.append((g_, t_, why.replace("{off}", f"{abs(g_ + t_):.3g}")))
+        if len(out) == n:
+            break
+    return out
+
+
+def _reachable(settings, gamma, theta, instrument) -> bool:
+    sel = np.abs(settings[:, 0] - gamma) < 1e-6
+    return bool(sel.any() and np.min(np.abs(settings[sel, 1] - theta)) <= max(
+        2.0 * instrument.theta_step, 2.0))
+
+
+def _nearest_free(settings, gamma, theta, taken, sep):
+    sel = np.flatnonzero(np.abs(settings[:, 0] - gamma) < 1e-6)
+    for j in taken:
+        sel = sel[~((np.abs(settings[sel, 0] - settings[j, 0]) < 1e-6)
+                    & (np.abs(settings[sel, 1] - settings[j, 1]) <= sep + 1e-9))]
+    if not sel.size:
+        return None
+    return int(sel[np.argmin(np.abs(settings[sel, 1] - theta))])
+
+
+# ----------------------------------------------------------------------------- the prior
+def _jacobian(model, values, gamma_deg, theta_deg):
+    """Prediction and its Jacobian in the model's internal coordinates (shape z, linear
+    scales alpha), ``(n,)`` and ``(n, P + L)``."""
+    from ..models import Geometry
+
+    z, alpha = model.from_natural(np.asarray(values, float)[None])
+    geom = Geometry.of(np.radians(gamma_deg)[None], np.radians(theta_deg)[None])
+    with np.errstate(all="ignore"):
+        basis, dbasis = model.basis(geom, z, True)
+    f = basis[0] @ alpha[0]
+    jz = np.einsum("nlp,l->np", dbasis[0], alpha[0])
+    ja = basis[0] * alpha[0]  # d / d ln alpha
+    ja = np.where(alpha[0] > 0, ja, basis[0] * max(float(np.max(alpha[0])), 1e-300) * 1e-3)
+    return np.nan_to_num(f), np.nan_to_num(np.concatenate([jz, ja], axis=1))
+
+
+def natural_jacobian(model, values, gamma_deg, theta_deg) -> np.ndarray:
+    """``d f / d p`` for the natural coefficients ``p`` (central differences), ``(n, k)``."""
+    values = np.asarray(values, float)
+    k = values.size
+    steps = 1e-5 * np.maximum(np.abs(values), 1e-3)
+    pert = np.vstack([values + np.diag(steps), values - np.diag(steps)])
+    lo = np.array([p.lower for p in model.params])
+    hi = np.array([p.upper for p in model.params])
+    pert = np.clip(pert, lo, hi)
+    with np.errstate(all="ignore"):
+        pred = model.predict(pert, np.radians(gamma_deg), np.radians(theta_deg))
+    width = pert[:k] - pert[k:]
+    width = np.diagonal(width)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        jac = (pred[:k] - pred[k:]).T / np.where(width > 0, width, np.inf)
+    return np.nan_to_num(jac)
+
+
+def specular_half_width(model, values, gamma_deg) -> np.ndarray:
+    """Half width at half maximum of the specular lobe (deg) per angle of incidence, from
+    ``u_ns cos^v_ns(gamma)`` when the model has them, else 10 deg."""
+    names = model.param_names
+    gamma_deg = np.asarray(gamma_deg, float)
+    if "u_ns" not in names:
+        return np.full(gamma_deg.shape, 10.0)
+    p = dict(zip(names, values, strict=True))
+    n = p["u_ns"] * np.cos(np.radians(gamma_deg)) ** p.get("v_ns", 0.0)
+    return np.clip(lobe_half_width_deg(np.maximum(n, 0.5)), 0.05, 60.0)
+
+
+@dataclass
+class Prior:
+    """The low-rank part (``features``, ``(n, r)``) and the parts given as functions of
+    the settings of the prior covariance of the readings, on ``n`` settings."""
+
+    gamma: np.ndarray
+    theta: np.ndarray
+    features: np.ndarray
+    law: list  # (values (n,), sd) per law in gamma
+    law_scale: float
+    amplitude: np.ndarray  # local misfit size per setting (power units)
+    scale: np.ndarray  # the predicted power's size per setting (power units)
+    lobe_coord: np.ndarray  # asinh(phi / half width)
+    rule: DesignRule
+
+    def block(self, i, j) -> np.ndarray:
+        """The prior covariance between settings ``i`` and ``j`` (index arrays)."""
+        from scipy.spatial.distance import cdist
+
+        out = self.features[i] @ self.features[j].T
+        gi, gj = self.gamma[i][:, None], self.gamma[j][:, None]
+        if self.law:
+            values = np.column_stack([v for v, _ in self.law])
+            sd2 = np.array([sd * sd for _, sd in self.law])
+            rg = np.exp(-0.5 * cdist(gi / self.law_scale, gj / self.law_scale, "sqeuclidean"))
+            out += ((values[i] * sd2) @ values[j].T) * rg
+        r = self.rule
+        xi = np.column_stack([self.gamma[i] / r.gamma_scale, self.theta[i] / r.theta_scale,
+                              self.lobe_coord[i] / r.lobe_scale])
+        xj = np.column_stack([self.gamma[j] / r.gamma_scale, self.theta[j] / r.theta_scale,
+                              self.lobe_coord[j] / r.lobe_scale])
+        local = np.exp(-0.5 * cdist(xi, xj, "sqeuclidean"))
+        out += self.amplitude[i][:, None] * local * self.amplitude[j][None, :]
+        return out
+
+
+def leave_one_out(model, meas, values, gamma_deg, theta_deg, seed=0):
+    """The leave-one-out refits of the readings, predicted on the settings, ``(m, n)``
+    (rows of failed refits dropped), and each refit's prediction at its own left-out
+    reading, ``(m,)`` (NaN where it failed)."""
+    n_meas = meas.n_points
+    if n_meas <= model.n_params + 1:
+        return np.zeros((0, len(gamma_deg))), np.full(n_meas, np.nan)
+    masks = ~np.eye(n_meas, dtype=bool)
+    z0, _ = model.from_natural(np.asarray(values, float)[None])
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", FitWarning)
+        sub = fit_subsets(meas.gamma_deg, meas.theta_deg, meas.power, masks, model,
+                          sigma=meas.sigma, n_screen=32, n_keep=2, shared_starts=z0,
+                          seed=seed)
+    ok = ~sub.failed
+    preds = np.zeros((int(ok.sum()), len(gamma_deg)))
+    own = np.full(n_meas, np.nan)
+    for row, k in enumerate(np.flatnonzero(ok)):
+        with np.errstate(all="ignore"):
+            preds[row] = model.predict_deg(sub.params[k], gamma_deg, theta_deg)
+            own[k] = model.predict_deg(sub.params[k], meas.gamma_deg[k:k + 1],
+                                       meas.theta_deg[k:k + 1])[0]
+    good = np.all(np.isfinite(preds), axis=1)
+    return preds[good], own
+
+
+def build_prior(model, result: FitResult, meas, gamma_deg, theta_deg,
+                rule: DesignRule = DEFAULT_RULE, loo=None, loo_own=None) -> Prior:
+    """The prior covariance of the readings at the settings (gamma_deg, theta_deg) and at
+    the measured readings, around the current fit (see the module docstring). The
+    settings come first, the measured readings after them."""
+    g = np.concatenate([gamma_deg, meas.gamma_deg])
+    t = np.concatenate([theta_deg, meas.theta_deg])
+    values = result.values
+    f, jac = _jacobian(model, values, g, t)
+    n_set = len(gamma_deg)
+    n_meas = meas.n_points
+    y = meas.power
+    fm = f[n_set:]
+    peak = max(float(np.max(np.abs(f))), float(np.max(np.abs(y))), 1e-300)
+    scale = np.abs(f) + 1e-3 * peak
+    rel = (y - fm) / scale[n_set:]
+    misfit = max(rule.misfit_min, float(np.sqrt(np.mean(rel ** 2))) if n_meas else 0.0)
+    if rule.loo_misfit and loo_own is not None and np.isfinite(loo_own).sum() >= 3:
+        ok = np.isfinite(loo_own)
+        held = np.clip(np.abs(y[ok] - loo_own[ok]) / scale[n_set:][ok], 0.0, 3.0)
+        misfit = max(misfit, rule.loo_misfit * float(np.sqrt(np.mean(held ** 2))))
+    parts = []
+    if rule.coefficient_prior:
+        lo, hi = model.screen_box()
+        sd = np.concatenate([(hi - lo) / 4.0, np.full(model.n_linear, 2.0)])
+        parts.append(rule.coefficient_prior * jac * sd)
+    if rule.refits and loo is not None and len(loo):
+        dev = (loo - f[None, :]).T
+        parts.append(rule.refits * dev * np.sqrt(max(n_meas - 1, 1) / len(loo)))
+    names = model.param_names
+    if rule.lobe_factors and "u_ns" in names:
+        k = names.index("u_ns")
+        lo_b, hi_b = model.params[k].lower, model.params[k].upper
+        sig = misfit * scale[n_set:]
+        base = np.sum(((y - fm) / sig) ** 2)
+        alts = []
+        for factor in rule.lobe_factors:
+            q = np.array(values, float)
+            q[k] = np.clip(q[k] * factor, lo_b, hi_b)
+            with np.errstate(all="ignore"):
+                fa = np.nan_to_num(model.predict_deg(q, g, t))
+            am = fa[n_set:]
+            s = float(am @ y / max(float(am @ am), 1e-300))
+            fa = fa * s
+            chi = np.sum(((y - fa[n_set:]) / sig) ** 2)
+            weight = np.exp(-0.5 * max(chi - base, 0.0) / max(n_meas, 1))
+            alts.append(np.sqrt(weight) * (fa - f))
+        parts.append(np.array(alts).T)
+    features = np.concatenate(parts, axis=1) if parts else np.zeros((len(g), 0))
+    width = specular_half_width(model, values, g)
+    lobe = np.arcsinh((-g - t) / width)
+    law = _law_terms(model, rule, values, g, t, f, width)
+    return Prior(gamma=g, theta=t, features=features, law=law,
+                 law_scale=rule.law_gamma_scale, amplitude=misfit * scale, scale=scale,
+                 lobe_coord=lobe, rule=rule)
+
+
+def _law_terms(model, rule: DesignRule, values, g, t, f, width) -> list:
+    """The prior's law terms ``(feature, sd)``: the coefficients' laws of gamma
+    (``rule.law_sd``), the lobe shifted along theta and heavier specular tails."""
+    names = model.param_names
+    law = []
+    if rule.law_sd:
+        jn = natural_jacobian(model, values, g, t)
+        for name, sd in rule.law_sd.items():
+            if name == "K" and "K" in names:
+                law.append((f, sd))
+            elif name in names:
+                i = names.index(name)
+                v = values[i] if values[i] > 0 else 1e-3
+                law.append((jn[:, i] * v, sd))
+    if rule.shift_sd:
+        # the lobe shifted along theta by a share of its half width (an angle offset, a
+        # tilted lobe): d f / d theta times the half width
+        h = np.minimum(0.05 * width, 0.05)
+        with np.errstate(all="ignore"):
+            slope = (np.nan_to_num(model.predict_deg(values, g, t + h))
+                     - np.nan_to_num(model.predict_deg(values, g, t - h))) / (2.0 * h)
+        law.append((slope * width, rule.shift_sd))
+    if rule.tail_sd and "u_as" in names:
+        # the specular lobe with heavier tails than cos^n (same peak, same half width)
+        q = np.array(values, float)
+        q[names.index("u_as")] = 0.0
+        with np.errstate(all="ignore"):
+            diffuse = np.nan_to_num(model.predict_deg(q, g, t)) * (1.0 - values[0])
+            peak = np.nan_to_num(model.predict_deg(values, g, -g)
+                                 - model.predict_deg(q, g, -g) * (1.0 - values[0]))
+        ratio = ((-g - t) / width) ** 2
+        cos_lobe = np.clip(f - diffuse, 0.0, None)
+        tail = np.clip(peak, 0.0, None) / (1.0 + ratio) - cos_lobe
+        law.append((tail, rule.tail_sd))
+    return law
+
+
+# ----------------------------------------------------------------------------- scoring
+@dataclass
+class Posterior:
+    """The posterior covariance over the settings after the measured readings, with the
+    noise of a reading at each setting; updated in place as proposals are taken."""
+
+    cov: np.ndarray  # (n, n)
+    noise: np.ndarray  # (n,) variance of a reading
+
+    def gains(self) -> np.ndarray:
+        """Per setting: the summed squared reduction of the predictive covariance over all
+        settings that a reading there brings."""
+        var = np.clip(np.diag(self.cov), 0.0, None)
+        return np.sum(self.cov ** 2, axis=0) / (var + self.noise)
+
+    def condition(self, j: int) -> None:
+        """Take a reading at setting ``j`` (its value is not needed)."""
+        col = self.cov[:, j].copy()
+        self.cov -= np.outer(col, col) / (max(self.cov[j, j], 0.0) + self.noise[j])
+
+
+def posterior(prior: Prior, n_settings: int, measured_noise: np.ndarray,
+              rule: DesignRule = DEFAULT_RULE) -> Posterior:
+    """The posterior of the readings at the first ``n_settings`` of the prior's points
+    given the readings at the others (their noise variances ``measured_noise``)."""
+    s = np.arange(n_settings)
+    m = np.arange(n_settings, len(prior.gamma))
+    k_ss = prior.block(s, s)
+    noise = np.maximum((rule.noise * prior.scale[s]) ** 2, 1e-300)
+    if m.size:
+        k_sm = prior.block(s, m)
+        k_mm = prior.block(m, m) + np.diag(measured_noise)
+        jitter = 1e-10 * max(float(np.max(np.diag(k_mm))), 1e-300)
+        try:
+            sol = np.linalg.solve(k_mm + jitter * np.eye(m.size), k_sm.T)
+        except np.linalg.LinAlgError:
+            sol = np.linalg.lstsq(k_mm, k_sm.T, rcond=None)[0]
+        k_ss = k_ss - k_sm @ sol
+    return Posterior(cov=k_ss, noise=noise)
+
+
+def posterior_error(prior: Prior, n_settings: int, measured_noise: np.ndarray,
+                    residuals: np.ndarray) -> float:
+    """The expected summed squared difference, over the first ``n_settings`` settings,
+    between the material and the current fit (the prior's mean), given the readings'
+    ``residuals`` from the fit: the posterior's variance plus its mean's squared
+    departure from the fit."""
+    s = np.arange(n_settings)
+    m = np.arange(n_settings, len(prior.gamma))
+    var = np.clip(np.einsum("ij,ij->i", prior.features[s], prior.features[s])
+                  + sum(sd * sd * v[s] ** 2 for v, sd in prior.law)
+                  + prior.amplitude[s] ** 2, 0.0, None)
+    if not m.size:
+        return float(np.sum(var))
+    k_sm = prior.block(s, m)
+    k_mm = prior.block(m, m) + np.diag(measured_noise)
+    jitter = 1e-10 * max(float(np.max(np.diag(k_mm))), 1e-300)
+    a = k_mm + jitter * np.eye(m.size)
+    try:
+        sol = np.linalg.solve(a, np.column_stack([k_sm.T, residuals]))
+    except np.linalg.LinAlgError:
+        sol = np.linalg.lstsq(a, np.column_stack([k_sm.T, residuals]), rcond=None)[0]
+    reduce = np.einsum("ij,ji->i", k_sm, sol[:, :-1])
+    mean = k_sm @ sol[:, -1]
+    return float(np.sum(np.clip(var - reduce, 0.0, None) + mean ** 2))
+
+
+# ----------------------------------------------------------------------------- why
+def region(gamma: float, theta: float, width: float, measured_gammas=()) -> str:
+    """Where a setting lies, in words (``width``: the specular lobe's half width, deg)."""
+    phi = -gamma - theta
+    off = abs(phi)
+    if off <= max(0.3 * width, 0.05) and off <= 2.0:
+        return "the mirror direction (specular peak)"
+    if off <= min(2.5 * width, 20.0):
+        return f"the specular lobe's body, {off:.1f} deg from the mirror"
+    if off <= min(8.0 * width, 30.0):
+        return f"the specular lobe's flank, {off:.1f} deg from the mirror"
+    if abs(theta) >= 60.0:
+        return f"grazing reception (theta {theta:g} deg)"
+    if abs(theta) <= 10.0:
+        return "the diffuse lobe near the normal"
+    side = theta * (-gamma) < 0 if gamma else theta < 0
+    return "the diffuse lobe on the source side" if side else "the diffuse lobe on the far side"
+
+
+def coefficient_gain(measured_rows: np.ndarray, row: np.ndarray, names, values,
+                     noise_var: np.ndarray, noise_row: float) -> tuple[str, float]:
+    """The coefficient whose (linearised) standard error a reading with Jacobian ``row``
+    (natural coefficients) shrinks most, and by what fraction, given the readings' Jacobian
+    ``measured_rows`` and noise variances."""
+    scale = np.maximum(np.abs(values), 1e-3)
+    a = measured_rows * scale / np.sqrt(noise_var)[:, None]
+    b = row * scale / np.sqrt(noise_row)
+    info = a.T @ a
+    lam = 1e-6 * max(float(np.trace(info)) / len(names), 1e-300)
+    eye = np.eye(len(names))
+    before = np.diag(np.linalg.pinv(info + lam * eye))
+    after = np.diag(np.linalg.pinv(info + np.outer(b, b) + lam * eye))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        drop = 1.0 - np.sqrt(np.clip(after, 0, None) / np.where(before > 0, before, np.inf))
+    drop = np.nan_to_num(drop)
+    i = int(np.argmax(drop))
+    return names[i], float(drop[i])
+

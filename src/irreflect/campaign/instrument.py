@@ -1,0 +1,185 @@
+"""What a goniometer can do: the settings a campaign may propose.
+
+An :class:`Instrument` lists the angles of incidence the source arm can be set to, the
+receiver's range and step, the smallest separation between two receiver angles that count
+as different readings, how close the receiver may come to the source direction, and the
+cost of changing the angle of incidence (the slow step of most goniometers). Its
+:meth:`~Instrument.settings` are every (gamma, theta) reading it can take; they are both the
+candidates of a proposal and, by default, the range over which the predicted curve must be
+right (the "range the user cares about").
+
+Angles in degrees, the paper's convention: gamma <= 0 on the source side, theta signed, the
+mirror direction at theta = -gamma. Angles of incidence given as magnitudes (all >= 0) are
+read as gamma = -|gamma|, as the tables are.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..errors import IrreflectError
+from ..validation import check_number
+
+#: Largest number of settings a campaign scores at once (the range and the candidates are
+#: thinned to this many, keeping the settings near a mirror direction first): the
+#: proposal's matrices grow with its square (900: about 0.1 s a proposal).
+MAX_SETTINGS = 900
+
+
+@dataclass(frozen=True)
+class Instrument:
+    """A goniometer's limits, in degrees.
+
+    Parameters
+    ----------
+    gammas_deg : sequence of float
+        The angles of incidence the source arm can be set to (<= 0, or magnitudes).
+    theta_min, theta_max : float
+        The receiver's range.
+    theta_step : float
+        The receiver's step: it stands at ``theta_min + k * theta_step``.
+    min_separation : float
+        Two readings at one angle of incidence closer than this are the same reading
+        (default: half the step).
+    source_clearance : float
+        The receiver cannot stand within this many degrees of the source direction
+        ``theta = gamma`` (the arms collide; 0: no limit).
+    gamma_change_cost : float
+        The cost of setting a new angle of incidence, in readings (0: free). A proposal's
+        expected gain is divided by ``1 + cost`` when it needs a new setting.
+    max_gamma_settings : int, optional
+        At most this many distinct angles of incidence over the whole campaign.
+    settings_deg : (n, 2) array, optional
+        An explicit list of (gamma, theta) settings (a dense table used as the
+        instrument); then ``theta_step`` only sets the default separation.
+    """
+
+    gammas_deg: tuple[float, ...]
+    theta_min: float = -85.0
+    theta_max: float = 85.0
+    theta_step: float = 1.0
+    min_separation: float | None = None
+    source_clearance: float = 5.0
+    gamma_change_cost: float = 0.0
+    max_gamma_settings: int | None = None
+    settings_deg: np.ndarray | None = field(default=None, repr=False, compare=False)
+
+    def __post_init__(self):
+        gammas = np.asarray(self.gammas_deg, float).ravel()
+        if gammas.size == 0:
+            raise IrreflectError("the instrument needs at least one angle of incidence "
+                                 "(--gammas G [G ...]); found none")
+        if not np.all(np.isfinite(gammas)) or np.any(np.abs(gammas) >= 90):
+            bad = gammas[~np.isfinite(gammas) | (np.abs(gammas) >= 90)][0]
+            raise IrreflectError(f"angles of incidence must lie strictly between -90 and 90 "
+                                 f"degrees; found {bad:g}")
+        if np.any(gammas > 0) and np.any(gammas < 0):
+            raise IrreflectError(
+                "the angles of incidence mix signs, which is ambiguous: give them all <= 0 "
+                "(the paper's convention) or all as magnitudes >= 0")
+        gammas = np.unique(np.round(-np.abs(gammas), 9) + 0.0)
+        gammas = gammas[np.argsort(np.abs(gammas), kind="stable")]
+        object.__setattr__(self, "gammas_deg", tuple(float(g) for g in gammas))
+        lo = check_number(self.theta_min, "theta_min", low=-90.0, high=90.0, low_open=True,
+                          high_open=True)
+        hi = check_number(self.theta_max, "theta_max", low=-90.0, high=90.0, low_open=True,
+                          high_open=True)
+        if not lo < hi:
+            raise IrreflectError(f"the receiver range needs theta_min < theta_max; found "
+                                 f"{lo:g} and {hi:g}: swap them")
+        step = check_number(self.theta_step, "theta_step", low=0.0, low_open=True)
+        if step > hi - lo:
+            raise IrreflectError(f"the receiver step {step:g} deg is wider than its range "
+                                 f"[{lo:g}, {hi:g}]: give a smaller --theta-step")
+        sep = step / 2.0 if self.min_separation is None else check_number(
+            self.min_separation, "min_separation", low=0.0)
+        clearance = check_number(self.source_clearance, "source_clearance", low=0.0,
+                                 high=90.0)
+        cost = check_number(self.gamma_change_cost, "gamma_change_cost", low=0.0)
+        if self.max_gamma_settings is not None and (
+                isinstance(self.max_gamma_settings, bool)
+                or int(self.max_gamma_settings) != self.max_gamma_settings
+                or self.max_gamma_settings < 1):
+            raise IrreflectError(f"max_gamma_settings must be an integer >= 1; found "
+                                 f"{self.max_gamma_settings!r}")
+        for name, value in (("theta_min", lo), ("theta_max", hi), ("theta_step", step),
+                            ("min_separation", sep), ("source_clearance", clearance),
+                            ("gamma_change_cost", cost)):
+            object.__setattr__(self, name, float(value))
+        if self.settings_deg is not None:
+            s = np.asarray(self.settings_deg, float).reshape(-1, 2)
+            object.__setattr__(self, "settings_deg", s)
+        if not len(self.settings()):
+            raise IrreflectError(
+                f"the instrument can take no reading: every receiver angle in [{lo:g}, "
+                f"{hi:g}] lies within {clearance:g} deg of the source direction at the given "
+                "angles of incidence: widen the range or lower --source-clearance")
+
+    @classmethod
+    def from_table(cls, gamma_deg, theta_deg, **kwargs) -> Instrument:
+        """The instrument that can take exactly the readings of a (dense) table."""
+        g = np.asarray(gamma_deg, float)
+        t = np.asarray(theta_deg, float)
+        diffs = np.concatenate([np.diff(np.unique(t[g == x])) for x in np.unique(g)])
+        step = float(np.min(diffs)) if diffs.size else 1.0
+        kwargs.setdefault("source_clearance", 0.0)
+        kwargs.setdefault("theta_step", step)
+        kwargs.setdefault("min_separation", 1e-6)
+        return cls(gammas_deg=tuple(np.unique(g)), theta_min=float(t.min()),
+                   theta_max=float(t.max()), settings_deg=np.column_stack([g, t]), **kwargs)
+
+    @property
+    def gammas(self) -> np.ndarray:
+        """The angles of incidence, by increasing magnitude."""
+        return np.asarray(self.gammas_deg, float)
+
+    def settings(self) -> np.ndarray:
+        """Every (gamma, theta) reading the instrument can take, ``(n, 2)`` degrees, sorted
+        by |gamma| then theta."""
+        if self.settings_deg is not None:
+            s = self.settings_deg
+            keep = np.abs(s[:, 1] - s[:, 0]) >= self.source_clearance - 1e-9
+            s = s[keep]
+        else:
+            count = int(np.floor((self.theta_max - self.theta_min) / self.theta_step + 1e-9))
+            thetas = np.round(self.theta_min + self.theta_step * np.arange(count + 1), 9)
+            rows = []
+            for g in self.gammas:
+                t = thetas[np.abs(thetas - g) >= self.source_clearance - 1e-9]
+                rows.append(np.column_stack([np.full(t.size, g), t]))
+            s = np.concatenate(rows) if rows else np.zeros((0, 2))
+        order = np.lexsort((s[:, 1], np.abs(s[:, 0])))
+        return s[order] + 0.0
+
+    def describe(self) -> str:
+        """One line: what the instrument can do."""
+        g = ", ".join(f"{x:g}" for x in self.gammas)
+        parts = [f"angles of incidence {g} deg",
+                 f"receiver {self.theta_min:g}..{self.theta_max:g} deg"
+                 + ("" if self.settings_deg is not None else f" every {self.theta_step:g} deg")]
+        if self.source_clearance:
+            parts.append(f"at least {self.source_clearance:g} deg from the source")
+        if self.max_gamma_settings:
+            parts.append(f"at most {self.max_gamma_settings} angle-of-incidence settings")
+        if self.gamma_change_cost:
+            parts.append(f"a new angle of incidence costs {self.gamma_change_cost:g} readings")
+        return "; ".join(parts)
+
+
+def thin_settings(settings: np.ndarray, limit: int = MAX_SETTINGS, keep=None) -> np.ndarray:
+    """Indices of at most ``limit`` of ``settings``: all of ``keep`` (a boolean mask, e.g.
+    the settings near a mirror direction) and an even spread of the others per angle of
+    incidence."""
+    n = len(settings)
+    if n <= limit:
+        return np.arange(n)
+    keep = np.zeros(n, bool) if keep is None else np.asarray(keep, bool)
+    chosen = list(np.flatnonzero(keep)[: limit // 2])
+    rest = np.flatnonzero(~keep)
+    room = limit - len(chosen)
+    if room > 0 and rest.size:
+        pick = np.unique(np.round(np.linspace(0, rest.size - 1, room)).astype(int))
+        chosen += list(rest[pick])
+    return np.sort(np.asarray(chosen, int))

@@ -1,0 +1,394 @@
+"""Replays of measurement campaigns against a dense table used as the instrument.
+
+The dense table answers every reading a strategy asks for: at its own settings (the
+nearest measured setting within a tolerance), or interpolated along theta at a measured
+angle of incidence; optionally with relative power noise and a receiver-angle error
+(uniform, the power read where the receiver really stood), all seeded. Every strategy is
+scored the same way: the model fitted to its readings only, judged by R^2 against *all*
+points of the dense table, after each reading.
+
+Strategies (:data:`STRATEGIES`):
+
+``adaptive``
+    :class:`~.core.Campaign`, one reading at a time (its opening design, then the adaptive
+    rule); the verdict after each reading is recorded.
+``paper``
+    The paper's 12-point protocol (section 4.3) for the table's angles of incidence.
+``glossy``
+    The glossy-aware 12-point protocol designed from the dense table itself (a pilot scan
+    of the same material: more than a new user has).
+``random``
+    Readings drawn at random from the instrument's settings (the median of three seeded
+    draws at each N).
+``hindsight``
+    The best subsets of the dense table that ``irreflect select`` finds for each N, knowing
+    every reading in advance: the bound no campaign reaches without hindsight.
+"""
+
+from __future__ import annotations
+
+import time
+import warnings
+from dataclasses import dataclass, field
+
+import numpy as np
+import pandas as pd
+
+from .. import metrics
+from ..data import Measurements, as_measurements
+from ..errors import FitError, FitWarning, IrreflectError, unknown_name
+from ..fitting import FitResult, fit
+from ..models import get_model
+from ..validation import check_int, check_number, check_seed
+from .core import Campaign
+from .design import DEFAULT_RULE, DesignRule
+from .instrument import Instrument
+
+STRATEGIES = ("adaptive", "paper", "glossy", "random", "hindsight")
+METHODS = ("nearest", "interpolate")
+#: How close to the all-points fit's R^2 a strategy must come (and stay) to count.
+TOLERANCE = 0.01
+
+
+@dataclass(frozen=True)
+class DenseInstrument:
+    """A dense table that answers readings.
+
+    dense : the table
+    method : ``nearest`` (the table's own settings, a reading at most ``tolerance_deg``
+        from one) or ``interpolate`` (every ``theta_step`` along theta at the table's
+        angles of incidence, the power interpolated linearly)
+    noise : relative power noise (1 sigma) added to every reading
+    angle_error_deg : the receiver stands up to this far (uniform) from where it was set
+    seed : seeds the noise and the angle errors
+    """
+
+    dense: Measurements
+    method: str = "nearest"
+    tolerance_deg: float = 0.5
+    theta_step: float | None = None
+    noise: float = 0.0
+    angle_error_deg: float = 0.0
+    seed: int = 0
+
+    def __post_init__(self):
+        object.__setattr__(self, "dense", as_measurements(self.dense))
+        if self.method not in METHODS:
+            raise unknown_name("instrument method", self.method, METHODS)
+        check_number(self.tolerance_deg, "tolerance", low=0.0)
+        check_number(self.noise, "noise", low=0.0)
+        check_number(self.angle_error_deg, "angle error", low=0.0, high=10.0)
+        check_seed(self.seed)
+        if self.theta_step is not None:
+            check_number(self.theta_step, "theta_step", low=0.0, low_open=True)
+        if len(self.dense.gammas) < 1 or self.dense.n_points < 10:
+            raise IrreflectError(
+                f"{self.dense.name}: a dense table to replay campaigns on needs at least 10 "
+                f"points; found {self.dense.n_points}")
+
+    def instrument(self, **kwargs) -> Instrument:
+        """The :class:`Instrument` whose settings this table can answer."""
+        d = self.dense
+        if self.method == "nearest":
+            return Instrument.from_table(d.gamma_deg, d.theta_deg, **kwargs)
+        step = self.theta_step or 1.0
+        rows = []
+        for g in d.gammas:
+            th = d.theta_deg[d.gamma_deg == g]
+            grid = np.arange(np.ceil(th.min() / step) * step, th.max() + 1e-9, step)
+            rows.append(np.column_stack([np.full(grid.size, g), grid]))
+        s = np.concatenate(rows)
+        kwargs.setdefault("source_clearance", 0.0)
+        kwargs.setdefault("min_separation", step / 2.0)
+        return Instrument(gammas_deg=tuple(d.gammas), theta_min=float(s[:, 1].min()),
+                          theta_max=float(s[:, 1].max()), theta_step=step, settings_deg=s,
+                          **kwargs)
+
+    def read(self, gamma_deg, theta_deg, rng: np.random.Generator) -> np.ndarray:
+        """Power at the given settings (degrees), with the instrument's errors."""
+        d = self.dense
+        g = np.atleast_1d(np.asarray(gamma_deg, float))
+        t = np.atleast_1d(np.asarray(theta_deg, float))
+        out = np.empty(g.size)
+        for i, (gi, ti) in enumerate(zip(g, t, strict=True)):
+            sel = np.abs(d.gamma_deg - gi) < 1e-6
+            if not sel.any():
+                raise IrreflectError(f"{d.name} has no angle of incidence {gi:g} deg")
+            th, pw = d.theta_deg[sel], d.power[sel]
+            order = np.argsort(th)
+            th, pw = th[order], pw[order]
+            stand = ti + (rng.uniform(-1, 1) * self.angle_error_deg if self.angle_error_deg
+                          else 0.0)
+            gap = float(np.min(np.abs(th - ti)))
+            if self.method == "nearest" and gap > self.tolerance_deg + 1e-9:
+                raise IrreflectError(
+                    f"({gi:g}, {ti:g}) is {gap:.3g} deg from the nearest reading of {d.name} "
+                    f"at that angle of incidence, more than the tolerance "
+                    f"{self.tolerance_deg:g} deg")
+            if self.method == "nearest" and not self.angle_error_deg:
+                out[i] = pw[int(np.argmin(np.abs(th - ti)))]
+            else:
+                out[i] = float(np.interp(stand, th, pw))
+        if self.noise:
+            out = out * (1.0 + self.noise * rng.standard_normal(out.size))
+        return out
+
+
+@dataclass
+class StrategyCurve:
+    """R^2 against all points of the dense table after each number of readings."""
+
+    name: str
+    r2: dict[int, float]
+    points: pd.DataFrame  # the readings, in the order taken (gamma_deg, theta_deg, power)
+    seconds: float = 0.0
+    note: str = ""
+
+    def reached(self, target: float) -> int | None:
+        """The first N from which R^2 >= ``target`` holds at every later N (None: never)."""
+        first = None
+        for n in sorted(self.r2):
+            if np.isfinite(self.r2[n]) and self.r2[n] >= target:
+                first = n if first is None else first
+            else:
+                first = None
+        return first
+
+    def first(self, target: float) -> int | None:
+        """The first N with R^2 >= ``target`` (it may fall again later)."""
+        return next((n for n in sorted(self.r2) if self.r2[n] >= target), None)
+
+
+@dataclass
+class ReplayResult:
+    """Every strategy's curve on one dense table, and the adaptive campaign's verdicts."""
+
+    dataset: str
+    n_points: int
+    reference_r2: float
+    curves: dict[str, StrategyCurve]
+    verdicts: dict[int, object] = field(default_factory=dict)
+    proposal_seconds: list[float] = field(default_factory=list)
+    settings: dict = field(default_factory=dict)
+
+    @property
+    def target(self) -> float:
+        return self.reference_r2 - TOLERANCE
+
+    @property
+    def stop_n(self) -> int | None:
+        """The first N at which the adaptive campaign's verdict said stop."""
+        return next((n for n in sorted(self.verdicts) if self.verdicts[n].stop), None)
+
+    def table(self) -> pd.DataFrame:
+        """One row per N, one column per strategy: R^2 against all points."""
+        ns = sorted({n for c in self.curves.values() for n in c.r2})
+        data = {"N": ns}
+        for name, c in self.curves.items():
+            data[name] = [c.r2.get(n, np.nan) for n in ns]
+        if self.verdicts:
+            data["adaptive verdict"] = [
+                ("stop" if self.verdicts[n].stop else "continue") if n in self.verdicts
+                else "" for n in ns]
+        return pd.DataFrame(data)
+
+    def summary(self) -> pd.DataFrame:
+        """One row per strategy: N reaching (and keeping) the all-points R^2 - 0.01, R^2
+        at 12 and at the largest N."""
+        rows = []
+        for name, c in self.curves.items():
+            ns = sorted(c.r2)
+            rows.append({
+                "strategy": name,
+                "N reaching all-points R^2 - 0.01 (and keeping it)": c.reached(self.target),
+                "R^2 at N = 12": c.r2.get(12, np.nan),
+                "largest N": ns[-1] if ns else np.nan,
+                "R^2 at the largest N": c.r2[ns[-1]] if ns else np.nan,
+                "note": c.note,
+            })
+        return pd.DataFrame(rows)
+
+    def to_dict(self) -> dict:
+        return {
+            "dataset": self.dataset, "n_points": self.n_points,
+            "reference_r2": self.reference_r2, "target": self.target,
+            "stop_n": self.stop_n,
+            "curves": {k: {"r2": {str(n): v for n, v in c.r2.items()},
+                           "reached": c.reached(self.target), "seconds": c.seconds,
+                           "note": c.note} for k, c in self.curves.items()},
+            "verdicts": {str(n): v.to_dict() for n, v in self.verdicts.items()},
+            "proposal_seconds": self.proposal_seconds,
+            "settings": self.settings,
+        }
+
+
+def _score(model, meas: Measurements, dense: Measurements, seed: int) -> float:
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", FitWarning)
+            res = fit(meas, model, seed=seed)
+    except (FitError, IrreflectError):
+        return float("nan")
+    with np.errstate(all="ignore"):
+        return float(metrics.r2(dense.power, res.predict(dense.gamma_deg, dense.theta_deg)))
+
+
+def replay_adaptive(source: DenseInstrument, n_max: int = 25, *, model="two-lobe",
+                    seed: int = 0, rule: DesignRule = DEFAULT_RULE, batch: int = 1,
+                    instrument_options: dict | None = None, progress=None):
+    """The adaptive campaign against the dense table, ``batch`` readings per proposal,
+    up to ``n_max`` readings: (curve, verdicts per N, seconds per proposal)."""
+    dense = source.dense
+    rng = np.random.default_rng([check_seed(seed), 11])
+    tool = source.instrument(**(instrument_options or {}))
+    campaign = Campaign(tool, model=model, seed=seed, rule=rule, name=dense.name)
+    r2, verdicts, times = {}, {}, []
+    t0 = time.perf_counter()
+    while campaign.n_measured < n_max:
+        start = time.perf_counter()
+        proposal = campaign.propose(min(batch, n_max - campaign.n_measured))
+        times.append(time.perf_counter() - start)
+        if not len(proposal):
+            break
+        power = source.read(proposal["gamma_deg"], proposal["theta_deg"], rng)
+        campaign.add(proposal[["gamma_deg", "theta_deg"]].assign(power=power))
+        n = campaign.n_measured
+        v = campaign.verdict()
+        verdicts[n] = v
+        if campaign.fit is not None:
+            r2[n] = campaign.r2_against(dense)
+        if progress:
+            progress(n)
+    meas = campaign.measurements
+    points = meas.to_frame() if meas is not None else pd.DataFrame()
+    return (StrategyCurve("adaptive", r2, points, time.perf_counter() - t0), verdicts, times)
+
+
+def replay_protocol(source: DenseInstrument, kind: str, *, model="two-lobe",
+                    seed: int = 0) -> StrategyCurve:
+    """The paper's (``kind="paper"``) or the glossy-aware (``"glossy"``) 12-point protocol,
+    its power read from the dense table (interpolated along theta where the table did not
+    measure its angles): R^2 at N = 12."""
+    from ..protocol.evaluate import glossy_protocol_for, paper_protocol_for, sample_protocol
+
+    dense = source.dense
+    t0 = time.perf_counter()
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", FitWarning)
+            proto = (paper_protocol_for(dense) if kind == "paper"
+                     else glossy_protocol_for(dense, seed=seed))
+        meas, frame = sample_protocol(proto, dense, tolerance_deg=max(5.0,
+                                                                    source.tolerance_deg))
+    except (IrreflectError, FitError) as exc:
+        return StrategyCurve(kind, {}, pd.DataFrame(), time.perf_counter() - t0,
+                             note=f"not available: {' '.join(str(exc).split())[:160]}")
+    r2 = _score(model, meas, dense, seed)
+    gammas = "/".join(f"{g:g}" for g in proto.settings.get("gammas_deg", proto.gammas))
+    return StrategyCurve(kind, {meas.n_points: r2}, meas.to_frame(),
+                         time.perf_counter() - t0, note=f"gammas {gammas} deg")
+
+
+def replay_random(source: DenseInstrument, n_max: int = 25, *, model="two-lobe", seed: int = 0,
+                  n_draws: int = 3) -> StrategyCurve:
+    """Readings at random settings of the instrument, one at a time; the median R^2 over
+    ``n_draws`` seeded draws at each N."""
+    dense = source.dense
+    model_obj = get_model(model)
+    tool = source.instrument()
+    settings = tool.settings()
+    t0 = time.perf_counter()
+    per_n: dict[int, list[float]] = {}
+    first = None
+    for draw in range(n_draws):
+        rng = np.random.default_rng([check_seed(seed), 29, draw])
+        order = rng.permutation(len(settings))[:n_max]
+        s = settings[order]
+        power = source.read(s[:, 0], s[:, 1], rng)
+        if first is None:
+            first = pd.DataFrame({"gamma_deg": s[:, 0], "theta_deg": s[:, 1], "power": power})
+        for n in range(model_obj.n_params + 1, len(order) + 1):
+            meas = Measurements(gamma_deg=s[:n, 0], theta_deg=s[:n, 1], power=power[:n],
+                                name=dense.name)
+            per_n.setdefault(n, []).append(_score(model_obj, meas, dense, seed))
+    r2 = {n: float(np.nanmedian(v)) if np.isfinite(v).any() else float("nan")
+          for n, v in per_n.items()}
+    return StrategyCurve("random", r2, first if first is not None else pd.DataFrame(),
+                         time.perf_counter() - t0, note=f"median of {n_draws} seeded draws")
+
+
+def replay_hindsight(source: DenseInstrument, n_max: int = 25, *, model="two-lobe",
+                     seed: int = 0, generations: int = 100, pop_size: int = 100,
+                     progress: bool = False) -> StrategyCurve:
+    """``select``'s best subsets of the dense table for each N up to ``n_max`` (every
+    reading known in advance): R^2 against all points; N without a subset of its own take
+    the best of fewer points (a subset of fewer readings is at hand)."""
+    from ..selection import run_selection
+
+    dense = source.dense
+    t0 = time.perf_counter()
+    n_top = min(n_max, dense.n_points)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", FitWarning)
+        sel = run_selection(dense, model, max_points=n_top, generations=generations,
+                            pop_size=pop_size, seed=seed, enough=False, progress=progress)
+    front = dict(zip(sel.front["n_points"].astype(int), sel.front["r2"].astype(float),
+                     strict=True))
+    r2, best = {}, -np.inf
+    for n in range(min(front) if front else n_top + 1, n_top + 1):
+        best = max(best, front.get(n, -np.inf))
+        r2[n] = float(best)
+    mask = sel.best_mask(12) if sel.best_mask(12) is not None else sel.best_mask(sel.knee_n)
+    pts = dense.subset(mask).to_frame() if mask is not None else pd.DataFrame()
+    return StrategyCurve("hindsight", r2, pts, time.perf_counter() - t0,
+                         note=f"select's best subsets, nsga2 {generations} generations x "
+                              f"{pop_size}")
+
+
+def replay(dense, strategies=STRATEGIES, *, n_max: int = 25, model="two-lobe", seed: int = 0,
+           method: str = "nearest", tolerance_deg: float = 0.5, theta_step=None,
+           noise: float = 0.0, angle_error_deg: float = 0.0, generations: int = 100,
+           rule: DesignRule = DEFAULT_RULE, reference: FitResult | None = None,
+           progress=None) -> ReplayResult:
+    """Replay every strategy of ``strategies`` against ``dense`` (a path, DataFrame or
+    Measurements) used as the instrument; see the module docstring.
+
+    n_max : readings of the adaptive campaign, random readings and hindsight subsets
+    method, tolerance_deg, theta_step, noise, angle_error_deg : see :class:`DenseInstrument`
+    generations : NSGA-II generations of the hindsight bound (population 100)
+    reference : the model's fit on all points of ``dense`` (fitted when not given)
+    progress : callable(str), told what runs
+    """
+    dense = as_measurements(dense)
+    n_max = check_int(n_max, "n_max", 9)
+    for s in strategies:
+        if s not in STRATEGIES:
+            raise unknown_name("campaign strategy", s, STRATEGIES)
+    model_obj = get_model(model)
+    source = DenseInstrument(dense, method=method, tolerance_deg=tolerance_deg,
+                             theta_step=theta_step, noise=noise,
+                             angle_error_deg=angle_error_deg, seed=seed)
+    if reference is None or reference.model != model_obj.name:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", FitWarning)
+            reference = fit(dense, model_obj, seed=seed)
+    say = progress or (lambda text: None)
+    curves, verdicts, times = {}, {}, []
+    for s in strategies:
+        say(f"{dense.name}: {s}")
+        if s == "adaptive":
+            curves[s], verdicts, times = replay_adaptive(source, n_max, model=model_obj,
+                                                         seed=seed, rule=rule)
+        elif s in ("paper", "glossy"):
+            curves[s] = replay_protocol(source, s, model=model_obj, seed=seed)
+        elif s == "random":
+            curves[s] = replay_random(source, n_max, model=model_obj, seed=seed)
+        else:
+            curves[s] = replay_hindsight(source, n_max, model=model_obj, seed=seed,
+                                         generations=generations)
+    return ReplayResult(
+        dataset=dense.name, n_points=dense.n_points, reference_r2=float(reference.r2),
+        curves=curves, verdicts=verdicts, proposal_seconds=times,
+        settings={"n_max": n_max, "model": model_obj.name, "seed": seed, "method": method,
+                  "tolerance_deg": tolerance_deg, "theta_step": theta_step, "noise": noise,
+                  "angle_error_deg": angle_error_deg, "generations": generations})

@@ -1,0 +1,320 @@
+"""``irreflect next`` and ``irreflect campaign``: the adaptive measurement campaign.
+
+``next MEASURED.csv`` proposes the next readings on a new material (an opening design when
+MEASURED.csv holds only its header) and says whether to stop; ``campaign DENSE.csv``
+replays campaigns (adaptive, the paper's protocol, the glossy-aware one, random readings,
+``select``'s hindsight subsets) against a dense table used as the instrument.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import sys
+from pathlib import Path
+
+from ..errors import IrreflectError
+from .options import (
+    ANGLE,
+    NON_NEGATIVE,
+    POSITIVE,
+    POSITIVE_INT,
+    SEED,
+    add_model_argument,
+    int_at_least,
+    print_json,
+)
+
+#: Default angles of incidence of ``next`` (a goniometer set every 10 deg).
+DEFAULT_GAMMAS = (-10.0, -20.0, -30.0, -40.0, -50.0, -60.0, -70.0)
+#: The most readings ``next`` reads, and the largest dense table ``campaign`` replays on.
+NEXT_MAX_READINGS = 2000
+CAMPAIGN_MAX_POINTS = 20000
+
+
+def _same_file(a, b) -> bool:
+    try:
+        return Path(a).exists() and Path(b).exists() and os.path.samefile(a, b)
+    except OSError:
+        return False
+
+
+def _instrument(args):
+    from ..campaign import Instrument
+
+    gammas = tuple(args.gammas) if args.gammas else DEFAULT_GAMMAS
+    return Instrument(gammas_deg=gammas, theta_min=args.theta_min, theta_max=args.theta_max,
+                      theta_step=args.theta_step, min_separation=args.min_separation,
+                      source_clearance=args.source_clearance,
+                      gamma_change_cost=args.gamma_cost,
+                      max_gamma_settings=args.gamma_settings)
+
+
+def _cmd_next(args) -> int:
+    from .._atomic import claim_output
+
+    if args.out:
+        if Path(args.out).suffix.lower() != ".csv":
+            raise IrreflectError(f"--out {args.out}: expected a file name ending in .csv; "
+                                 f"found '{Path(args.out).suffix or 'no suffix'}'")
+        if _same_file(args.out, args.measured) or (
+                Path(args.out).absolute() == Path(args.measured).absolute()):
+            raise IrreflectError(f"--out {args.out} is the input table: write the proposals "
+                                 "to another file (irreflect never replaces an input)")
+    claim = claim_output(args.out, "file", "--out") if args.out else contextlib.nullcontext()
+    with claim:
+        return _next(args)
+
+
+def _next(args) -> int:
+    from .._atomic import atomic_path
+    from ..campaign import Campaign
+    from ..campaign.io import read_readings
+    from ..models import get_model
+
+    model = get_model(args.model)
+    tool = _instrument(args)
+    readings = read_readings(args.measured, average_duplicates=args.average_duplicates,
+                             max_rows=NEXT_MAX_READINGS)
+    name = Path(args.measured).stem
+    campaign = Campaign(tool, readings, model=model.name, seed=args.seed, name=name)
+    proposals = campaign.propose(args.n)
+    verdict = campaign.verdict()
+    if args.out:
+        table = proposals[["gamma_deg", "theta_deg", "why"]].copy()
+        table["new_gamma"] = proposals["new_gamma"].map({True: "yes", False: "no"})
+        table["power"] = ""
+        with atomic_path(args.out) as tmp:
+            table.to_csv(tmp, index=False, float_format="%.6g")
+    if args.json:
+        doc = {"dataset": name, "n_measured": campaign.n_measured,
+               "instrument": tool.describe(), "model": model.name, "seed": args.seed,
+               "proposals": [{"gamma_deg": float(r.gamma_deg), "theta_deg": float(r.theta_deg),
+                              "why": r.why, "new_gamma": bool(r.new_gamma),
+                              "gain": float(r.gain)} for r in proposals.itertuples()],
+               "verdict": verdict.to_dict(), "out": args.out}
+        print_json(doc)
+        return 0
+    if not args.gammas:
+        print(f"irreflect: note: instrument angles of incidence "
+              f"{', '.join(f'{g:g}' for g in DEFAULT_GAMMAS)} deg (the default; give "
+              "--gammas to change)", file=sys.stderr)
+    print(f"{name}: {campaign.n_measured} readings so far; instrument: {tool.describe()}")
+    if len(proposals):
+        print(f"next {len(proposals)} setting(s), in measurement order:")
+        for r in proposals.itertuples():
+            print(f"  gamma {r.gamma_deg:7.4g}  theta {r.theta_deg:8.4g}   {r.why}")
+    else:
+        print("no setting left to propose: every setting of the instrument is measured")
+    print(f"verdict: {verdict.text}")
+    if args.out:
+        what = "setting" if len(proposals) == 1 else "settings"
+        print(f"wrote {args.out} ({len(proposals)} {what}: fill in power and add the rows "
+              f"to {Path(args.measured).name})")
+    return 0
+
+
+def _cmd_campaign(args) -> int:
+    from .._atomic import claim_output
+
+    claim = claim_output(args.out, "dir", "--out") if args.out else contextlib.nullcontext()
+    with claim:
+        return _campaign(args)
+
+
+def _campaign(args) -> int:
+    from .._progress import progress
+    from ..campaign import STRATEGIES, replay
+    from ..data import read_measurements
+    from ..errors import unknown_name
+    from ..models import get_model
+    from ..validation import check_points_budget
+
+    model = get_model(args.model)
+    strategies = [s.strip() for s in args.strategies.split(",") if s.strip()]
+    if not strategies:
+        raise IrreflectError("--strategies: expected a comma-separated list of "
+                             f"{', '.join(STRATEGIES)}; found none")
+    for s in strategies:
+        if s not in STRATEGIES:
+            raise unknown_name("campaign strategy", s, STRATEGIES)
+    dense = read_measurements(args.data, average_duplicates=args.average_duplicates)
+    check_points_budget(dense.n_points, "campaign", str(args.data))
+    if dense.n_points > CAMPAIGN_MAX_POINTS:
+        raise IrreflectError(
+            f"{args.data}: {dense.n_points} measured points is more than 'campaign' replays "
+            f"on ({CAMPAIGN_MAX_POINTS}): subsample the table")
+    if args.method == "interpolate" and args.theta_step is None:
+        args.theta_step = 1.0
+    if args.method == "nearest" and args.theta_step is not None:
+        raise IrreflectError("--theta-step applies to --method interpolate (the nearest "
+                             "method reads at the table's own angles)")
+    bar = progress(len(strategies), desc=f"campaign {dense.name}", unit="strategies",
+                   enabled=not args.json)
+    try:
+        def told(text):
+            bar.set_postfix_str(text.split(": ", 1)[-1])
+            bar.update(1)
+
+        result = replay(dense, strategies, n_max=args.n_max, model=model.name, seed=args.seed,
+                        method=args.method, tolerance_deg=args.tolerance,
+                        theta_step=args.theta_step, noise=args.noise,
+                        angle_error_deg=args.angle_error, generations=args.generations,
+                        progress=told)
+    finally:
+        bar.close()
+    if args.out:
+        _write_campaign(result, args.out)
+    if args.json:
+        print_json(result.to_dict())
+        return 0
+    print(format_replay(result))
+    if args.out:
+        print(f"wrote {args.out}: r2_by_n.csv, summary.csv, replay.json, campaign.png")
+    return 0
+
+
+def format_replay(result) -> str:
+    """The printed replay: the strategies' N to reach the target, then R^2 per N."""
+    lines = [f"{result.dataset}: {result.n_points} points; all-points fit R^2 "
+             f"{result.reference_r2:.4f}, target R^2 >= {result.target:.4f} (within 0.01)"]
+    width = max(len(k) for k in result.curves) if result.curves else 8
+    for name, c in result.curves.items():
+        reached = c.reached(result.target)
+        at12 = c.r2.get(12)
+        text = (f"reaches the target at N = {reached} and keeps it" if reached is not None
+                else "never keeps the target" if c.r2 else "not available")
+        extra = "" if at12 is None else f"; R^2 {at12:.4f} at N = 12"
+        note = f"  ({c.note})" if c.note else ""
+        lines.append(f"  {name:<{width}}  {text}{extra}{note}")
+    if result.verdicts:
+        stop = result.stop_n
+        lines.append("  adaptive verdict: " + (f"stop at N = {stop}" if stop else
+                                                 "never said stop")
+                     + (f", R^2 {result.curves['adaptive'].r2.get(stop, float('nan')):.4f} "
+                        "there" if stop else ""))
+    if result.proposal_seconds:
+        t = sorted(result.proposal_seconds)
+        lines.append(f"  adaptive: {len(t)} proposals, median {t[len(t) // 2]:.2f} s, "
+                     f"slowest {t[-1]:.2f} s; whole campaign "
+                     f"{result.curves['adaptive'].seconds:.1f} s")
+    table = result.table()
+    cols = [c for c in table.columns if c != "N"]
+    lines.append("R^2 against all points by number of readings N:")
+    lines.append("  " + f"{'N':>3}  " + "  ".join(f"{c:>10}" for c in cols))
+    for row in table.itertuples(index=False):
+        cells = []
+        for v in row[1:]:
+            if isinstance(v, str):
+                cells.append(f"{v:>10}")
+            elif v != v:
+                cells.append(f"{'':>10}")
+            else:
+                cells.append(f"{v:>10.4f}" if v > -1e4 else f"{v:>10.3g}")
+        lines.append("  " + f"{int(row[0]):>3}  " + "  ".join(cells))
+    return "\n".join(lines)
+
+
+def _write_campaign(result, out) -> None:
+    from .._atomic import atomic_directory
+    from .._jsonio import dumps
+    from ..plots.campaign import plot_campaign
+    from ..plots.common import save_figure
+
+    with atomic_directory(out, "--out", "campaign") as tmp:
+        tmp = Path(tmp)
+        result.table().to_csv(tmp / "r2_by_n.csv", index=False)
+        result.summary().to_csv(tmp / "summary.csv", index=False)
+        (tmp / "replay.json").write_text(dumps(result.to_dict()))
+        save_figure(plot_campaign(result).figure, tmp / "campaign.png")
+
+
+def _add_instrument_options(p) -> None:
+    p.add_argument("--gammas", nargs="+", type=ANGLE, metavar="G",
+                   help="the angles of incidence the instrument can set, degrees (<= 0, or "
+                        "magnitudes; default -10 -20 ... -70)")
+    p.add_argument("--theta-min", type=ANGLE, default=-80.0,
+                   help="lowest receiver angle (deg, default -80)")
+    p.add_argument("--theta-max", type=ANGLE, default=80.0,
+                   help="highest receiver angle (deg, default 80)")
+    p.add_argument("--theta-step", type=POSITIVE, default=1.0,
+                   help="the receiver's step: it stands at theta-min + k * step (deg, "
+                        "default 1)")
+    p.add_argument("--min-separation", type=NON_NEGATIVE, default=None,
+                   help="two readings of one angle of incidence closer than this are the "
+                        "same (deg, default half the step)")
+    p.add_argument("--source-clearance", type=NON_NEGATIVE, default=5.0,
+                   help="the receiver cannot stand within this many degrees of the source "
+                        "direction theta = gamma (deg, default 5)")
+    p.add_argument("--gamma-settings", type=POSITIVE_INT, default=None, metavar="K",
+                   help="use at most K angles of incidence in the whole campaign (default: "
+                        "any)")
+    p.add_argument("--gamma-cost", type=NON_NEGATIVE, default=0.0, metavar="C",
+                   help="cost of setting a new angle of incidence, in readings: a reading "
+                        "that needs one counts 1 + C (default 0)")
+
+
+def register(sub) -> None:
+    p = sub.add_parser(
+        "next", help="the next readings to take on a new material, and whether to stop",
+        description="Propose the next K measurement settings (gamma, theta) for a material "
+                    "from the readings taken so far (MEASURED.csv may hold only the header "
+                    "gamma_deg,theta_deg,power: then the opening design), each with why, "
+                    "and print the verdict: stop or continue. Angles in degrees; gamma "
+                    "negative on the source side.")
+    p.add_argument("measured", metavar="MEASURED.csv",
+                   help="readings so far: gamma_deg, theta_deg, power[, sigma] (CSV or "
+                        "Parquet; a header alone: nothing measured yet)")
+    p.add_argument("--n", type=POSITIVE_INT, default=1, metavar="K",
+                   help="how many settings to propose (default 1)")
+    p.add_argument("--out", metavar="NEXT.csv",
+                   help="write the settings here (gamma_deg, theta_deg, why, new_gamma and "
+                        "an empty power column; default: print only)")
+    _add_instrument_options(p)
+    add_model_argument(p)
+    p.add_argument("--seed", type=SEED, default=0, help="seed of the fits (default 0)")
+    p.add_argument("--average-duplicates", action="store_true",
+                   help="average the power of repeated (gamma, theta) readings instead of "
+                        "refusing them")
+    p.add_argument("--json", action="store_true", help="one JSON object on stdout")
+    p.set_defaults(handler=_cmd_next)
+
+    p = sub.add_parser(
+        "campaign", help="replay measurement campaigns against a dense table",
+        description="Replay measurement campaigns against a dense table used as the "
+                    "instrument: the adaptive campaign (irreflect next), the paper's "
+                    "12-point protocol, the glossy-aware protocol, random readings and "
+                    "select's best subsets (hindsight). Prints R^2 against all points by "
+                    "number of readings for each, and the N from which each stays within "
+                    "0.01 of the all-points fit.")
+    p.add_argument("data", metavar="DENSE.csv",
+                   help="dense measurement table (CSV or Parquet) used as the instrument")
+    p.add_argument("--strategies", default="adaptive,paper,glossy,random,hindsight",
+                   help="comma-separated strategies (default adaptive,paper,glossy,random,"
+                        "hindsight)")
+    p.add_argument("--n-max", type=int_at_least(9), default=25,
+                   help="readings per replayed campaign (default 25)")
+    p.add_argument("--method", choices=("nearest", "interpolate"), default="nearest",
+                   help="a reading is the table's own point (nearest, within --tolerance) "
+                        "or interpolated along theta every --theta-step (default nearest)")
+    p.add_argument("--theta-step", type=POSITIVE, default=None,
+                   help="with --method interpolate: the receiver step (deg, default 1)")
+    p.add_argument("--tolerance", type=NON_NEGATIVE, default=0.5,
+                   help="largest gap (deg) a reading may be from the table's nearest point "
+                        "(default 0.5)")
+    p.add_argument("--noise", type=NON_NEGATIVE, default=0.0,
+                   help="relative power noise added to every reading, 1 sigma (default 0)")
+    p.add_argument("--angle-error", type=NON_NEGATIVE, default=0.0,
+                   help="receiver angle error, uniform +- this many degrees (default 0)")
+    p.add_argument("--generations", type=POSITIVE_INT, default=100,
+                   help="NSGA-II generations of the hindsight subsets (default 100)")
+    add_model_argument(p)
+    p.add_argument("--seed", type=SEED, default=0,
+                   help="seed of the fits, the noise and the random readings (default 0)")
+    p.add_argument("--average-duplicates", action="store_true",
+                   help="average the power of duplicated (gamma, theta) rows of DENSE")
+    p.add_argument("--out", metavar="DIR",
+                   help="write r2_by_n.csv, summary.csv, replay.json and campaign.png here "
+                        "(default: print only)")
+    p.add_argument("--json", action="store_true", help="one JSON object on stdout")
+    p.set_defaults(handler=_cmd_campaign)

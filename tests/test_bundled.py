@@ -1,0 +1,108 @@
+"""What ships with irreflect is reachable by name from any folder, and listed with its
+origin and path by ``irreflect datasets``."""
+
+from __future__ import annotations
+
+import contextlib
+import io
+import json
+from pathlib import Path
+
+import pytest
+
+from irreflect.cli import main
+from irreflect.data import (
+    BUNDLED,
+    bundled_dir,
+    bundled_files,
+    find_bundled,
+    read_measurements,
+    resolve_scene,
+)
+from irreflect.errors import DataError
+from irreflect.paper import PAPER_TABLES, paper_tables_dir
+
+
+def _run(argv):
+    out, err = io.StringIO(), io.StringIO()
+    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+        code = main(argv)
+    return code, out.getvalue(), err.getvalue()
+
+
+def test_bundled_tables_and_scenes_by_name_from_another_folder(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    for name in BUNDLED:
+        for text in (name, f"{name}.csv"):
+            meas = read_measurements(text)
+            assert meas.name == name and meas.n_points in (102, 132)
+    assert resolve_scene("office") == bundled_dir() / "rooms" / "office.toml"
+    assert resolve_scene("office.toml").exists()
+    assert find_bundled("granite") is None and find_bundled("sub/terrazzo") is None
+
+
+def test_a_file_of_that_name_wins_over_the_bundled_one(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    Path("terrazzo.csv").write_text("gamma_deg,theta_deg,power\n" + "".join(
+        f"-{g},{t},{1 + 0.01 * t}\n" for g in (20, 40) for t in range(-40, 50, 10)))
+    assert read_measurements("terrazzo.csv").n_points == 18  # the local file, not 132 points
+    assert read_measurements("terrazzo").n_points == 132  # no file named 'terrazzo' here
+
+
+def test_a_missing_path_that_names_a_bundled_file_says_to_use_the_name(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    code, out, err = _run(["fit", "datasets/terrazzo.csv"])
+    assert code == 2 and out == "" and err.count("\n") == 1
+    assert "datasets/terrazzo.csv: no such file" in err
+    assert "reachable by name: write 'terrazzo'" in err
+    with pytest.raises(DataError, match="or the name of a bundled dataset: terrazzo"):
+        read_measurements("granite.csv")
+    code, _, err = _run(["room", "rooms/office.toml", "--out", str(tmp_path / "r")])
+    assert code == 2 and "write 'office' instead" in err and not (tmp_path / "r").exists()
+
+
+def test_fit_by_name_gives_the_same_fit_as_by_path(tmp_path, monkeypatch):
+    code, by_path, _ = _run(["fit", str(bundled_dir() / "plasterboard.csv"), "--json"])
+    monkeypatch.chdir(tmp_path)
+    code2, by_name, _ = _run(["fit", "plasterboard", "--json"])
+    assert code == code2 == 0
+    a, b = json.loads(by_path), json.loads(by_name)
+    assert a["params"] == b["params"] and a["r2"] == b["r2"]
+
+
+def test_datasets_lists_every_shipped_file_with_origin_and_path():
+    files = bundled_files()
+    names = {f.name for f in files}
+    assert set(BUNDLED) | {"office"} <= names
+    assert {f"{p.removesuffix('.csv')}" for p in PAPER_TABLES} <= names
+    for f in files:
+        assert f.path.exists(), f
+        assert f.origin
+    code, out, err = _run(["datasets"])
+    assert code == 0 and err == ""
+    for f in files:
+        assert f.name in out and str(f.path) in out
+    assert "reconstruction of the paper's terrazzo, not a measurement" in out
+    assert "(132 points)" in out and "Sensors 17(4), 847 (2017)" in out
+    code, out, _ = _run(["datasets", "--path", "table5_methods_r2"])
+    assert code == 0 and Path(out.strip()) == paper_tables_dir() / "table5_methods_r2.csv"
+    code, out, _ = _run(["datasets", "--json"])
+    doc = json.loads(out)
+    assert {d["name"]: d["points"] for d in doc["bundled"] if d["kind"] == "table"} == {
+        "terrazzo": 132, "plasterboard": 102, "foam_board": 132}
+    code, _, err = _run(["datasets", "--path", "terazzo"])
+    assert code == 2 and "Did you mean 'terrazzo'?" in err
+
+
+def test_the_kernel_cache_is_inspected_and_a_warm_one_not_rebuilt():
+    from irreflect._compiled import ensure_compiled, kernel_cache
+
+    first = io.StringIO()
+    seconds = ensure_compiled(first)  # `make venv` warmed it: normally nothing to build
+    if seconds is not None:  # a cold cache (the kernel's source changed): built, announced
+        assert "compiling the fitting kernel" in first.getvalue()
+    folder, cold = kernel_cache()
+    assert folder is not None and folder.is_dir() and cold is False
+    assert any(folder.glob("finish_kernel.tl_finish-*.nbi"))  # numba's index of the entry point
+    again = io.StringIO()
+    assert ensure_compiled(again) is None and again.getvalue() == ""
