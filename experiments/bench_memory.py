@@ -10,6 +10,12 @@ command is either expected to finish within the documented budget or to refuse u
     .venv/bin/python experiments/bench_memory.py                  # 20,000 and 200,000 rows
     .venv/bin/python experiments/bench_memory.py --rows 20000     # one size
     .venv/bin/python experiments/bench_memory.py --commands fit select
+    .venv/bin/python experiments/bench_memory.py --room           # room runs: estimate vs RSS
+
+``--room`` runs ``irreflect room`` at settings whose memory estimate (the one its budget
+check uses, :func:`irreflect.room.checks.check_room_budget`) is a few hundred MB to a GB
+and prints the estimate beside the measured peak RSS above the loaded interpreter: the
+estimate must not be below what the run takes.
 
 A watchdog kills a command whose process tree exceeds ``--kill-gb`` (default 8) of RSS or
 runs longer than ``--timeout`` seconds (default 600), so that a regression cannot take the
@@ -121,6 +127,62 @@ def run(argv: list[str], kill_bytes: float, timeout: float):
     return int(code), seconds, int(maxrss_kb) / 1024, last
 
 
+ROOM_CASES = [
+    # (label, scene, extra options)
+    ("Monte Carlo, office, 1 bounce, --dt 0.001", "office",
+     ["--rays", "300", "--bounces", "1", "--dt", "0.001"]),
+    ("Monte Carlo, office, 3 bounces, --dt 0.005", "office",
+     ["--rays", "2000", "--bounces", "3", "--dt", "0.005"]),
+    ("recursive, office (3 receivers), 4 bounces, --cell 0.25 --dt 0.02", "office3",
+     ["--method", "recursive", "--bounces", "4", "--cell", "0.25", "--dt", "0.02"]),
+]
+
+
+def room_estimate(scene_path: Path, extra: list[str]) -> float:
+    """The memory (bytes) the budget check counts for ``irreflect room`` with ``extra``."""
+    from irreflect.room import load_scene
+    from irreflect.room.checks import memory_estimate, resolve_settings
+
+    scene = load_scene(scene_path)
+    opts = dict(zip(extra[::2], extra[1::2], strict=True))
+    keys = {"--rays": ("rays", int), "--bounces": ("bounces", int), "--dt":
+            ("time_resolution_ns", float), "--cell": ("cell_m", float),
+            "--method": ("method", str)}
+    settings = resolve_settings(scene, {keys[k][0]: keys[k][1](v) for k, v in opts.items()})
+    return memory_estimate(scene, settings)
+
+
+def run_room(args) -> None:
+    from irreflect.room import load_scene  # noqa: F401  (warms the import for the estimate)
+
+    print(f"{'case':<62} {'estimate':>10} {'peak RSS':>10} {'above interpreter':>18}  exit")
+    base = None
+    with tempfile.TemporaryDirectory(prefix="bench_memory_room_") as tmp:
+        folder = Path(tmp)
+        rooms = Path(__file__).resolve().parents[1] / "datasets" / "rooms"
+        for f in rooms.iterdir():
+            (folder / f.name).write_bytes(f.read_bytes())
+        text = (rooms / "office.toml").read_text()
+        cut = text.index("[[receiver_grid]]")
+        (folder / "office3.toml").write_text(text[:cut] + text[text.index("[simulation]"):])
+        exe = [sys.executable, "-m", "irreflect.cli"]
+        # the interpreter with the room simulation loaded: a run of no reflection
+        code, _, base, _ = run(exe + ["room", str(folder / "office3.toml"), "--out",
+                                      str(folder / "base"), "--quiet", "--no-figures",
+                                      "--bounces", "0"], args.kill_gb * 2**30, args.timeout)
+        for label, scene, extra in ROOM_CASES:
+            path = folder / f"{scene}.toml"
+            estimate = room_estimate(path, extra)
+            argv = exe + ["room", str(path), "--out", str(folder / "out"), "--quiet",
+                          "--no-figures", *extra]
+            code, seconds, peak_mb, last = run(argv, args.kill_gb * 2**30, args.timeout)
+            print(f"{label:<62} {estimate / 2**20:>7.0f} MB {peak_mb:>7.0f} MB "
+                  f"{peak_mb - base:>15.0f} MB  {code} ({seconds:.0f} s) {last[:60]}",
+                  flush=True)
+    print(f"(the interpreter with the room simulation loaded, a run of 0 bounces: "
+          f"{base:.0f} MB)")
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--rows", type=int, nargs="+", default=[20_000, 200_000])
@@ -128,7 +190,12 @@ def main() -> None:
                         help="command names to run (default: all; e.g. fit select)")
     parser.add_argument("--kill-gb", type=float, default=8.0)
     parser.add_argument("--timeout", type=float, default=600.0)
+    parser.add_argument("--room", action="store_true",
+                        help="room runs: the budget's memory estimate beside the peak RSS")
     args = parser.parse_args()
+    if args.room:
+        run_room(args)
+        return
     print(f"pid {os.getpid()}, {os.cpu_count()} CPUs, "
           f"{psutil.virtual_memory().total / 2**30:.0f} GB RAM")
     print(f"{'rows':>8}  {'command':<24} {'exit':>16} {'seconds':>8} {'peak RSS':>10}  outcome")

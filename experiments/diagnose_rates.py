@@ -245,7 +245,7 @@ def summary(df: pd.DataFrame) -> pd.DataFrame:
 
 
 def main(argv=None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(description=" ".join(__doc__.split("\n\n")[0].split()))
     parser.add_argument("--seeds", default="0:300", help="seed range A:B (default 0:300)")
     parser.add_argument("--no-saturate", action="store_true",
                         help="keep the specular share below 0.95 on every table")

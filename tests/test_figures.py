@@ -397,7 +397,7 @@ def test_selection_shows_the_ideal_point_over_the_knee_and_the_threshold_in_its_
     assert ideal.get_marker() != knee.get_marker() and knee.get_markerfacecolor() == "none"
     assert ideal.get_markersize() < knee.get_markersize()
     threshold = next(lb for lb in lines if lb.startswith("enough-points threshold"))
-    value = float(re.search(r"1 - R\$\^2\$ = ([0-9.e+-]+)", threshold).group(1))
+    value = float(re.search(r"1 - R² = ([0-9.e+-]+)", threshold).group(1))
     assert value == pytest.approx(res.enough.threshold_one_minus_r2(meas.power), rel=1e-3)
     assert "RMSE" in threshold and "1 - R" in ax.get_ylabel()
     plt.close("all")

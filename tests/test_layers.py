@@ -21,7 +21,8 @@ PACKAGE = Path(irreflect.__file__).parent
 
 #: layer -> module prefixes, lowest first
 LAYERS = [
-    ("data and models", ["errors", "validation", "_atomic", "_progress", "_jsonio", "paper",
+    ("data and models", ["errors", "validation", "schema", "_atomic", "_inputs", "_progress",
+                         "_jsonio", "paper",
                          "data", "metrics", "models"]),
     ("fitting", ["fitting", "_compiled", "synthetic", "verdict"]),
     ("capabilities", ["diagnose", "protocol", "compare", "selection", "campaign", "room"]),

@@ -95,6 +95,7 @@ def _small_checkpoint(tmp_path, seed=4, generations=3):
     ("bad_tag", "no format tag"),
     ("bad_version", "format version 1"),
     ("bad_shape", "do not fit together"),
+    ("edited_scores", "modified after it was written"),
     ("object_array", "pickle"),
 ])
 def test_foreign_or_corrupt_checkpoints_are_one_line_errors(tmp_path, damage, message):
@@ -118,8 +119,13 @@ def test_foreign_or_corrupt_checkpoints_are_one_line_errors(tmp_path, damage, me
             meta["format"] = "something-else"
         elif damage == "bad_version":
             meta["version"] = 1
-        else:
+        elif damage == "edited_scores":  # the fingerprint kept, the scores changed
+            arrays["cache_scores"] = arrays["cache_scores"] * 0.5
+        else:  # a shape that does not fit, with a digest that matches it
+            from irreflect.selection.checkpoint import _digest
+
             arrays["pop_F"] = arrays["pop_F"][:-1]
+            meta["digest"] = _digest(arrays, meta)
         arrays["meta"] = np.array(json.dumps(meta))
         with open(ckpt, "wb") as fh:
             np.savez(fh, **arrays)
@@ -167,8 +173,9 @@ def table_10_001(tmp_path_factory):
 @pytest.mark.parametrize("command", ["diagnose", "reproduce", "select", "protocol"])
 def test_tables_over_a_command_budget_are_refused_up_front(table_10_001, tmp_path, command,
                                                            monkeypatch):
-    # the computation must not start: any fit would raise here
-    monkeypatch.setattr("irreflect.fitting.fit", _must_not_run)
+    # the computation must not start: any fit would raise here (the search itself is
+    # patched: a module imported meanwhile that binds `fit` would keep a patched `fit`)
+    monkeypatch.setattr("irreflect.fitting._fit_search", _must_not_run)
     argv = {
         "diagnose": ["diagnose", str(table_10_001)],
         "reproduce": ["reproduce", "--data-dir", str(table_10_001.parent), "--out",

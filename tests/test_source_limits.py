@@ -55,7 +55,6 @@ KNOWN = {
     "room/kernels.py:first_bounce": "issue 26: room kernels (rooms work)",
     "room/kernels.py:_basis": "issue 26: room kernels (rooms work)",
     "room/kernels.py:_intersect": "issue 26: room kernels (rooms work)",
-    "room/scene.py:scene_from_dict": "issue 26: scene validation as a schema (reliability work)",
     "selection/run.py:run_selection": "issue 26: the selection's run",
 }
 

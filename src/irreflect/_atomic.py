@@ -15,6 +15,14 @@ is refused: irreflect never deletes files it did not write.
 Locks are ``fcntl.flock`` locks on a hidden file beside the path
 (``.<name>.irreflect-lock``): the system releases them when a process dies, so a killed run
 never blocks the next one, and the lock file is removed when the run ends.
+
+An output path that is a symlink is followed only within the folder it lies in (``latest ->
+run3``); its target is what is written, checked and locked, so two runs through a link and
+its target are locked out of each other. A link out of that folder, a device, a FIFO or
+anything else that is not a regular file (or a folder, for folder outputs) is refused
+(:func:`irreflect.validation.check_output_path`). While a run holds its outputs, every
+input it reads is checked against them (:func:`check_not_output`): an output never replaces
+an input of the same run.
 """
 
 from __future__ import annotations
@@ -26,6 +34,7 @@ import json
 import os
 import re
 import shutil
+import stat
 import tempfile
 import threading
 import time
@@ -53,7 +62,7 @@ _held_lock = threading.Lock()
 
 
 def _key(path: Path) -> Path:
-    return Path(os.path.abspath(path))
+    return Path(os.path.realpath(path))
 
 
 class _Claim:
@@ -78,7 +87,7 @@ class _Claim:
         if fcntl is None:  # pragma: no cover
             return
         for _attempt in range(20):
-            fd = os.open(self.lock_path, os.O_RDWR | os.O_CREAT, 0o644)
+            fd = self._open_lock()
             try:
                 fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
             except OSError:
@@ -103,6 +112,23 @@ class _Claim:
             os.close(fd)
         raise IrreflectError(f"{self.option} {self.path}: could not take the lock "  # pragma: no cover
                              f"{self.lock_path}: try again")
+
+    def _open_lock(self) -> int:
+        """The lock file, never through a link (a link planted there must not make the
+        run truncate its target) and only a regular file."""
+        try:
+            fd = os.open(self.lock_path, os.O_RDWR | os.O_CREAT | getattr(os, "O_NOFOLLOW", 0)
+                         | getattr(os, "O_NONBLOCK", 0), 0o644)
+        except OSError as exc:
+            raise IrreflectError(f"{self.option} {self.path}: cannot take the lock "
+                                 f"{self.lock_path} ({exc.strerror or exc}; a link or a "
+                                 "special file there?): remove it or choose another path"
+                                 ) from None
+        if not stat.S_ISREG(os.fstat(fd).st_mode):
+            os.close(fd)
+            raise IrreflectError(f"{self.option} {self.path}: {self.lock_path} is not a "
+                                 "regular file: remove it or choose another path")
+        return fd
 
     def release(self) -> None:
         if self.fd is not None:
@@ -158,13 +184,16 @@ def claim_output(path, kind: str = "dir", option: str = "--out", suffixes=None):
     claim the caller holds. Yields the path.
     """
 
+    if path is None or not isinstance(path, str | os.PathLike) or str(path).strip() == "":
+        check_output_path(path, "file" if kind == "file" else "dir", option)  # one line
     path = Path(path)
     key = _key(path)
     with _held_lock:
         claim = _held.get(key)
         new = claim is None
         if new:
-            check_output_path(path, "file" if kind == "file" else "dir", option, suffixes)
+            path = check_output_path(path, "file" if kind == "file" else "dir", option,
+                                     suffixes)
             if kind == "dir":
                 _check_owned(path, option)
             claim = _Claim(path, kind, option)
@@ -177,7 +206,7 @@ def claim_output(path, kind: str = "dir", option: str = "--out", suffixes=None):
             _held[key] = claim
         claim.depth += 1
     try:
-        yield path
+        yield claim.path
     finally:
         with _held_lock:
             claim.depth -= 1
@@ -204,6 +233,38 @@ def _check_owned(path: Path, option: str) -> None:
         )
 
 
+def check_not_output(path, expected: str = "an input", reading: str | None = None) -> None:
+    """Refuse to read ``path`` as an input when an output this process holds would replace
+    it: the same file (also through a link or a hard link), or a file of an output folder
+    that the previous run wrote (its manifest lists it). ``reading``: the option of a claim
+    that may be read back (``--checkpoint``: a run resumes from its own checkpoint)."""
+    path = Path(path)
+    real = _key(path)
+    try:
+        st = os.stat(path)
+    except OSError:
+        st = None
+    with _held_lock:
+        claims = list(_held.values())
+    for claim in claims:
+        if reading is not None and claim.option == reading:
+            continue
+        target = _key(claim.path)
+        if claim.kind == "file":
+            same = real == target
+            if not same and st is not None:
+                with contextlib.suppress(OSError):
+                    same = os.path.samestat(st, os.stat(target))
+        else:
+            same = (claim.kind == "dir" and target in real.parents
+                    and real.relative_to(target).parts[0] in _manifest_entries(target))
+        if same:
+            raise IrreflectError(
+                f"{path}: is read as {expected} and would be replaced by this run's output "
+                f"{claim.option} {claim.path}: write the output elsewhere (an output never "
+                "replaces an input of the same run)")
+
+
 # ----------------------------------------------------------------------------- files
 def _permissions(path: Path) -> None:
     """``mkstemp``/``mkdtemp`` make owner-only entries; give the usual ones (umask)."""
@@ -217,8 +278,7 @@ def atomic_path(path, option: str = "output"):
     """Yield a temporary path beside ``path``; move it into place only if the block
     succeeds. The path is claimed (locked) for the duration unless the caller holds it."""
 
-    path = Path(path)
-    with claim_output(path, "file", option):
+    with claim_output(path, "file", option) as path:
         fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.{_TMP}-", dir=path.parent)
         os.close(fd)
         tmp = Path(tmp)
@@ -238,8 +298,7 @@ def atomic_directory(path, option: str = "--out", command: str = "irreflect"):
     whole (with a manifest of what was written), keeping only entries of the old folder
     that no irreflect run wrote. On failure nothing at ``path`` changes."""
 
-    path = Path(path)
-    with claim_output(path, "dir", option):
+    with claim_output(path, "dir", option) as path:
         tmp = Path(tempfile.mkdtemp(prefix=f".{path.name}.{_TMP}-", dir=path.parent))
         try:
             yield tmp
@@ -279,11 +338,17 @@ def _swap_in(new: Path, path: Path) -> None:
 
 
 def _manifest_entries(path: Path) -> set[str]:
-    """Top-level names of the entries a previous run recorded in its manifest."""
+    """Top-level names of the entries a previous run recorded in its manifest (read only
+    when it is a regular file of reasonable size: a FIFO planted there must not hang)."""
+    manifest = path / MANIFEST
     try:
-        doc = json.loads((path / MANIFEST).read_text())
+        st = os.lstat(manifest)
+        if not stat.S_ISREG(st.st_mode) or st.st_size > 16 * 2**20:
+            return set()
+        with open(manifest, "rb") as fh:
+            doc = json.loads(fh.read(16 * 2**20).decode("utf-8"))
         return {str(f).split("/")[0] for f in doc.get("files", [])}
-    except (OSError, ValueError, AttributeError):
+    except (OSError, ValueError, AttributeError, TypeError, RecursionError):
         return set()
 
 

@@ -22,7 +22,8 @@ import numpy as np
 import pandas as pd
 
 from ._atomic import atomic_path
-from .errors import DataError, unknown_name
+from ._inputs import read_bytes
+from .errors import DataError, IrreflectError, unknown_name
 from .paper import real_data_dir as _real
 from .validation import MAX_FILE_BYTES, MAX_TABLE_ROWS, check_real_array, short_list
 
@@ -63,6 +64,17 @@ class Measurements:
         if len(set(sizes.values())) > 1:
             _fail(f"{source}: gamma_deg, theta_deg, power (and sigma) need one value per "
                   f"point; found lengths {', '.join(f'{k} {n}' for k, n in sizes.items())}")
+        if not isinstance(self.name, str):
+            _fail(f"Measurements: name must be text; found {self.name!r}")
+        if sizes["power"] == 0:
+            _fail(f"{source}: no points: expected at least one measurement")
+        for k in ("gamma_deg", "theta_deg"):
+            out = np.abs(arrays[k]) >= 90
+            if out.any():
+                _fail(f"{source}: {k} must lie strictly between -90 and 90 degrees (from the "
+                      f"surface normal); found {arrays[k][out][0]:g}")
+        if "sigma" in arrays:  # sigma <= 0 is the fit's to refuse (a table may carry it)
+            check_sigma(arrays["power"], arrays["sigma"], source, positive=False)
         for k, v in arrays.items():
             object.__setattr__(self, k, v)
 
@@ -98,6 +110,34 @@ class Measurements:
 
 def _fail(msg: str):
     raise DataError(msg)
+
+
+#: sigma must lie within these multiples of the largest |power|: weights 1/sigma^2 beyond
+#: them over- or underflow in the fit.
+SIGMA_RANGE = (1e-12, 1e12)
+
+
+def check_sigma(power: np.ndarray, sigma: np.ndarray, source: str, rows=None,
+                positive: bool = True) -> None:
+    """sigma > 0 (with ``positive``; else the fit refuses it) and within
+    :data:`SIGMA_RANGE` of the largest |power| (one line naming the row)."""
+    rows = rows or (lambda i: f"point {i + 1}")
+    if positive and np.any(sigma <= 0):
+        i = int(np.nonzero(sigma <= 0)[0][0])
+        _fail(f"{source}: sigma must be > 0 (fits are weighted by 1/sigma^2); found "
+              f"{sigma[i]:g} in {rows(i)}: give that point's uncertainty, or drop sigma to fit "
+              "unweighted")
+    peak = float(np.max(np.abs(power)))
+    if peak == 0:
+        return
+    low, high = SIGMA_RANGE[0] * peak, SIGMA_RANGE[1] * peak
+    bad = ((sigma < low) & (sigma > 0)) | (sigma > high)
+    if bad.any():
+        i = int(np.nonzero(bad)[0][0])
+        side = "below 1e-12 of" if sigma[i] < low else "above 1e12 times"
+        _fail(f"{source}: sigma {sigma[i]:g} in {rows(i)} is {side} the largest power "
+              f"({peak:g}): weights 1/sigma^2 that {'large' if sigma[i] < low else 'small'} "
+              "cannot be fitted; give a realistic uncertainty or delete the sigma column")
 
 
 # ----------------------------------------------------------------------------- row labels
@@ -255,11 +295,8 @@ def validate_table(df: pd.DataFrame, source: str = "table", *,
         _fail(f"{source}: the largest |power| is {peak:g}, outside what the fitter handles "
               f"({POWER_RANGE[0]:g} to {POWER_RANGE[1]:g}): rescale the column (any consistent "
               "unit works, e.g. divide by its maximum)")
-    if sigma is not None and np.min(sigma) < 1e-12 * peak:
-        i = int(np.argmin(sigma))
-        _fail(f"{source}: sigma {sigma[i]:g} in {rows(i)} is below 1e-12 of the largest power "
-              f"({peak:g}): weights 1/sigma^2 that large cannot be fitted; give a realistic "
-              "uncertainty or delete the sigma column")
+    if sigma is not None:
+        check_sigma(power, sigma, source, rows)
     positive, negative = np.any(gamma > 0), np.any(gamma < 0)
     if positive and negative:
         _fail(
@@ -351,27 +388,41 @@ def read_measurements(path, *, average_duplicates: bool = False) -> Measurements
     if path.is_dir():
         _fail(f"{path}: is a folder; expected a CSV or Parquet measurement table")
     suffix = path.suffix.lower()
+    if path.exists() and suffix not in _SUFFIXES:
+        _fail(f"{path}: unknown file type '{suffix}': expected .csv or .parquet")
+    try:
+        raw = read_bytes(path, str(path), _EXPECTED, MAX_FILE_BYTES, _SUBSAMPLE)
+    except DataError:
+        raise
+    except IrreflectError as exc:  # the reader's one line, as the table's DataError
+        raise DataError(str(exc)) from None
     if suffix not in _SUFFIXES:
         _fail(f"{path}: unknown file type '{suffix}': expected .csv or .parquet")
-    size = path.stat().st_size
-    if size > MAX_FILE_BYTES:
-        _fail(f"{path}: {size / 2**20:.0f} MB is more than irreflect reads "
-              f"({MAX_FILE_BYTES // 2**20} MB): subsample the table")
     if suffix in (".parquet", ".pq"):
-        df = _read_parquet(path)
+        df = _read_parquet(path, raw)
         lines = None
     else:
-        df, lines = _read_csv(path)
+        df, lines = _read_csv(path, raw)
     return validate_table(df, str(path), average_duplicates=average_duplicates, name=path.stem,
                           _row_lines=lines)
 
 
-def _read_parquet(path: Path) -> pd.DataFrame:
+_EXPECTED = "a CSV or Parquet measurement table"
+_SUBSAMPLE = "subsample the table"
+#: Parquet columns are decoded into at most this many bytes in all (the file itself is at
+#: most MAX_FILE_BYTES; compressed, repetitive text can decode to gigabytes).
+MAX_DECODED_BYTES = 512 * 2**20
+
+
+def _read_parquet(path: Path, raw: bytes) -> pd.DataFrame:
+    """The columns irreflect reads from a Parquet file, decoded within
+    :data:`MAX_DECODED_BYTES` (counted on what is decoded, batch by batch, not on what
+    the file declares)."""
     import pyarrow as pa
     import pyarrow.parquet as pq
 
     try:
-        pf = pq.ParquetFile(path)
+        pf = pq.ParquetFile(pa.BufferReader(raw))
         names = pf.schema_arrow.names
         dup = sorted({n for n in names if names.count(n) > 1})
         if dup:
@@ -380,13 +431,58 @@ def _read_parquet(path: Path) -> pd.DataFrame:
         if pf.metadata.num_rows > MAX_TABLE_ROWS:
             _fail(f"{path}: {pf.metadata.num_rows} rows is more than irreflect reads "
                   f"({MAX_TABLE_ROWS}): subsample the table")
-        return pf.read().to_pandas()
-    except (OSError, pa.ArrowException, ValueError, TypeError) as exc:
+        wanted = [n for n in names if str(n).strip() in REQUIRED + OPTIONAL]
+        if len(wanted) < len(REQUIRED):  # the column check names what is missing
+            return pd.DataFrame(columns=names)
+        text = [n for n in wanted if _is_text(pf.schema_arrow.field(n).type)]
+        if text:  # text read as dictionaries: counted value by value before decoding
+            pf = pq.ParquetFile(pa.BufferReader(raw), read_dictionary=text)
+        batches, decoded = [], 0
+        for batch in pf.iter_batches(batch_size=4096, columns=wanted):
+            decoded += _decoded_size(batch)
+            if decoded > MAX_DECODED_BYTES:
+                _fail(f"{path}: its columns decode to more than "
+                      f"{MAX_DECODED_BYTES // 2**20} MB (long or many text values), more "
+                      "than irreflect reads: keep numbers in gamma_deg, theta_deg, power "
+                      "and sigma, and a short material name")
+            batches.append(batch)
+        table = (pa.Table.from_batches(batches) if batches else
+                 pf.schema_arrow.empty_table().select(wanted))
+        for i, column in enumerate(table.columns):
+            if pa.types.is_dictionary(column.type):
+                table = table.set_column(i, table.field(i).name,
+                                         column.cast(column.type.value_type))
+        return table.to_pandas()
+    except (OSError, pa.ArrowException, ValueError, TypeError, IndexError) as exc:
         if isinstance(exc, DataError):
             raise
         first = (str(exc).strip().splitlines() or [type(exc).__name__])[0]
         _fail(f"{path}: cannot be read as Parquet ({first}): write it again with pandas or "
               "pyarrow, or export the table as CSV")
+
+
+def _is_text(kind) -> bool:
+    import pyarrow as pa
+
+    return (pa.types.is_string(kind) or pa.types.is_large_string(kind)
+            or pa.types.is_binary(kind) or pa.types.is_large_binary(kind))
+
+
+def _decoded_size(batch) -> int:
+    """Bytes a record batch takes once decoded to pandas: dictionary-encoded text counted
+    value by value (its dictionary is shared, its expansion is not)."""
+    import pyarrow as pa
+    import pyarrow.compute as pc
+
+    total = 0
+    for column in batch.columns:
+        if pa.types.is_dictionary(column.type):
+            lengths = pc.binary_length(column.dictionary.cast(pa.large_binary()))
+            per_row = pc.take(lengths, column.indices)
+            total += int(pc.sum(per_row).as_py() or 0) + 64 * len(column)
+        else:
+            total += column.nbytes
+    return total
 
 
 def _decode(raw: bytes, path: Path) -> str:
@@ -432,10 +528,10 @@ def _looks_utf16(head: bytes) -> bool:
     return False
 
 
-def _read_csv(path: Path) -> tuple[pd.DataFrame, list[int]]:
+def _read_csv(path: Path, raw: bytes) -> tuple[pd.DataFrame, list[int]]:
     """Parse a CSV strictly: every row has as many fields as the header (pandas would take
     an extra leading field as the index and shift every column silently)."""
-    text = _decode(path.read_bytes(), path)
+    text = _decode(raw, path)
     numbers, kept = [], []
     for no, line in enumerate(text.splitlines(), 1):
         cut = line.find("#")
@@ -644,15 +740,17 @@ def real_datasets() -> dict[str, Path]:
 def header_only(path: Path) -> bool:
     """True when the table at ``path`` has column names and no rows (the names are checked):
     a campaign's first table (`irreflect next`)."""
-    if path.suffix.lower() in (".parquet", ".pq"):
-        df = _read_parquet(path)
+    if path.suffix.lower() in (".parquet", ".pq"):  # read within the table's limit
+        df = _read_parquet(path, read_bytes(path, str(path), "a CSV or Parquet measurement "
+                                            "table", MAX_FILE_BYTES))
         if len(df):
             return False
         _check_columns(df, str(path))
         return True
     if path.stat().st_size > 65536:
         return False
-    text = _decode(path.read_bytes(), path)
+    text = _decode(read_bytes(path, str(path), "a CSV or Parquet measurement table", 65536),
+                   path)
     lines = [line.split("#", 1)[0] for line in text.splitlines()]
     lines = [line for line in lines if line.strip()]
     if len(lines) != 1:

@@ -18,8 +18,15 @@ class DataError(IrreflectError):
     """A measurement table that cannot be used as it is."""
 
 
-class SceneError(IrreflectError):
-    """A room scene or material file that cannot be used as it is."""
+class SchemaError(IrreflectError):
+    """A document (scene, material file, checkpoint metadata, protocol) that does not follow
+    its declared schema (:mod:`irreflect.schema`): one line naming the file, the key, what
+    was expected, what was found and the fix."""
+
+
+class SceneError(SchemaError):
+    """A room scene that cannot be simulated: its file, a key, a material it names, or a
+    rule that ties keys together (a receiver at an emitter, a box filling the room)."""
 
 
 class UnknownNameError(IrreflectError):
@@ -40,7 +47,7 @@ def unknown_name(kind: str, name: str, valid) -> UnknownNameError:
     """Build the one-line error for a registry look-up that failed."""
 
     valid = sorted(valid)
-    close = difflib.get_close_matches(name, valid, n=1)
+    close = difflib.get_close_matches(name, valid, n=1) if isinstance(name, str) else []
     hint = f" Did you mean '{close[0]}'?" if close else ""
     return UnknownNameError(
         f"unknown {kind} '{name}': expected one of {', '.join(valid)}.{hint}"

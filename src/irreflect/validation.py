@@ -12,7 +12,9 @@ from __future__ import annotations
 import math
 import numbers
 import os
+import stat
 import tempfile
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -72,6 +74,63 @@ def check_number(value, name: str, *, low=None, high=None, low_open=False,
         want = "a finite number" + (" " + " and ".join(parts) if parts else "")
         raise IrreflectError(f"{name} must be {want}{unit}; found {value!r}")
     return x
+
+
+def check_bool(value, name: str) -> bool:
+    """True or False (numpy's too), not a string or a number: ``use_sigma="no"`` must not
+    mean True."""
+    if isinstance(value, bool | np.bool_):
+        return bool(value)
+    raise IrreflectError(f"{name} must be True or False; found {value!r}")
+
+
+#: Integer settings of :func:`irreflect.fitting.fit` and ``fit_subsets``: (smallest,
+#: largest; None: the setting may be None for its default). The largest values bound the
+#: work of one fit.
+_FIT_COUNTS = {
+    "n_random_starts": (0, 10_000, False), "n_screen": (1, 1_000_000, True),
+    "n_keep": (0, 10_000, True), "n_data_starts": (0, 10_000, True),
+    "max_iter": (1, 100_000, False), "max_rounds": (0, 1_000, True),
+    "n_hops": (0, 10_000, True),
+}
+_FIT_FLAGS = ("use_sigma", "polish", "retry", "data_starts", "scan", "exhaustive")
+
+
+def check_fit_options(**options) -> None:
+    """The keyword settings of :func:`irreflect.fitting.fit` and ``fit_subsets``: counts
+    are integers in their range (:data:`_FIT_COUNTS`), flags are booleans, ``ftol`` a
+    number in (0, 1), ``seed`` a seed; one line naming the setting otherwise."""
+    for name, value in options.items():
+        if name in _FIT_COUNTS:
+            low, high, optional = _FIT_COUNTS[name]
+            if value is None and optional:
+                continue
+            if isinstance(value, bool) or not isinstance(value, numbers.Integral) or \
+                    not low <= value <= high:
+                raise IrreflectError(f"{name} must be an integer from {low} to {high}"
+                                     f"{' (or None for the default)' if optional else ''}; "
+                                     f"found {value!r}")
+        elif name in _FIT_FLAGS:
+            check_bool(value, name)
+        elif name == "ftol":
+            check_number(value, "ftol", low=0.0, high=1.0, low_open=True, high_open=True)
+        elif name == "seed":
+            check_seed(value)
+
+
+def check_starts(starts, n_nonlinear: int, name: str = "extra_starts") -> np.ndarray | None:
+    """Starting points of the nonlinear coordinates: None, or finite numbers of shape
+    (S, ``n_nonlinear``) (a single start may be 1-D)."""
+    if starts is None:
+        return None
+    arr = check_real_array(starts, name, ndim=None)
+    if arr.ndim == 1:
+        arr = arr[None]
+    if arr.ndim != 2 or arr.shape[1] != n_nonlinear or arr.shape[0] > 100_000:
+        raise IrreflectError(f"{name} must be an array of shape (starts, {n_nonlinear}) (the "
+                             f"model's nonlinear coordinates, at most 100000 starts); found "
+                             f"shape {np.shape(starts)}")
+    return arr
 
 
 # ----------------------------------------------------------------------------- arrays
@@ -200,14 +259,36 @@ _OTHERWISE = {
 }
 
 
+def point_budget(command: str) -> int | None:
+    """Measured points ``command`` accepts: :data:`POINT_BUDGET`, or the environment
+    variable ``IRREFLECT_BUDGET_POINTS_<COMMAND>`` when set."""
+    limit = POINT_BUDGET.get(command)
+    if limit is None:
+        return None
+    env = "IRREFLECT_BUDGET_POINTS_" + command.upper().replace("-", "_")
+    text = os.environ.get(env)
+    if text is None or not text.strip():
+        return limit
+    try:
+        value = int(float(text))
+    except (ValueError, OverflowError):
+        value = 0
+    if value < 1:
+        raise BudgetError(f"{env}={text!r}: expected a number of points >= 1 (default {limit})")
+    return value
+
+
 def check_points_budget(n_points: int, command: str, source: str = "") -> None:
     """Refuse up front a table too large for ``command`` (see :data:`POINT_BUDGET`)."""
-    limit = POINT_BUDGET.get(command)
+    limit = point_budget(command)
+    note_memory_option("the table's size: subsample the table")
     if limit is not None and n_points > limit:
         where = f"{source}: " if source else ""
+        env = "IRREFLECT_BUDGET_POINTS_" + command.upper().replace("-", "_")
         raise DataError(
             f"{where}{n_points} measured points is more than '{command}' handles within its "
-            f"memory budget ({limit} points): {_SUBSAMPLE}{_OTHERWISE.get(command, '')}"
+            f"memory budget ({limit} points): {_SUBSAMPLE}{_OTHERWISE.get(command, '')} "
+            f"(or raise the budget: {env}=N)"
         )
 
 
@@ -231,15 +312,169 @@ def check_selection_budget(n_points: int, max_points: int | None, source: str = 
         )
 
 
+# ----------------------------------------------------------------------------- work budgets
+class BudgetError(IrreflectError):
+    """A run larger than its budget, refused before it starts (one line naming the option
+    and the largest value allowed on this machine)."""
+
+
+@dataclass(frozen=True)
+class Budget:
+    """A limit on the size of one kind of work, checked before the work starts.
+
+    ``limit`` is the default; the environment variable :attr:`env` (``IRREFLECT_BUDGET_`` +
+    the name in capitals) replaces it, for a machine that can do more (or should do less).
+    """
+
+    name: str
+    limit: float
+    unit: str
+    what: str
+
+    @property
+    def env(self) -> str:
+        return "IRREFLECT_BUDGET_" + self.name.upper().replace("-", "_")
+
+    def value(self) -> float:
+        text = os.environ.get(self.env)
+        if text is None or not text.strip():
+            return float(self.limit)
+        try:
+            value = float(text)
+        except ValueError:
+            value = math.nan
+        if not (math.isfinite(value) and value > 0):
+            raise BudgetError(f"{self.env}={text!r}: expected a number > 0 ({self.what}, in "
+                              f"{self.unit}; default {self.limit:g})")
+        return value
+
+
+def physical_memory() -> int:
+    """Bytes of memory of this machine (8 GiB when the system does not say)."""
+    try:
+        return int(os.sysconf("SC_PAGE_SIZE")) * int(os.sysconf("SC_PHYS_PAGES"))
+    except (ValueError, OSError, AttributeError):  # pragma: no cover - not POSIX
+        return 8 * 2**30
+
+
+#: The budgets of every command (README, "Bad input"; docs/bad-input.md). Work budgets
+#: bound the time a run takes (a few tens of minutes on one core at most), the memory
+#: budget what one run may allocate (a quarter of this machine's memory, at most 8 GiB).
+BUDGETS = {b.name: b for b in (
+    Budget("memory", min(physical_memory() / 4, 8 * 2**30) / 2**30, "GB",
+           "memory one run may take"),
+    Budget("ray-bounces", 1e9, "ray-bounces",
+           "Monte Carlo rays x emitter-receiver pairs x bounces of one room run"),
+    Budget("cell-pairs", 3e11, "cell pairs",
+           "cells^2 x (emitter-receiver pairs + emitters x (bounces - 2)) of one recursive "
+           "room run, a pair counted 30 times when a material is not Lambertian"),
+    Budget("receivers", 40_000, "receivers", "receivers of one scene (grids included)"),
+    Budget("subset-fits", 5e6, "subset fits",
+           "generations x population of one selection run"),
+    Budget("trials", 500_000, "trials", "Monte Carlo trials of evaluate-protocol"),
+)}
+
+
+def budget(name: str) -> float:
+    """The value in force of budget ``name`` (bytes for ``memory``)."""
+    b = BUDGETS[name]
+    return b.value() * (2**30 if name == "memory" else 1)
+
+
+#: What to lower when a command runs out of memory (the CLI's message), set by the last
+#: budget check of the run.
+_memory_hint: list[str] = []
+
+
+def memory_hint(default: str) -> str:
+    """The option that sized the run that ran out of memory (the last budget checked)."""
+    return _memory_hint[-1] if _memory_hint else default
+
+
+def note_memory_option(text: str) -> None:
+    """Remember which option(s) size this run's memory, for an out-of-memory message. A
+    command-line option (``--dt``) is not replaced by the library's name of the same
+    setting checked again further down (``time_resolution_ns``); the CLI clears the note
+    when a command starts (:func:`forget_memory_options`)."""
+    if _memory_hint and _memory_hint[-1].startswith("--") and not text.startswith("--"):
+        return
+    _memory_hint[:] = [text]
+
+
+def forget_memory_options() -> None:
+    _memory_hint.clear()
+
+
+def _amount(x: float) -> str:
+    return f"{x:,.0f}" if abs(x) < 1e7 else f"{x:.3g}"
+
+
+def check_budget(name: str, amount: float, *, option: str, value, largest, detail: str,
+                 direction: str = "or less", alternative: str = "") -> None:
+    """Refuse work of ``amount`` (in the budget's unit) above budget ``name``: one line
+    naming ``option`` (given ``value``), what the amount is made of (``detail``) and the
+    ``largest`` value the option may take here (``direction``: "or less", "or more")."""
+    limit = budget(name)
+    b = BUDGETS[name]
+    if name == "memory":
+        note_memory_option(f"{option} ({largest} {direction} with {detail})")
+    if amount <= limit:
+        return
+    unit = b.unit
+    shown = (f"{amount / 2**30:.3g} GB" if name == "memory" else f"{_amount(amount)} {unit}")
+    allowed = (f"{limit / 2**30:.3g} GB" if name == "memory" else f"{_amount(limit)}")
+    way = (f"pass {option} {largest} {direction}" if largest is not None
+           else f"lower {option}")
+    raise BudgetError(
+        f"{option} {value}: {shown} ({detail}) is more than this machine's budget of "
+        f"{allowed} ({b.what}): {way}{alternative} (or raise the budget: {b.env}=N)")
+
+
+def check_search_budget(pop_size: int, generations: int, n_points: int, *,
+                        pop_option: str = "pop_size",
+                        gen_option: str = "generations") -> None:
+    """A subset search of ``generations x pop_size`` fits on ``n_points`` points within the
+    ``subset-fits`` budget (time) and the memory budget (every scored subset is cached)."""
+    fits = int(pop_size) * int(generations)
+    limit = budget("subset-fits")
+    if pop_size * 2 > limit or generations < 2:  # the population alone is too large
+        check_budget("subset-fits", fits, option=pop_option, value=pop_size,
+                     largest=max(2, int(limit // generations)),
+                     detail=f"{pop_option} x {gen_option} {generations}",
+                     alternative=f" or fewer {gen_option}")
+    check_budget("subset-fits", fits, option=gen_option, value=generations,
+                 largest=max(1, int(limit // pop_size)),
+                 detail=f"{gen_option} x {pop_option} {pop_size}",
+                 alternative=f" or a smaller {pop_option}")
+    per_fit = (n_points + 7) // 8 + 160  # the cache entry of a scored subset
+    check_budget("memory", fits * per_fit + pop_size * n_points * 16, option=gen_option,
+                 value=generations,
+                 largest=max(1, int(budget("memory") // (per_fit * pop_size))),
+                 detail=f"{fits:,} cached subsets of {n_points} points",
+                 alternative=f" or a smaller {pop_option}")
+
+
+def check_trials_budget(n_trials: int, option: str = "n_trials") -> None:
+    """A Monte Carlo of ``n_trials`` fits within the ``trials`` budget."""
+    check_budget("trials", n_trials, option=option, value=n_trials,
+                 largest=int(budget("trials")), detail="one fit per trial")
+
+
 # ----------------------------------------------------------------------------- output paths
 def check_output_path(path, kind: str = "file", option: str = "--out",
                       suffixes: tuple[str, ...] | None = None) -> Path:
     """Check before any work that ``path`` can be written as a ``kind`` (``file`` or
     ``dir``): not an existing folder where a file is expected (or a file where a folder is),
-    inside a folder that exists or can be created, and writable."""
-    if path is None or str(path).strip() == "":
-        raise IrreflectError(f"{option} must name a {'folder' if kind == 'dir' else 'file'}")
-    path = Path(path)
+    not a device, FIFO or anything else that is not a regular file or folder, inside a folder
+    that exists or can be created, and writable. A symlink is followed only within the
+    folder it lies in; the path to write (the link's target, else ``path``) is returned."""
+    noun = "folder" if kind == "dir" else "file"
+    if path is None or not isinstance(path, str | os.PathLike) or str(path).strip() == "":
+        raise IrreflectError(f"{option} must name a {noun}; found "
+                             f"{'an empty name' if isinstance(path, str) else repr(path)}")
+    if "\0" in str(path):
+        raise IrreflectError(f"{option} {path!r}: a path cannot hold a NUL character")
+    path = _follow_link(Path(path), noun, option)
     if kind == "file":
         if path.is_dir():
             raise IrreflectError(f"{option} {path}: is a folder; expected a file name"
@@ -247,7 +482,8 @@ def check_output_path(path, kind: str = "file", option: str = "--out",
         if suffixes and path.suffix.lower() not in suffixes:
             raise IrreflectError(f"{option} {path}: expected a file name ending in "
                                  f"{', '.join(suffixes)}; found '{path.suffix or 'no suffix'}'")
-    elif path.exists() and not path.is_dir():
+    _check_special(path, noun, option)
+    if kind != "file" and path.exists() and not path.is_dir():
         raise IrreflectError(f"{option} {path}: is a file; expected a folder (give a new or "
                              "existing folder name)")
     parent = path.absolute().parent
@@ -261,6 +497,40 @@ def check_output_path(path, kind: str = "file", option: str = "--out",
         raise IrreflectError(f"{option} {path}: cannot write in '{ancestor}' (permission "
                              "denied or read-only): choose a folder you can write to")
     return path
+
+
+def _follow_link(path: Path, noun: str, option: str) -> Path:
+    """``path``, or the target of the symlink ``path`` when it lies within the link's own
+    folder; a link out of it is refused (an output never follows a link elsewhere)."""
+    if not path.is_symlink():
+        return path
+    folder = Path(os.path.realpath(path.absolute().parent))
+    target = Path(os.path.realpath(path))
+    if folder != target and folder not in target.parents:
+        raise IrreflectError(
+            f"{option} {path}: is a symlink to '{os.readlink(path)}', outside '{folder}': "
+            f"irreflect does not write through links out of the folder asked for: give the "
+            f"real {noun} ({target}) or another name")
+    return target
+
+
+def _check_special(path: Path, noun: str, option: str) -> None:
+    """Refuse an existing output that is a device, a FIFO, a socket or a link that leads
+    nowhere it may write: it would be replaced by a regular file (or written into)."""
+    try:
+        mode = os.stat(path).st_mode
+    except FileNotFoundError:
+        return
+    except OSError as exc:
+        raise IrreflectError(f"{option} {path}: cannot be checked ({exc.strerror or exc}): "
+                             "choose another path") from None
+    if stat.S_ISREG(mode) or stat.S_ISDIR(mode):
+        return
+    kind = ("a device" if stat.S_ISCHR(mode) or stat.S_ISBLK(mode) else
+            "a pipe (FIFO)" if stat.S_ISFIFO(mode) else
+            "a socket" if stat.S_ISSOCK(mode) else "not a regular file")
+    raise IrreflectError(f"{option} {path}: is {kind}; expected a {noun} name (irreflect "
+                         f"writes regular files and replaces nothing else): choose another path")
 
 
 def _writable(folder: Path) -> bool:

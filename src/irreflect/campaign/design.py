@@ -220,12 +220,14 @@ class Prior:
         from scipy.spatial.distance import cdist
 
         out = self.features[i] @ self.features[j].T
-        gi, gj = self.gamma[i][:, None], self.gamma[j][:, None]
         if self.law:
             values = np.column_stack([v for v, _ in self.law])
             sd2 = np.array([sd * sd for _, sd in self.law])
-            rg = np.exp(-0.5 * cdist(gi / self.law_scale, gj / self.law_scale, "sqeuclidean"))
-            out += ((values[i] * sd2) @ values[j].T) * rg
+            # smooth in gamma alone: on the distinct angles of incidence, then spread
+            ug_i, at_i = np.unique(self.gamma[i], return_inverse=True)
+            ug_j, at_j = np.unique(self.gamma[j], return_inverse=True)
+            rg = np.exp(-0.5 * ((ug_i[:, None] - ug_j[None, :]) / self.law_scale) ** 2)
+            out += ((values[i] * sd2) @ values[j].T) * rg[np.ix_(at_i.ravel(), at_j.ravel())]
         r = self.rule
         xi = np.column_stack([self.gamma[i] / r.gamma_scale, self.theta[i] / r.theta_scale,
                               self.lobe_coord[i] / r.lobe_scale])

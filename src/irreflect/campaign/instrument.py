@@ -15,6 +15,7 @@ read as gamma = -|gamma|, as the tables are.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -26,6 +27,9 @@ from ..validation import check_number
 #: thinned to this many, keeping the settings near a mirror direction first): the
 #: proposal's matrices grow with its square (900: about 0.1 s a proposal).
 MAX_SETTINGS = 900
+#: An instrument lists at most this many (gamma, theta) settings (a --theta-step of 1e-9 deg
+#: would list 1.6e11 and exhaust memory before the first proposal).
+MAX_INSTRUMENT_SETTINGS = 1_000_000
 
 
 @dataclass(frozen=True)
@@ -93,6 +97,15 @@ class Instrument:
         if step > hi - lo:
             raise IrreflectError(f"the receiver step {step:g} deg is wider than its range "
                                  f"[{lo:g}, {hi:g}]: give a smaller --theta-step")
+        n_gammas = max(len(tuple(self.gammas_deg)), 1)
+        per_gamma = math.floor((hi - lo) / step + 1e-9) + 1
+        if self.settings_deg is None and per_gamma * n_gammas > MAX_INSTRUMENT_SETTINGS:
+            smallest = (hi - lo) / max(MAX_INSTRUMENT_SETTINGS // n_gammas - 1, 1)
+            raise IrreflectError(
+                f"theta_step (--theta-step) {step:g} deg: {per_gamma:,} receiver angles x "
+                f"{n_gammas} angle(s) of incidence is more settings than an instrument may "
+                f"list ({MAX_INSTRUMENT_SETTINGS:,}): pass --theta-step "
+                f"{math.ceil(smallest * 1000) / 1000:g} or more")
         sep = step / 2.0 if self.min_separation is None else check_number(
             self.min_separation, "min_separation", low=0.0)
         clearance = check_number(self.source_clearance, "source_clearance", low=0.0,

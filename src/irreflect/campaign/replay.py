@@ -39,12 +39,14 @@ from ..data import Measurements, as_measurements
 from ..errors import FitError, FitWarning, IrreflectError, unknown_name
 from ..fitting import FitResult, fit
 from ..models import get_model
-from ..validation import check_int, check_number, check_seed
+from ..validation import check_int, check_number, check_search_budget, check_seed
 from .core import Campaign
 from .design import DEFAULT_RULE, DesignRule
 from .instrument import Instrument
 
 STRATEGIES = ("adaptive", "paper", "glossy", "random", "hindsight")
+#: The most readings a replayed campaign takes (``next`` reads at most as many).
+MAX_REPLAY_READINGS = 2000
 METHODS = ("nearest", "interpolate")
 #: How close to the all-points fit's R^2 a strategy must come (and stay) to count.
 TOLERANCE = 0.01
@@ -237,23 +239,27 @@ def replay_adaptive(source: DenseInstrument, n_max: int = 25, *, model="two-lobe
                     seed: int = 0, rule: DesignRule = DEFAULT_RULE, batch: int = 1,
                     instrument_options: dict | None = None, progress=None):
     """The adaptive campaign against the dense table, ``batch`` readings per proposal,
-    up to ``n_max`` readings: (curve, verdicts per N, seconds per proposal)."""
+    up to ``n_max`` readings: (curve, verdicts per N, seconds per proposal, each with the
+    verdict on the readings before it: the work ``irreflect next`` does per call)."""
     dense = source.dense
     rng = np.random.default_rng([check_seed(seed), 11])
     tool = source.instrument(**(instrument_options or {}))
     campaign = Campaign(tool, model=model, seed=seed, rule=rule, name=dense.name)
     r2, verdicts, times = {}, {}, []
     t0 = time.perf_counter()
+    judged = 0.0  # the verdict's time, counted with the proposal after it (they share work)
     while campaign.n_measured < n_max:
         start = time.perf_counter()
         proposal = campaign.propose(min(batch, n_max - campaign.n_measured))
-        times.append(time.perf_counter() - start)
+        times.append(time.perf_counter() - start + judged)
         if not len(proposal):
             break
         power = source.read(proposal["gamma_deg"], proposal["theta_deg"], rng)
         campaign.add(proposal[["gamma_deg", "theta_deg"]].assign(power=power))
         n = campaign.n_measured
+        start = time.perf_counter()
         v = campaign.verdict()
+        judged = time.perf_counter() - start
         verdicts[n] = v
         if campaign.fit is not None:
             r2[n] = campaign.r2_against(dense)
@@ -361,9 +367,16 @@ def replay(dense, strategies=STRATEGIES, *, n_max: int = 25, model="two-lobe", s
     """
     dense = as_measurements(dense)
     n_max = check_int(n_max, "n_max", 9)
+    if n_max > MAX_REPLAY_READINGS:
+        raise IrreflectError(f"n_max (--n-max) {n_max}: a replayed campaign takes at most "
+                             f"{MAX_REPLAY_READINGS} readings (one fit each): pass --n-max "
+                             f"{MAX_REPLAY_READINGS} or less")
     for s in strategies:
         if s not in STRATEGIES:
             raise unknown_name("campaign strategy", s, STRATEGIES)
+    if "hindsight" in strategies:  # before any work: the hindsight bound is a selection
+        check_search_budget(100, check_int(generations, "generations", 1), dense.n_points,
+                            pop_option="population", gen_option="--generations")
     model_obj = get_model(model)
     source = DenseInstrument(dense, method=method, tolerance_deg=tolerance_deg,
                              theta_step=theta_step, noise=noise,

@@ -76,6 +76,9 @@ def main(argv=None) -> int:
     if not getattr(args, "handler", None):
         parser.print_help(sys.stderr)
         return 2
+    from ..validation import forget_memory_options
+
+    forget_memory_options()
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         try:
@@ -97,8 +100,12 @@ def main(argv=None) -> int:
             print(f"irreflect: fit failed: {_one_line(exc)}", file=sys.stderr)
             return 1
         except MemoryError:
-            print("irreflect: error: out of memory: subsample the table or lower the budget "
-                  "options (see 'Bad input' in the README for each command's limit)",
+            from ..validation import memory_hint
+
+            hint = memory_hint("the table's size: subsample the table")
+            print(f"irreflect: error: out of memory in '{args.command}': its size is set by "
+                  f"{hint}: change it, or lower the memory budget IRREFLECT_BUDGET_MEMORY "
+                  "(GB) on a machine shared with other work (docs/bad-input.md)",
                   file=sys.stderr)
             return 1
         except OSError as exc:  # a full disk, a file removed under us: the system's reason

@@ -53,15 +53,16 @@ def _instrument(args):
 def _cmd_next(args) -> int:
     from .._atomic import claim_output
 
-    if args.out:
-        if Path(args.out).suffix.lower() != ".csv":
-            raise IrreflectError(f"--out {args.out}: expected a file name ending in .csv; "
-                                 f"found '{Path(args.out).suffix or 'no suffix'}'")
+    if args.out is not None:
+        from ..validation import check_output_path
+
+        check_output_path(args.out, "file", "--out", (".csv",))
         if _same_file(args.out, args.measured) or (
                 Path(args.out).absolute() == Path(args.measured).absolute()):
             raise IrreflectError(f"--out {args.out} is the input table: write the proposals "
                                  "to another file (irreflect never replaces an input)")
-    claim = claim_output(args.out, "file", "--out") if args.out else contextlib.nullcontext()
+    claim = (claim_output(args.out, "file", "--out") if args.out is not None
+             else contextlib.nullcontext())
     with claim:
         return _next(args)
 
@@ -80,11 +81,11 @@ def _next(args) -> int:
     campaign = Campaign(tool, readings, model=model.name, seed=args.seed, name=name)
     proposals = campaign.propose(args.n)
     verdict = campaign.verdict()
-    if args.out:
+    if args.out is not None:
         table = proposals[["gamma_deg", "theta_deg", "why"]].copy()
         table["new_gamma"] = proposals["new_gamma"].map({True: "yes", False: "no"})
         table["power"] = ""
-        with atomic_path(args.out) as tmp:
+        with atomic_path(args.out, "--out") as tmp:
             table.to_csv(tmp, index=False, float_format="%.6g")
     if args.json:
         doc = {"dataset": name, "n_measured": campaign.n_measured,
@@ -107,7 +108,7 @@ def _next(args) -> int:
     else:
         print("no setting left to propose: every setting of the instrument is measured")
     print(f"verdict: {verdict.text}")
-    if args.out:
+    if args.out is not None:
         what = "setting" if len(proposals) == 1 else "settings"
         print(f"wrote {args.out} ({len(proposals)} {what}: fill in power and add the rows "
               f"to {Path(args.measured).name})")
@@ -117,7 +118,8 @@ def _next(args) -> int:
 def _cmd_campaign(args) -> int:
     from .._atomic import claim_output
 
-    claim = claim_output(args.out, "dir", "--out") if args.out else contextlib.nullcontext()
+    claim = (claim_output(args.out, "dir", "--out") if args.out is not None
+             else contextlib.nullcontext())
     with claim:
         return _campaign(args)
 
@@ -163,13 +165,13 @@ def _campaign(args) -> int:
                         progress=told)
     finally:
         bar.close()
-    if args.out:
+    if args.out is not None:
         _write_campaign(result, args.out)
     if args.json:
         print_json(result.to_dict())
         return 0
     print(format_replay(result))
-    if args.out:
+    if args.out is not None:
         print(f"wrote {args.out}: r2_by_n.csv, summary.csv, replay.json, campaign.png")
     return 0
 

@@ -19,14 +19,18 @@ def _cmd_compare(args) -> int:
         raise IrreflectError(
             f"--phong-at-deg must lie between 0 and 90 degrees, found {at:g}"
         )
+    if args.models is not None and not args.models.strip():
+        raise IrreflectError("--models is empty: expected a comma-separated list, e.g. "
+                             "two-lobe,phong (leave the option out for the default models)")
     parse_model_list(args.models, PAPER_PHONG_DEG if at is None else abs(at))  # names first
-    claim = claim_output(args.out, "dir", "--out") if args.out else contextlib.nullcontext()
+    claim = (claim_output(args.out, "dir", "--out") if args.out is not None
+             else contextlib.nullcontext())
     with claim:
         meas = load_data(args)
         comparison = compare_models(meas, args.models,
                                     phong_at_deg=None if at is None else abs(at),
                                     seed=args.seed, progress=None, skip_failures=True)
-        written = write_outputs(comparison, args.out) if args.out else []
+        written = write_outputs(comparison, args.out) if args.out is not None else []
     for label, why in comparison.skipped.items():  # said on stderr too, whatever the format
         print(f"irreflect: warning: {comparison.data_name}: {label} left out of the comparison: "
               f"{why}", file=sys.stderr)

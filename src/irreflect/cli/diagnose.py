@@ -66,20 +66,19 @@ def _cmd_diagnose(args: argparse.Namespace) -> int:
     extensions = None
     if args.extensions is not None:
         extensions = [e.strip() for e in args.extensions.split(",") if e.strip()]
+        if not extensions:
+            raise IrreflectError("--extensions is empty: expected a comma-separated list of "
+                                 "extensions (see 'irreflect models'), or leave the option out "
+                                 "to try them all")
         for name in extensions:
             get_extension(name)
     get_model(args.model)
-    if args.separate_out:
-        from pathlib import Path
-
-        target, data = Path(args.separate_out), Path(str(args.data))
-        if target.exists() and data.exists() and target.resolve() == data.resolve():
-            raise IrreflectError(f"--separate-out {target}: is the input table; give another "
-                                 "file name (the plan would replace your measurements)")
+    # outputs are claimed before the table is read: an output never replaces an input
+    # (the table, also through a link or a hard link) of the same run
     with contextlib.ExitStack() as stack:
-        if args.out:
+        if args.out is not None:
             stack.enter_context(claim_output(args.out, "dir", "--out"))
-        if args.separate_out:
+        if args.separate_out is not None:
             stack.enter_context(claim_output(args.separate_out, "file", "--separate-out",
                                              suffixes=(".csv",)))
         return _diagnose(args, extensions)
@@ -96,8 +95,8 @@ def _diagnose(args, extensions) -> int:
                           seed=args.seed, alpha=args.alpha, progress=bar)
     finally:
         bar.close()
-    written = write_outputs(result, meas, args.out) if args.out else []
-    if args.separate_out:
+    written = write_outputs(result, meas, args.out) if args.out is not None else []
+    if args.separate_out is not None:
         from pathlib import Path
 
         from .._atomic import atomic_path

@@ -15,16 +15,22 @@ def _cmd_fit(args) -> int:
 
     model = args.model
     parse_spec(model).model()  # the name checked before any work ('phong@10' included)
-    if args.save and args.reflectance is not None:
+    if args.save is None and (args.reflectance is not None or args.wavelength is not None
+                              or args.notes is not None):
+        from ..errors import IrreflectError
+
+        raise IrreflectError("--reflectance, --wavelength and --notes go into the material "
+                             "file: add --save MATERIAL.json")
+    if args.save is not None and args.reflectance is not None:
         from ..room.materials import parse_reflectance
 
         parse_reflectance(args.reflectance, "--reflectance")  # before the fit, not after
-    claim = (claim_output(args.save, "file", "--save", suffixes=(".json",)) if args.save
-             else contextlib.nullcontext())
+    claim = (claim_output(args.save, "file", "--save", suffixes=(".json",))
+             if args.save is not None else contextlib.nullcontext())
     with claim:  # the material file's path is checked and locked before any work
         meas = load_data(args)
         result = fit(meas, model, seed=args.seed, engine=_engine(meas.n_points))
-        if args.save:
+        if args.save is not None:
             from ..room.materials import save_material
 
             save_material(result, args.save, data_file=args.data, wavelength_nm=args.wavelength,
@@ -51,7 +57,7 @@ def _cmd_fit(args) -> int:
             print(f"fitted on the {result.n_points} points of one angle of incidence; on all "
                   f"{on_all['n_points']} points: R^2 = {on_all['r2']:.6f}   RMSE = "
                   f"{on_all['rmse']:.6g}")
-        if args.save:
+        if args.save is not None:
             print(f"wrote {args.save} (material file for 'irreflect room' scenes)")
     return 0
 

@@ -29,6 +29,9 @@ def _cmd_protocol(args) -> int:
     from .._atomic import claim_output
 
     fmt = args.format
+    if args.out is not None and not args.out.strip():
+        raise IrreflectError("--out must name a file; found an empty name (leave it out to "
+                             "print on stdout)")
     if args.out and Path(args.out).is_dir():
         raise IrreflectError(f"--out {args.out}: is a folder; expected a file name ending in "
                              ".csv, .json or .md")
@@ -79,8 +82,11 @@ def _protocol(args, fmt: str) -> int:
         )
     elif args.design_from:
         from ..selection.design import design_protocol
+        from ..validation import check_search_budget
 
         dense = load_data(args, "protocol", args.design_from)
+        check_search_budget(args.pop_size, args.generations, dense.n_points,
+                            pop_option="--pop-size", gen_option="--generations")
         protocol = design_protocol(
             dense, args.n, args.model, theta_min=args.theta_min, theta_max=args.theta_max,
             n_gamma_settings=args.gamma_settings, selector=args.selector, seed=args.seed,
@@ -125,8 +131,11 @@ def _cmd_evaluate(args) -> int:
     from ..models import get_model
     from ..protocol.evaluate import evaluate_protocol
     from ..protocol.export import read_protocol
+    from ..validation import check_trials_budget
 
     get_model(args.model)
+    if args.monte_carlo:
+        check_trials_budget(args.monte_carlo, "--monte-carlo")
     protocol = read_protocol(args.protocol)
     dense = load_data(args, "evaluate-protocol", args.dense)
     ev = evaluate_protocol(protocol, dense, args.model, tolerance_deg=args.tolerance,

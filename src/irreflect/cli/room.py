@@ -16,6 +16,8 @@ def _cmd_room(args) -> int:
 def _room(args) -> int:
     from pathlib import Path
 
+    from ..data import resolve_scene
+    from ..room.checks import CLI_OPTIONS, check_room_budget, material_notes, resolve_settings
     from ..room.engine import simulate
     from ..room.scene import load_scene
 
@@ -24,10 +26,11 @@ def _room(args) -> int:
 
         check_scheduler_address(args.scheduler)
     out = Path(args.out)
-    from ..data import resolve_scene
-    from ..room.checks import material_notes
-
-    scene = load_scene(resolve_scene(args.scene))
+    scene = load_scene(resolve_scene(args.scene), materials_dir=args.materials_dir)
+    settings = resolve_settings(scene, {"method": args.method, "bounces": args.bounces,
+                                        "cell_m": args.cell, "rays": args.rays,
+                                        "time_resolution_ns": args.dt})
+    check_room_budget(scene, settings, CLI_OPTIONS, args.workers)  # before any work
     for line in material_notes(scene, allow_unphysical=args.allow_unphysical):
         print(line)
     result = simulate(scene, method=args.method, bounces=args.bounces, cell_m=args.cell,
@@ -39,9 +42,24 @@ def _room(args) -> int:
     written = result.write(out, figures=figures)
     summary = result.summary()
     print(_report(result, summary))
+    _warn_dark(summary)
     print(f"wrote {out}/: {', '.join(written[:6])}{' ...' if len(written) > 6 else ''} "
           f"({len(written)} files)")
     return 0
+
+
+def _warn_dark(summary) -> None:
+    """A pair that receives no light at all is worth a word: a receiver turned to a wall,
+    shut in by boxes, or out of every emitter's reach (its delays are NaN)."""
+    import sys
+
+    dark = summary[~(summary.dc_gain_total > 0)]
+    if len(dark):
+        first = dark.iloc[0]
+        print(f"irreflect: warning: {len(dark)} emitter-receiver pair(s) receive no light, "
+              f"e.g. {first.emitter} -> {first.receiver} (their delays are NaN): check that "
+              "the receivers face the room and are not shut in by boxes, or follow more "
+              "--bounces", file=sys.stderr)
 
 
 def _report(result, summary) -> str:
@@ -106,6 +124,9 @@ def register(sub) -> None:
                         "(default: local)")
     p.add_argument("--workers", type=POSITIVE_INT, default=None,
                    help="local worker processes for the receivers (default 1)")
+    p.add_argument("--materials-dir", default=None, metavar="DIR",
+                   help="also read the scene's material files from DIR (default: only from "
+                        "the scene's own folder)")
     p.add_argument("--allow-unphysical", action="store_true",
                    help="simulate a material whose model predicts negative power in the room "
                         "(clipped to 0; default: refused)")

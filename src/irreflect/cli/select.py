@@ -118,7 +118,7 @@ def _cmd_select(args) -> int:
     from ..models import get_model
     from ..selection.parallel import check_scheduler_address
     from ..selection.selectors import get_selector
-    from ..validation import check_selection_budget, short_list
+    from ..validation import check_search_budget, check_selection_budget, short_list
 
     # everything that can be checked before any work: names, seeds, the scheduler's
     # address, output and checkpoint paths (claimed: checked and locked), table sizes
@@ -140,6 +140,8 @@ def _cmd_select(args) -> int:
         for path in args.data:
             meas = load_data(args, "select", path)
             check_selection_budget(meas.n_points, args.max_points, str(path))
+            check_search_budget(args.pop_size, args.generations, meas.n_points,
+                                pop_option="--pop-size", gen_option="--generations")
             tables.append(meas)
         return _run_and_write(args, tables, seeds, out, flat)
 

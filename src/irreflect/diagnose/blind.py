@@ -334,7 +334,10 @@ def blind_case(seed: int, *, effects: tuple[str, ...] | None = None, base: str |
         for _ in range(6):
             clean_e = clean_power(bp, {e: p}, g, t)
             sig_e = np.sqrt(a * a + (b * clean_e) ** 2)
-            got = max(_chi2_base(g, t, clean_e, sig_e, seed) - lam0, 1e-9)
+            got = _chi2_base(g, t, clean_e, sig_e, seed) - lam0
+            if not np.isfinite(got):  # a base fit that cannot beat a constant (inf - inf)
+                got = np.inf if np.isfinite(lam0) else 1e-9
+            got = max(got, 1e-9)
             tried.append((abs(np.log(got / targets[e])), p, got))
             if tried[-1][0] < np.log(1.25):
                 break

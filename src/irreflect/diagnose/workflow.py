@@ -62,6 +62,7 @@ from ..errors import FitError, FitWarning, IrreflectError
 from ..fitting import FitResult, fit
 from ..models import ReflectionModel, get_model
 from ..models.extensions import EXTENSIONS, applied_extensions, get_extension
+from ..validation import check_int, check_number, check_seed
 from .noise import (
     NoiseEstimate,
     clipped_scale,
@@ -684,6 +685,25 @@ def _select(search: _Search, names, max_effects: int, alpha: float, min_share: f
     return rounds, (final or [()])
 
 
+def _check_settings(extensions, max_effects, seed, min_share, alpha) -> None:
+    """:func:`diagnose`'s settings, each in its range (one line otherwise)."""
+    if extensions is not None and (isinstance(extensions, str) or not all(
+            isinstance(e, str) for e in _iterable(extensions))):
+        raise IrreflectError(f"extensions must be a list of extension names (or None for "
+                             f"all); found {extensions!r}")
+    check_int(max_effects, "max_effects", 0)
+    check_seed(seed)
+    check_number(alpha, "alpha", low=0.0, high=1.0, low_open=True, high_open=True)
+    check_number(min_share, "min_share", low=0.0, high=1.0)
+
+
+def _iterable(obj):
+    try:
+        return list(obj)
+    except TypeError:
+        return [None]
+
+
 def diagnose(measurements, model="two-lobe", *, extensions: Sequence[str] | None = None,
              max_effects: int = 3, seed: int = 0, min_share: float = 0.5,
              alpha: float = 0.01, separate: int = 12,
@@ -726,6 +746,7 @@ def diagnose(measurements, model="two-lobe", *, extensions: Sequence[str] | None
     if legacy:
         raise TypeError(f"diagnose() got unexpected keyword arguments {sorted(legacy)}")
     t0 = time.perf_counter()
+    _check_settings(extensions, max_effects, seed, min_share, alpha)
     meas = as_measurements(measurements)
     base_model = get_model(model)
     names = list(EXTENSIONS) if extensions is None else list(extensions)

@@ -17,7 +17,7 @@ from ..models import (
     get_model,
     parse_spec,
 )
-from ..validation import check_seed, short_list
+from ..validation import check_fit_options, check_seed, check_starts, short_list
 from .engine import _kernel_codes, _kernel_geometry
 from .finish import finish
 from .options import (
@@ -104,6 +104,7 @@ def fit(measurements, model="two-lobe", options: FitOptions | None = None,
     """
     opts = _options(options, settings)
     spec = parse_spec(model) if isinstance(model, str) and "@" in model else None
+    opts = _checked(opts, spec.model_text if spec is not None else model)
     if spec is not None and spec.at_gamma_deg is not None:  # 'phong@10': one incidence
         sub = points_at_incidence(as_measurements(measurements), spec.at_gamma_deg, str(spec))
         return dataclasses.replace(fit(sub, spec.model_text, opts), model=str(spec))
@@ -134,6 +135,20 @@ def _options(options: FitOptions | None, settings: dict) -> FitOptions:
                         f"settings: {', '.join(FIT_SETTINGS)})")
     opts = options if options is not None else FitOptions()
     return dataclasses.replace(opts, **settings) if settings else opts
+
+
+def _checked(opts: FitOptions, model) -> FitOptions:
+    """``opts`` with its counts, flags and seed checked (one line naming the setting) and
+    ``extra_starts`` as a float array of the model's nonlinear coordinates."""
+    check_fit_options(seed=opts.seed, n_random_starts=opts.n_random_starts,
+                      n_screen=opts.n_screen, n_keep=opts.n_keep,
+                      n_data_starts=opts.n_data_starts, use_sigma=opts.use_sigma,
+                      max_iter=opts.max_iter, max_rounds=opts.max_rounds, polish=opts.polish,
+                      n_hops=opts.n_hops, retry=opts.retry)
+    if opts.extra_starts is None:
+        return opts
+    extra = check_starts(opts.extra_starts, get_model(model).n_nonlinear)
+    return dataclasses.replace(opts, extra_starts=extra)
 
 
 def retry_reasons(result) -> tuple[str, ...]:

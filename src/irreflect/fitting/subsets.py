@@ -13,7 +13,7 @@ from ..models import (
     Geometry,
     get_model,
 )
-from ..validation import check_seed, check_subset_inputs
+from ..validation import check_fit_options, check_seed, check_starts, check_subset_inputs
 from .engine import _kernel_codes, _kernel_geometry, _kernel_static, _w
 from .local import STOP_FTOL, STOP_STUCK, STOP_XTOL, _levenberg_marquardt
 from .options import FitOptions
@@ -84,6 +84,10 @@ def fit_subsets(gamma_deg, theta_deg, power, masks, model="two-lobe", *, sigma=N
     starts only, each subset's optimum is still that of its own points).
     """
     model_obj = get_model(model)
+    check_fit_options(seed=seed, max_iter=max_iter, ftol=ftol, n_screen=n_screen,
+                      n_keep=n_keep, data_starts=data_starts, n_data_starts=n_data_starts,
+                      scan=scan, exhaustive=exhaustive)
+    shared_starts = check_starts(shared_starts, model_obj.n_nonlinear, "shared_starts")
     seed = check_seed(seed)
     gamma_deg, theta_deg, power, masks, sigma = check_subset_inputs(gamma_deg, theta_deg, power,
                                                                     masks, sigma)

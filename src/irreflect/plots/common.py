@@ -44,6 +44,13 @@ def _log_radius(power, radius: str) -> bool:
     return radius == "log" or (radius == "auto" and dynamic_range(power) > LOG_RADIUS_RANGE)
 
 
+def plain(text):
+    """``text`` as plain text in a figure: every ``$`` escaped, so that a name (a file
+    stem, a scene's emitter) is never read as matplotlib mathtext (``$\\frac{$`` would stop
+    the drawing). irreflect's own labels use no mathtext (R² is a character)."""
+    return text if not isinstance(text, str) else text.replace("$", r"\$")
+
+
 def _polar_axes(ax=None, fig=None):
     if ax is None:
         fig = fig or plt.figure(figsize=(6.4, 4.6))
@@ -183,7 +190,7 @@ def plot_polar(measurements, predict=None, ax=None, *, label="fit", title=None,
                 top = max(top, float(np.nanmax(curve)))
     scale.apply(ax, top)
     if title:
-        ax.set_title(title, fontsize=10)
+        ax.set_title(plain(title), fontsize=10)
     handles, labels = _dedupe_legend(*ax.get_legend_handles_labels())
     if predict is not None:
         handles.append(matplotlib.lines.Line2D([], [], color="0.3", lw=1.2))
@@ -233,14 +240,14 @@ def plot_polar_per_gamma(measurements, curves: dict, fig=None, *, title=None, st
             ax.set_rlim(scale.floor, top * 1.6)
         else:
             ax.set_rlim(0.0, 1.25 * top)
-        ax.set_title(f"gamma = {g:g} deg" + (f"\n{', '.join(negative)}: power < 0"
+        ax.set_title(plain(f"gamma = {g:g} deg") + (f"\n{', '.join(negative)}: power < 0"
                                              if negative else ""),
                      fontsize=9, color="red" if negative else "k")
         for h, lb in zip(*ax.get_legend_handles_labels(), strict=True):
             if lb not in labels:
                 handles.append(h)
                 labels.append(lb)
-    fig.suptitle((title + "\n" if title else "") + f"receiver angle theta (deg); "
+    fig.suptitle((plain(title) + "\n" if title else "") + f"receiver angle theta (deg); "
                  f"{scale.caption()}", fontsize=10 if title else 9)
     fig.tight_layout(rect=(0, 0.1 if nrows > 1 else 0.16, 1, 1))
     fig.legend(handles, labels, loc="lower center", ncol=min(len(labels), 4), fontsize=8,
@@ -283,7 +290,7 @@ def plot_surface(measurements, predict, ax=None, *, highlight=None, title=None):
     ax.set_zlabel("power (table's power units)")
     ax.legend(fontsize=7)
     if title:
-        ax.set_title(title, fontsize=10)
+        ax.set_title(plain(title), fontsize=10)
     return ax
 
 
@@ -386,7 +393,7 @@ def plot_residual_map(gamma_deg, theta_deg, values, ax=None, *, title=None,
         ax.legend(fontsize=7, loc="lower left", bbox_to_anchor=(0.0, 1.0), frameon=False,
                   borderaxespad=0.2)
     if title:
-        ax.set_title(title, fontsize=10, pad=18 if source_line else 16)
+        ax.set_title(plain(title), fontsize=10, pad=18 if source_line else 16)
     return ax
 
 
@@ -418,5 +425,5 @@ def plot_residual_histogram(values, ax=None, *, title=None,
     ax.set_xlabel(label)
     ax.set_ylabel("number of points (count)")
     if title:
-        ax.set_title(title, fontsize=10)
+        ax.set_title(plain(title), fontsize=10)
     return ax

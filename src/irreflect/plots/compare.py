@@ -11,7 +11,7 @@ from matplotlib.ticker import FuncFormatter, LogLocator
 from .._atomic import atomic_directory
 from .._jsonio import dumps
 from ..compare import Comparison, at_label
-from .common import plot_polar_per_gamma, plt, save_figure
+from .common import plain, plot_polar_per_gamma, plt, save_figure
 
 _STYLES = {"two-lobe": "-.", "phong": ":"}
 
@@ -76,7 +76,7 @@ def plot_errors_per_gamma(comparison: Comparison, ax=None, *, log=True, legend=T
     ax.set_ylabel("relative polar-area error (%)")
     if log:
         _log_axis(ax)
-    ax.set_title(title or f"{comparison.data_name}: error per angle of incidence (section 5.3)",
+    ax.set_title(plain(title or f"{comparison.data_name}: error per angle of incidence (section 5.3)"),
                  fontsize=10)
     if legend:
         ax.legend(fontsize=7, ncol=2, frameon=False)

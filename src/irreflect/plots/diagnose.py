@@ -14,7 +14,7 @@ import numpy as np
 
 from .._atomic import atomic_directory
 from .._jsonio import dumps
-from .common import NORMALIZED, plot_polar_per_gamma, plot_residual_map, plt, save_figure
+from .common import NORMALIZED, plain, plot_polar_per_gamma, plot_residual_map, plt, save_figure
 
 
 def plot_diagnosis_residuals(diagnoses: dict, fig=None):
@@ -57,7 +57,7 @@ def plot_residual_maps(diagnosis, fig=None, *, limit: float = 4.0):
         plot_residual_map(a.fit.gamma_deg, a.fit.theta_deg, a.residuals_z, ax=ax,
                           title=f"{label}: {a.model_name}, chi2/dof {a.lack_of_fit.ratio:.3g}",
                           **(NORMALIZED | {"limit": limit}))
-    fig.suptitle(f"{diagnosis.name}: {diagnosis.verdict}", fontsize=11)
+    fig.suptitle(plain(f"{diagnosis.name}: {diagnosis.verdict}"), fontsize=11)
     fig.tight_layout()
     return fig
 

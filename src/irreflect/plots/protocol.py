@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .common import plt
+from .common import plain, plt
 
 _STYLE = {
     "mirror": ("*", "tab:red"),
@@ -58,5 +58,5 @@ def plot_protocol(protocol, dense=None, ax=None, *, title=None):
     ax.set_ylim(-90, 90)
     ax.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.01, 1.0), frameon=False)
     if title:
-        ax.set_title(title, fontsize=10)
+        ax.set_title(plain(title), fontsize=10)
     return ax

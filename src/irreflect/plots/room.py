@@ -9,7 +9,7 @@ import matplotlib.patches
 import numpy as np
 
 from ..room.results import grid_values, safe_name
-from .common import plt
+from .common import plain, plt
 
 _ORDER_LABEL = {0: "line of sight", 1: "1 reflection"}
 
@@ -50,8 +50,8 @@ def plot_impulse_response(result, emitter=0, receiver=0, ax=None, *, max_order=N
     ax.set_xlabel("delay t (ns)")
     ax.set_ylabel("h(t) (1/ns)")
     rx = result.scene.receivers[link.receiver]
-    ax.set_title(f"{result.scene.name}: {result.scene.emitters[link.emitter].name} -> {rx.name} "
-                 f"({result.method})", fontsize=9)
+    ax.set_title(plain(f"{result.scene.name}: {result.scene.emitters[link.emitter].name} -> {rx.name} "
+                 f"({result.method})"), fontsize=9)
     ax.legend(fontsize=7)
     return ax
 
@@ -77,13 +77,13 @@ def plot_bounce_gains(result, emitter=0, receivers=None, ax=None):
         ax.errorbar(orders[shown] + offsets[i], gains[shown],
                     yerr=(link.stderr_w / P)[shown] if np.any(link.stderr_w > 0) else None,
                     fmt=markers[i % len(markers)], ls=":", lw=0.8, ms=6, capsize=2,
-                    label=f"{scene.receivers[r].name} (share per order: {share} %)")
+                    label=plain(f"{scene.receivers[r].name}") + f" (share per order: {share} %)")
     ax.set_yscale("log")
     ax.set_xticks(np.arange(result.bounces + 1))
     ax.set_xticklabels(["LoS"] + [str(k) for k in range(1, result.bounces + 1)])
     ax.set_xlabel("reflections (order; LoS = line of sight)")
     ax.set_ylabel("DC gain H(0) (W/W, logarithmic axis)")
-    ax.set_title(f"{scene.name}: DC gain per order ({result.method})", fontsize=9)
+    ax.set_title(plain(f"{scene.name}: DC gain per order ({result.method})"), fontsize=9)
     ax.grid(True, axis="y", which="both", alpha=0.3)
     ax.legend(fontsize=7, loc="upper center", bbox_to_anchor=(0.5, -0.18), frameon=False)
     return ax
@@ -114,8 +114,8 @@ def plot_map(result, summary, grid, column, emitter, ax=None, *, label=None, cma
     ax.set_aspect("equal")
     ax.set_xlabel("x (m)")
     ax.set_ylabel("y (m)")
-    ax.set_title(f"{result.scene.name}: {label or column}\n{grid.name} at z = {grid.z_m:g} m, "
-                 f"{emitter} ({result.method})", fontsize=9)
+    ax.set_title(plain(f"{result.scene.name}: {label or column}\n{grid.name} at z = "
+                       f"{grid.z_m:g} m, {emitter} ({result.method})"), fontsize=9)
     if ax.get_legend_handles_labels()[0]:  # below the map: a legend inside would hide cells
         ax.legend(fontsize=7, loc="upper center", bbox_to_anchor=(0.5, -0.13), ncol=2,
                   frameon=False)
@@ -137,7 +137,8 @@ def plot_material_3d(material, gamma_deg: float, ax=None, azimuths=(0, 30, 60, 9
     ax.tick_params(labelsize=7)
     ax.set_thetamin(-90)
     ax.set_thetamax(90)
-    ax.set_title(f"{material.name}: 3D intensity, gamma = {gamma_deg:g} deg", fontsize=9)
+    ax.set_title(plain(f"{material.name}: 3D intensity, gamma = {gamma_deg:g} deg"),
+                 fontsize=9)
     ax.legend(fontsize=7, loc="center left", bbox_to_anchor=(1.05, 0.5), frameon=False,
               title="angle: receiver angle theta (deg)\nradius: intensity (1/sr per W)",
               title_fontsize=7, alignment="left")
@@ -150,15 +151,22 @@ def write_figures(result, summary, singles, folder) -> list[str]:
     receiver grid, per emitter. Returns the file names."""
     out = []
     scene = result.scene
+
+    def unique(name: str) -> str:  # names are distinct as files (the scene checks); in case
+        stem, k = name[:-4], 2
+        while name in out:
+            name, k = f"{stem}_{k}.png", k + 1
+        return name
+
     shown = singles[:6]
     for e, em in enumerate(scene.emitters):
         for r in shown:
-            name = f"impulse_{safe_name(em.name)}_{safe_name(scene.receivers[r].name)}.png"
+            name = unique(f"impulse_{safe_name(em.name)}_{safe_name(scene.receivers[r].name)}.png")
             ax = plot_impulse_response(result, e, r)
             save(ax, folder / name)
             out.append(name)
         if shown:
-            name = f"bounce_gains_{safe_name(em.name)}.png"
+            name = unique(f"bounce_gains_{safe_name(em.name)}.png")
             ax = plot_bounce_gains(result, e, shown)
             save(ax, folder / name)
             out.append(name)
@@ -168,7 +176,7 @@ def write_figures(result, summary, singles, folder) -> list[str]:
                                   ("rms_delay_spread_ns", "RMS delay spread (ns)")):
                 if summary[column].isna().all():
                     continue
-                name = f"map_{column}_{safe_name(grid.name)}_{safe_name(em.name)}.png"
+                name = unique(f"map_{column}_{safe_name(grid.name)}_{safe_name(em.name)}.png")
                 ax = plot_map(result, summary, grid, column, em.name, label=label)
                 save(ax, folder / name)
                 out.append(name)

@@ -14,7 +14,7 @@ from matplotlib.ticker import FuncFormatter
 
 from .._jsonio import dumps
 from ..selection.run import PAPER_N
-from .common import plt, save_figure
+from .common import plain, plt, save_figure
 
 
 def _log_n_axis(ax, lo: float, hi: float) -> None:
@@ -63,7 +63,7 @@ def plot_pareto(result, ax=None, *, title=None, label=None, log_y: bool = True, 
     _log_n_axis(ax, lo, n_total * 1.12)
     if summary is not None:
         ax.axhline(summary.reference, color="0.35", ls=":", lw=1,
-                   label=f"fit on all {n_total} points: 1 - R$^2$ = {summary.reference:.4g}")
+                   label=f"fit on all {n_total} points: 1 - R² = {summary.reference:.4g}")
     # the ideal point is a star drawn on top of everything: where the knee falls on it
     # (the knee is the frontier point closest to it), the knee's open ring surrounds it
     ideal = dict(marker="*", ms=10, color="gold", mec="k", mew=0.8, ls="none", zorder=8)
@@ -82,7 +82,7 @@ def plot_pareto(result, ax=None, *, title=None, label=None, log_y: bool = True, 
         threshold = enough.threshold_one_minus_r2(result.measurements.power)
         # drawn in the axis' own quantity: the 1 - R^2 a fit with that RMSE would have
         ax.axhline(threshold, color="tab:green", ls="--", lw=1,
-                   label=f"enough-points threshold: 1 - R$^2$ = {threshold:.3g}, a fit whose "
+                   label=f"enough-points threshold: 1 - R² = {threshold:.3g}, a fit whose "
                          f"RMSE is the all-points {enough.rmse_all:.3g} + noise sigma "
                          f"{enough.sigma:.3g}")
         if enough.n is not None:
@@ -94,7 +94,7 @@ def plot_pareto(result, ax=None, *, title=None, label=None, log_y: bool = True, 
     if hasattr(result, "best_mask") and result.best_mask(PAPER_N) is not None:
         b = result.best_score(PAPER_N)
         ax.plot([PAPER_N], [b], "s", ms=9, mfc="none", mew=1.8, color="tab:purple",
-                label=f"best {PAPER_N} points: R$^2$ = {1 - b:.5f}", zorder=5)
+                label=f"best {PAPER_N} points: R² = {1 - b:.5f}", zorder=5)
     # the vertical range follows the frontier (and the lines drawn across it), not a
     # protocol that fails: that one is drawn at the top edge when it lies above
     finite = y[np.isfinite(y) & (y > 0)]
@@ -107,14 +107,14 @@ def plot_pareto(result, ax=None, *, title=None, label=None, log_y: bool = True, 
         above = y_hi is not None and e12 > y_hi
         ax.plot([PAPER_N], [y_hi / 1.03 if above else e12], "^" if above else "X", ms=8,
                 color="tab:brown", zorder=5,
-                label=f"paper's protocol: R$^2$ = {methods['12']['r2']:.4g}"
+                label=f"paper's protocol: R² = {methods['12']['r2']:.4g}"
                       + (" (above the axis)" if above else ""))
     if log_y and finite.size:
         ax.set_yscale("log")
     if y_lo is not None:
         ax.set_ylim(y_lo, y_hi)
     ax.set_xlabel("number of points N (points, logarithmic axis)")
-    ax.set_ylabel("1 - R$^2$ (unitless; fit on N points, judged on all)")
+    ax.set_ylabel("1 - R² (unitless; fit on N points, judged on all)")
     ax.grid(True, alpha=0.3, which="both")
     if legend_below:
         ax.legend(fontsize=7, loc="upper center", bbox_to_anchor=(0.5, -0.16), ncol=1,
@@ -122,7 +122,7 @@ def plot_pareto(result, ax=None, *, title=None, label=None, log_y: bool = True, 
     else:
         ax.legend(fontsize=7, loc="upper right", framealpha=0.85)
     if title:
-        ax.set_title(title, fontsize=10)
+        ax.set_title(plain(title), fontsize=10)
     return ax
 
 
@@ -153,7 +153,7 @@ def plot_points(measurements, masks: dict, ax=None, *, title=None):
     ax.grid(True, alpha=0.3)
     ax.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.01, 1.0), frameon=False)
     if title:
-        ax.set_title(title, fontsize=10)
+        ax.set_title(plain(title), fontsize=10)
     return ax
 
 

@@ -8,6 +8,7 @@ ignores the ``purpose`` column).
 
 from __future__ import annotations
 
+import io
 import json
 import math
 from dataclasses import replace
@@ -15,8 +16,11 @@ from pathlib import Path
 
 import pandas as pd
 
+from .. import schema as sc
 from .._atomic import atomic_path
+from .._inputs import parse_json, read_bytes
 from ..errors import IrreflectError, unknown_name
+from ..validation import check_output_path
 from .core import ORDER_RULE, Protocol, protocol_from_frame
 
 SCHEMA_VERSION = 1
@@ -132,49 +136,85 @@ def format_from_path(path, default: str = "csv") -> str:
 
 def write_protocol(protocol: Protocol, path, fmt: str | None = None) -> Path:
     """Write a protocol atomically; the format follows ``fmt`` or the file's extension."""
-    path = Path(path)
+    protocol = as_protocol(protocol)
+    path = check_output_path(path, "file", "--out")
     text = render(protocol, fmt or format_from_path(path))
     with atomic_path(path) as tmp:
         tmp.write_text(text, encoding="utf-8")
     return path
 
 
+#: Protocol files larger than this, or with more points, are refused (a protocol lists tens
+#: of points; every one is fitted).
+MAX_PROTOCOL_BYTES = 16 * 2**20
+MAX_PROTOCOL_POINTS = 10_000
+_EXPECTED = "a protocol CSV or JSON (written by 'irreflect protocol')"
+_POINT = sc.Table({
+    "step": sc.Integer(lo=1), "gamma_deg": sc.Number(lo=-90, hi=90, lo_open=True, hi_open=True),
+    "theta_deg": sc.Number(lo=-90, hi=90, lo_open=True, hi_open=True),
+    "purpose": sc.Text(max_len=64), "requested_theta_deg": sc.Nullable(sc.Number()),
+    "adjustment": sc.Text(max_len=64), "power": sc.Nullable(sc.Number()),
+}, required=("gamma_deg", "theta_deg"))
+#: The declared schema of a protocol JSON document (:func:`to_dict`).
+PROTOCOL_SCHEMA = sc.Table({
+    "schema_version": sc.Integer(), "kind": sc.Choice(options=("irreflect-protocol",)),
+    "name": sc.Text(max_len=200), "protocol_kind": sc.Text(max_len=64),
+    "n_points": sc.Integer(lo=0), "units": sc.Document(), "convention": sc.Text(max_len=2000),
+    "tool_limits": sc.Table({"theta_min_deg": sc.Nullable(sc.Number(lo=-90, hi=90)),
+                             "theta_max_deg": sc.Nullable(sc.Number(lo=-90, hi=90))}),
+    "rule": sc.Text(max_len=10_000, multiline=True), "order_rule": sc.Text(max_len=10_000),
+    "settings": sc.Document(), "points": sc.ListOf(_POINT, min_items=1, max_items=MAX_PROTOCOL_POINTS),
+    "notes": sc.ListOf(sc.Text(max_len=10_000, multiline=True), max_items=10_000),
+}, required=("kind", "schema_version", "points"))
+
+
 def read_protocol(path) -> Protocol:
     """Read a protocol written by :func:`write_protocol` (CSV or JSON), or any CSV with
     ``gamma_deg, theta_deg`` (optional ``purpose``; other columns ignored)."""
+    raw = read_bytes(path, "protocol", _EXPECTED, MAX_PROTOCOL_BYTES)
     path = Path(path)
-    if not path.exists():
-        raise IrreflectError(f"{path}: no such file: expected a protocol CSV or JSON")
     if path.suffix.lower() == ".json":
-        try:
-            doc = json.loads(path.read_text(encoding="utf-8"))
-        except (json.JSONDecodeError, UnicodeDecodeError) as exc:
-            raise IrreflectError(f"{path}: not valid JSON ({exc})") from exc
-        if not isinstance(doc, dict) or doc.get("kind") != "irreflect-protocol":
-            raise IrreflectError(f"{path}: not an irreflect protocol (no \"kind\": "
-                                 "\"irreflect-protocol\"): export one with 'irreflect protocol'")
-        if doc.get("schema_version") != SCHEMA_VERSION:
-            raise IrreflectError(f"{path}: protocol schema version {doc.get('schema_version')} "
-                                 f"is not supported; this irreflect reads version {SCHEMA_VERSION}")
-        df = pd.DataFrame(doc.get("points") or [])
-        proto = protocol_from_frame(df, str(path), name=doc.get("name") or path.stem)
-        limits = doc.get("tool_limits") or {}
-
-        return replace(
-            proto, kind=doc.get("protocol_kind", "file"), rule=doc.get("rule", ""),
-            settings=doc.get("settings") or {}, notes=tuple(doc.get("notes") or ()),
-            theta_min=float("nan") if limits.get("theta_min_deg") is None
-            else float(limits["theta_min_deg"]),
-            theta_max=float("nan") if limits.get("theta_max_deg") is None
-            else float(limits["theta_max_deg"]),
-        )
+        return _protocol_from_json(path, raw)
     try:
-        df = pd.read_csv(path, dtype=str, comment="#", skipinitialspace=True,
+        df = pd.read_csv(io.BytesIO(raw), dtype=str, comment="#", skipinitialspace=True,
                          keep_default_na=False)
-    except (pd.errors.ParserError, pd.errors.EmptyDataError, UnicodeDecodeError) as exc:
+    except (pd.errors.ParserError, pd.errors.EmptyDataError, UnicodeDecodeError,
+            ValueError) as exc:
         first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
-        raise IrreflectError(f"{path}: cannot be read as a CSV protocol ({first})") from exc
+        raise IrreflectError(f"{path}: cannot be read as a CSV protocol ({first})") from None
+    if len(df) > MAX_PROTOCOL_POINTS:
+        raise IrreflectError(f"{path}: {len(df)} points is more than a protocol may list "
+                             f"({MAX_PROTOCOL_POINTS}): a protocol names the few settings to "
+                             "measure; give the dense scan as DENSE instead")
     return protocol_from_frame(df, str(path), name=path.stem)
+
+
+def _protocol_from_json(path: Path, raw: bytes) -> Protocol:
+    try:
+        text = raw.decode("utf-8-sig")
+    except UnicodeDecodeError:
+        raise IrreflectError(f"{path}: not UTF-8 text; expected {_EXPECTED}") from None
+    doc = parse_json(text, str(path), _EXPECTED)
+    if not isinstance(doc, dict) or doc.get("kind") != "irreflect-protocol":
+        raise IrreflectError(f"{path}: not an irreflect protocol (no \"kind\": "
+                             "\"irreflect-protocol\"): export one with 'irreflect protocol'")
+    if doc.get("schema_version") != SCHEMA_VERSION:
+        raise IrreflectError(f"{path}: protocol schema version {doc.get('schema_version')!r} "
+                             f"is not supported; this irreflect reads version {SCHEMA_VERSION}")
+    doc = sc.validate(PROTOCOL_SCHEMA, doc, str(path))
+    df = pd.DataFrame(doc["points"])
+    proto = protocol_from_frame(df, str(path), name=doc.get("name") or path.stem)
+    limits = doc.get("tool_limits") or {}
+    return replace(
+        proto, kind=doc.get("protocol_kind", "file"), rule=doc.get("rule", ""),
+        settings=doc.get("settings") or {}, notes=tuple(doc.get("notes") or ()),
+        theta_min=_or_nan(limits.get("theta_min_deg")),
+        theta_max=_or_nan(limits.get("theta_max_deg")),
+    )
+
+
+def _or_nan(value) -> float:
+    return float("nan") if value is None else float(value)
 
 
 def as_protocol(obj) -> Protocol:

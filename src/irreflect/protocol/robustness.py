@@ -33,6 +33,7 @@ from ..data import Measurements, as_measurements
 from ..errors import FitError, FitWarning, IrreflectError
 from ..fitting import FitResult, fit, fit_subsets
 from ..models import get_model
+from ..validation import check_int, check_number, check_seed, check_trials_budget
 from .advice import (
     CORRELATION_LIMIT,
     RELATIVE_ERROR_LIMIT,
@@ -207,6 +208,12 @@ def protocol_robustness(protocol, reference, *, model=None, dense=None, n_trials
         Additive Gaussian power noise, 1-sigma, in the power's unit.
     seed : int
     """
+    n_trials = check_int(n_trials, "n_trials", 2)
+    check_trials_budget(n_trials)  # before any fit
+    for name, value in (("angle_error_deg", angle_error_deg), ("power_noise", power_noise),
+                        ("power_noise_abs", power_noise_abs)):
+        check_number(value, name, low=0.0)
+    seed = check_seed(seed)
     protocol = as_protocol(protocol)
     if isinstance(reference, FitResult):
         ref_fit = reference
@@ -224,8 +231,6 @@ def protocol_robustness(protocol, reference, *, model=None, dense=None, n_trials
         model_obj = get_model(model or "two-lobe")
         ref_fit = fit(as_measurements(reference), model_obj, seed=seed)
     dense = as_measurements(dense)
-    if int(n_trials) < 2:
-        raise IrreflectError(f"the Monte Carlo needs at least 2 trials; found {n_trials}")
     for name, value in (("angle error", angle_error_deg), ("power noise", power_noise),
                         ("absolute power noise", power_noise_abs)):
         if not (np.isfinite(value) and value >= 0):

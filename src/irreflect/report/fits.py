@@ -227,7 +227,7 @@ def _fit_figures(ctx, name, meas, full, mask, twelve):
     r2 = metrics.r2(meas.power, pred)
     ax = plot_residual_map(meas.gamma_deg, meas.theta_deg, resid,
                            title=f"{name}: residuals of the {which} "
-                                 f"(R$^2$ = {r2:.4g} on all points)",
+                                 f"(R² = {r2:.4g} on all points)",
                            label="measured - model (table's power units)", robust=True)
     out[f"residuals_{name}"] = save_figure(ax.figure, ctx.figure_path(f"residuals_{name}"))
     with np.errstate(divide="ignore", invalid="ignore"):

@@ -6,6 +6,7 @@ import pandas as pd
 
 from ..errors import FitError, IrreflectError
 from ..plots import save_figure
+from ..plots.common import plain
 from ..plots.selection import plot_points, plot_selection
 from ..protocol.points import protocol_points_mask
 from ..selection.run import (
@@ -333,6 +334,6 @@ def _figure_points(ctx: ReportContext, results: dict):
     first = next(iter(results.values())).measurements
     ax = plot_points(first, items, title=f"best {PAPER_N} points per material")
     if len(items) > 1:
-        ax.set_title(f"best {PAPER_N} points per material (grey: {first.name}'s grid)",
+        ax.set_title(plain(f"best {PAPER_N} points per material (grey: {first.name}'s grid)"),
                      fontsize=10)
     return save_figure(ax.figure, ctx.figure_path("selection_optimal_points"))

@@ -37,6 +37,7 @@ import numpy as np
 from .._progress import progress as progress_display
 from ..errors import IrreflectError
 from . import kernels as K
+from .checks import DEFAULTS, check_room_budget, check_simulate_arguments
 from .geometry import (
     Cells,
     boxes_array,
@@ -49,8 +50,6 @@ from .geometry import (
 from .results import summary_table, write_results
 from .scene import METHODS, Scene
 
-DEFAULTS = {"method": "montecarlo", "bounces": 3, "cell_m": 0.25, "rays": 20000, "seed": 0,
-            "time_resolution_ns": 0.25}
 #: receivers per task of a process pool or Dask cluster (fixed: results do not depend on it)
 TASK_RECEIVERS = 8
 _CHUNK = 16  # cells per chunk of the backward pass (per-chunk buffers, thread-independent)
@@ -196,8 +195,10 @@ def simulate(scene: Scene, *, method=None, bounces=None, cell_m=None, rays=None,
     progress : bool
         Show a progress bar on stderr.
     """
+    check_simulate_arguments(scene, scheduler, workers, threads)
     s = _resolve(scene, method=method, bounces=bounces, cell_m=cell_m, rays=rays, seed=seed,
                  time_resolution_ns=time_resolution_ns)
+    check_room_budget(scene, s, workers=workers)  # refused before any work when too large
     t0 = time.perf_counter()
     _, mats = scene.material_list()
     dt = s["time_resolution_ns"] * 1e-9

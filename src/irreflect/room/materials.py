@@ -50,15 +50,19 @@ from __future__ import annotations
 
 import json
 import math
+import numbers
 import re
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
 
+from .. import schema as sc
 from .._atomic import atomic_path
+from .._inputs import parse_json, read_text
 from ..errors import IrreflectError
 from ..models import get_model
+from ..validation import check_output_path
 from .kernels import (  # noqa: F401  (the table constants are re-exported)
     GAMMA_NODES,
     LOBE_MAX,
@@ -219,6 +223,7 @@ def from_model(model, params: dict, reflectance, *, name: str = "material",
     """
 
     model_obj = get_model(model)
+    outside = _check_model_arguments(model_obj, params, gamma_max_deg, name)
     spec = model if isinstance(model, str) else model_obj.name
     names = tuple(model_obj.param_names)
     missing = [p for p in names if p not in params]
@@ -247,8 +252,11 @@ def from_model(model, params: dict, reflectance, *, name: str = "material",
     lobes, share = _lobes_for(model_obj.name, values)
     metadata = dict(metadata or {})
     unphysical = negative_power(model_obj, values, gmax)
+    if outside is not None and unphysical is None:
+        raise IrreflectError(outside)
     if unphysical:
-        metadata["unphysical"] = unphysical
+        metadata["unphysical"] = unphysical if outside is None else (
+            f"{unphysical} ({outside.removeprefix(f'material {name!r}: ')})")
     base = dict(name=name, source=source or f"{spec} {values}", reflectance=rho, scale=scale,
                 model=spec, params=values, stderr=stderr, gamma_max_rad=float(gmax),
                 metadata=metadata)
@@ -259,7 +267,37 @@ def from_model(model, params: dict, reflectance, *, name: str = "material",
         table = _plane_table(model_obj, values, gmax)
         mat = Material(kind=KIND_TABLE, table=table, **base)
         S = table_hemisphere_integral(mat)
-    return _with_scale(mat, S, K)
+    mat = _with_scale(mat, S, K)
+    if outside is not None and not (np.all(np.isfinite(mat.rho_table))
+                                    and np.all(np.isfinite(mat.norm_table))):
+        raise IrreflectError(outside)  # unphysical and not even simulable
+    return mat
+
+
+def _check_model_arguments(model_obj, params, gamma_max_deg, name) -> str | None:
+    """:func:`from_model`'s arguments: params a table of finite numbers, gamma_max_deg None
+    or in (0, 90]. Returns the message of a coefficient outside the model's bounds (None
+    when all lie within): :func:`from_model` refuses it, unless the model then predicts
+    negative power, which makes the material unphysical (refused by ``irreflect room``
+    unless ``--allow-unphysical``, :func:`irreflect.room.checks.material_notes`)."""
+    if not isinstance(params, dict):
+        raise IrreflectError(f"material '{name}': params must be a table NAME: VALUE of the "
+                             f"parameters of {model_obj.name}; found {sc.found(params)}")
+    outside = None
+    try:
+        check_params(model_obj, params, f"material '{name}'")
+    except IrreflectError as exc:
+        if any(not isinstance(v, numbers.Real) or isinstance(v, bool)
+               or sc.as_float(v) is None or not math.isfinite(sc.as_float(v))
+               for v in params.values()):
+            raise
+        outside = str(exc)
+    if gamma_max_deg is not None:
+        x = sc.as_float(gamma_max_deg)
+        if x is None or not 0 <= x <= 90:
+            raise IrreflectError(f"material '{name}': gamma_max_deg must be a number from 0 to "
+                                 f"90 (degrees) or None; found {sc.found(gamma_max_deg)}")
+    return outside
 
 
 def negative_power(model_obj, values: dict, gamma_max: float) -> str | None:
@@ -425,6 +463,10 @@ def save_material(result, path, *, data_file=None, wavelength_nm=None, notes=Non
     BRDF x cos(theta) in 1/sr, or None (then a scene must give it).
     """
 
+    if not all(hasattr(result, k) for k in ("model", "param_names", "values", "gamma_deg")):
+        raise IrreflectError(f"save_material expects a FitResult (from irreflect.fit); found "
+                             f"{type(result).__name__}")
+    check_output_path(path, "file", "--save", (".json",))
     reflectance = parse_reflectance(reflectance, Path(path).stem)
     gamma = np.abs(np.asarray(result.gamma_deg, float))
     doc = {
@@ -453,47 +495,126 @@ def save_material(result, path, *, data_file=None, wavelength_nm=None, notes=Non
     return doc
 
 
+#: Material files larger than this are refused (they are about a kilobyte).
+MAX_MATERIAL_BYTES = 1 * 2**20
+_FROM_FIT = "a material file written by 'irreflect fit DATA --save MATERIAL.json'"
+#: A material's total reflectance: a number in [0, 1], or "K" (see the module docstring).
+REFLECTANCE = sc.AnyOf(
+    shape=lambda v: sc.Choice(options=("K",)) if isinstance(v, str) else sc.Number(lo=0.0,
+                                                                                  hi=1.0),
+    expected='a number from 0 to 1 or "K"', whole=True)
+_PARAM_NAME = sc.Text(max_len=64, what="a parameter name")
+_VERDICT_NUMBER = sc.Nullable(sc.Number())
+#: A fit's verdict as ``fit --save`` writes it (:meth:`irreflect.verdict.FitVerdict.to_dict`):
+#: ``irreflect room`` prints its summary, so it is checked like every other key.
+VERDICT_SCHEMA = sc.Table({
+    "trustworthy": sc.Boolean(),
+    "summary": sc.Text(max_len=10_000, multiline=True),
+    "problems": sc.ListOf(sc.Text(max_len=10_000, multiline=True), max_items=1_000),
+    "at_bound": sc.ListOf(sc.Text(max_len=100, what="a parameter name"), max_items=64),
+    "ill_determined": sc.ListOf(sc.Text(max_len=100, what="a parameter name"), max_items=64),
+    "converged": sc.Boolean(),
+    "saturated_gammas_deg": sc.ListOf(sc.Number(lo=-90.0, hi=90.0), max_items=10_000),
+    "angles": sc.ListOf(sc.Table({
+        "gamma_deg": sc.Number(lo=-90.0, hi=90.0), "n_points": sc.Integer(lo=0),
+        "polar_error_pct": _VERDICT_NUMBER, "polar_error_at_points_pct": _VERDICT_NUMBER,
+        "specular_share": _VERDICT_NUMBER, "lobe_half_width_deg": _VERDICT_NUMBER,
+        "lobe_points_1hw": sc.Integer(lo=0), "lobe_points_2hw": sc.Integer(lo=0),
+        "lobe_matters": sc.Boolean(), "lobe_resolved": sc.Boolean(), "ok": sc.Boolean(),
+    }, what="a verdict per angle of incidence"), max_items=10_000),
+}, what="a fit's verdict (as 'irreflect fit --save' writes it)")
+#: The declared schema of a material file (:func:`save_material` writes it).
+MATERIAL_FILE_SCHEMA = sc.Table({
+    "format": sc.Choice(options=(MATERIAL_FORMAT,)),
+    "format_version": sc.Integer(),
+    "model": sc.Text(max_len=100, what="a model name (see 'irreflect models')"),
+    "params": sc.MapOf(keys=_PARAM_NAME, values=sc.Number(), max_items=64,
+                       what="a table of NAME: VALUE"),
+    "stderr": sc.Nullable(sc.MapOf(keys=_PARAM_NAME, max_items=64, what="a table",
+                                   values=sc.Nullable(sc.Number(lo=0.0, allow_nan=True)))),
+    "r2": sc.Nullable(sc.Number(hi=1.0, allow_nan=True)),
+    "rmse": sc.Nullable(sc.Number(lo=0.0, allow_nan=True)),
+    "n_points": sc.Nullable(sc.Integer(lo=0)),
+    "gamma_range_deg": sc.Nullable(sc.Vector(2, item=sc.Number(lo=0.0, hi=90.0),
+                                             what="[min, max] in degrees")),
+    "data_file": sc.Nullable(sc.Text(max_len=4096)),
+    "reflectance": sc.Nullable(REFLECTANCE),
+    "wavelength_nm": sc.Nullable(sc.Number(lo=0.0, hi=1e6, lo_open=True, unit="nm")),
+    "notes": sc.Nullable(sc.Text(max_len=100_000, multiline=True)),
+    "trustworthy": sc.Nullable(sc.Boolean()),
+    "verdict": sc.Nullable(VERDICT_SCHEMA),
+    "warnings": sc.Nullable(sc.ListOf(sc.Text(max_len=10_000, multiline=True),
+                                      max_items=1_000, what="a list of text")),
+}, required=("format", "format_version", "model", "params"))
+
+
+def check_params(model, params: dict, source: str) -> None:
+    """Natural parameters of ``model`` within the model's physical bounds (one line naming
+    the parameter, its range and the value); names are checked by :func:`from_model`."""
+    model_obj = get_model(model)
+    for p in model_obj.params:
+        value = params.get(p.name)
+        if value is None:
+            continue
+        x = sc.as_float(value)
+        span = p.upper - p.lower if math.isfinite(p.upper - p.lower) else 1.0
+        tol = 1e-9 * max(span, 1.0)
+        if x is None or x < p.lower - tol or x > p.upper + tol:
+            raise IrreflectError(
+                f"{source}: {p.name} of {model_obj.name} must be a number from {p.lower:g} to "
+                f"{p.upper:g} ({p.description}); found {sc.found(value)}")
+
+
 def load_material(path, *, name: str | None = None, reflectance=None) -> Material:
     """Read a material file written by ``irreflect fit --save``.
 
-    ``reflectance`` overrides the file's (a number in [0, 1] or ``"K"``); one of the two must
-    give it.
+    Every key is checked against :data:`MATERIAL_FILE_SCHEMA` and the coefficients against
+    the model's physical bounds. ``reflectance`` overrides the file's (a number in [0, 1] or
+    ``"K"``); one of the two must give it.
     """
-    path = Path(path)
-    label = name or path.stem
-    if not path.exists():
-        raise IrreflectError(f"material '{label}': file {path} not found: expected a material file "
-                             "written by 'irreflect fit DATA --save MATERIAL.json'")
+    label = name or (Path(path).stem if isinstance(path, str | Path) else "material")
     try:
-        doc = json.loads(path.read_text())
-    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
-        raise IrreflectError(f"material '{label}': {path} is not JSON ({exc}); expected a file "
-                             "written by 'irreflect fit DATA --save MATERIAL.json'") from exc
-    if not isinstance(doc, dict) or doc.get("format") != MATERIAL_FORMAT:
-        raise IrreflectError(f"material '{label}': {path} is not an irreflect material file "
-                             f"(no \"format\": \"{MATERIAL_FORMAT}\"); write one with "
-                             "'irreflect fit DATA --save MATERIAL.json'")
-    version = doc.get("format_version")
-    if version != MATERIAL_FORMAT_VERSION:
-        raise IrreflectError(f"material '{label}': {path} has format_version {version!r}; this "
-                             f"irreflect reads version {MATERIAL_FORMAT_VERSION}")
-    for key in ("model", "params"):
-        if key not in doc:
-            raise IrreflectError(f"material '{label}': {path} has no \"{key}\"")
+        text = read_text(path, f"material '{label}'", _FROM_FIT, MAX_MATERIAL_BYTES)
+        doc = parse_json(text, str(path), _FROM_FIT)
+        path = Path(path)
+        if not isinstance(doc, dict) or doc.get("format") != MATERIAL_FORMAT:
+            raise IrreflectError(f"{path} is not an irreflect material file (no \"format\": "
+                                 f"\"{MATERIAL_FORMAT}\"); write one with 'irreflect fit DATA "
+                                 "--save MATERIAL.json'")
+        version = doc.get("format_version")
+        if version != MATERIAL_FORMAT_VERSION:
+            raise IrreflectError(f"{path} has format_version {sc.found(version)}; this "
+                                 f"irreflect reads version {MATERIAL_FORMAT_VERSION}")
+        doc = sc.validate(MATERIAL_FILE_SCHEMA, doc, str(path))
+        get_model(doc["model"])  # the bounds of its coefficients: from_model
+        extra = sorted(set(doc.get("stderr") or {}) - set(doc["params"]))
+        if extra:
+            raise IrreflectError(f"{path}: stderr has '{extra[0]}', which is not one of the "
+                                 f"params ({', '.join(doc['params'])})")
+    except IrreflectError as exc:
+        text = str(exc)
+        where = "" if str(path) in text else f"{path}: "
+        raise IrreflectError(f"material '{label}': {where}{text}") from None
     rho = reflectance if reflectance is not None else doc.get("reflectance")
     if rho is None:
         raise IrreflectError(
             f"material '{label}': {path} gives no total reflectance: add reflectance = RHO "
             "(0..1) to the scene's material, or save the fit with --reflectance RHO")
     grange = doc.get("gamma_range_deg")
-    gmax = float(grange[1]) if isinstance(grange, list) and len(grange) == 2 else None
-    return from_model(doc["model"], doc["params"], rho, name=label,
-                      source=f"{path.name} ({doc['model']})", stderr=doc.get("stderr"),
-                      gamma_max_deg=gmax,
-                      metadata={k: doc.get(k) for k in ("r2", "data_file", "wavelength_nm",
-                                                        "notes", "gamma_range_deg",
-                                                        "trustworthy", "verdict",
-                                                        "warnings")})
+    if grange is not None and grange[0] > grange[1]:
+        raise IrreflectError(f"material '{label}': {path}: gamma_range_deg must be [min, max] "
+                             f"with min <= max; found {list(grange)}")
+    try:
+        return from_model(doc["model"], doc["params"], rho, name=label,
+                          source=f"{path.name} ({doc['model']})", stderr=doc.get("stderr"),
+                          gamma_max_deg=None if grange is None else grange[1],
+                          metadata={k: doc.get(k) for k in ("r2", "data_file", "wavelength_nm",
+                                                            "notes", "gamma_range_deg",
+                                                            "trustworthy", "verdict",
+                                                            "warnings")})
+    except IrreflectError as exc:  # the file named in the one line
+        text = str(exc).removeprefix(f"material '{label}': ")
+        raise IrreflectError(f"material '{label}': {path}: {text}") from None
 
 
 _LAMBERTIAN_RE = re.compile(r"^\s*lambertian\s*\(\s*([^)]*)\)\s*$", re.IGNORECASE)
@@ -511,6 +632,6 @@ def parse_lambertian(text: str):
 
 
 __all__ = ["Material", "lambertian", "from_model", "load_material", "save_material",
-           "fit_notes", "negative_power",
+           "check_params", "MATERIAL_FILE_SCHEMA", "REFLECTANCE", "fit_notes", "negative_power",
            "lobe_fraction_above", "lobe_hemisphere_integral", "parse_lambertian",
            "MATERIAL_FORMAT", "MATERIAL_FORMAT_VERSION"]

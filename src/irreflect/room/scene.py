@@ -9,20 +9,40 @@ Room faces are named ``floor``, ``ceiling``, ``wall_x0`` (x = 0), ``wall_x1`` (x
 ``wall_y0``, ``wall_y1``; ``walls`` sets the four walls at once. A material is the name of a
 ``[materials.NAME]`` table, ``"lambertian(RHO)"``, or the path of a material file written by
 ``irreflect fit --save`` (relative to the scene file) that carries its reflectance.
+
+Every key is checked against the declared schema :data:`SCENE_SCHEMA` (types, ranges,
+finiteness, list sizes; :mod:`irreflect.schema`) before anything is built; the rules that tie
+keys together follow (positions inside the room and outside boxes, emitters and receivers
+facing into the room, no receiver at an emitter, no box filling the room, names that are
+distinct, also as file names). A scene reads material files only inside its own folder
+(or ``materials_dir``): a path that leaves it, also through a symlink, is refused before
+anything is opened, with the same message whether or not the file exists.
 """
 
 from __future__ import annotations
 
 import difflib
 import math
-import tomllib
+import os
+from collections import Counter
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
 
-from ..errors import IrreflectError
-from .materials import Material, from_model, lambertian, load_material, parse_lambertian
+from .. import schema as sc
+from .._inputs import parse_toml, read_text
+from ..errors import IrreflectError, SceneError
+from ..validation import budget
+from .materials import (
+    REFLECTANCE,
+    Material,
+    check_params,
+    from_model,
+    lambertian,
+    load_material,
+    parse_lambertian,
+)
 
 ROOM_FACES = ("wall_x0", "wall_x1", "wall_y0", "wall_y1", "floor", "ceiling")
 BOX_FACES = ("x0", "x1", "y0", "y1", "bottom", "top")
@@ -138,334 +158,505 @@ class Scene:
         return names, [self.materials[n] for n in names]
 
 
-# ----------------------------------------------------------------------------- parsing
+# ----------------------------------------------------------------------------- schema
+#: Smallest and largest side of a room (m).
+ROOM_SIDE_M = (0.01, 1000.0)
+MAX_EMITTERS = 64
+MAX_BOXES = 256
+MAX_GRIDS = 32
+#: Receivers per grid axis (the total over the scene is the ``receivers`` budget).
+MAX_GRID_AXIS = 1000
+#: Closest an emitter and a receiver may be (m): at the emitter the line of sight is undefined.
+MIN_DISTANCE_M = 1e-3
+_TOL = 1e-9
+
+_COORD = sc.Number(lo=-1e6, hi=1e6, unit="m")
+_POINT = sc.Vector(3, item=_COORD, what="[x, y, z] in metres")
+_DIRECTION = sc.Vector(3, nonzero=True, what="[x, y, z]",
+                       fix="give the direction it faces, e.g. [0, 0, -1] for down")
+_MATERIAL_REF = sc.Text(max_len=1024, what='a material name, "lambertian(RHO)" or a .json file')
+_MATERIAL = sc.Table({
+    "file": sc.Text(max_len=1024, what="a .json file name"),
+    "lambertian": sc.Number(lo=0.0, hi=1.0),
+    "model": sc.Text(max_len=100, what="a model name (see 'irreflect models')"),
+    "params": sc.MapOf(keys=sc.Text(max_len=64, what="a parameter name"), values=sc.Number(),
+                       max_items=64, what="a table NAME = VALUE"),
+    "reflectance": REFLECTANCE,
+    "gamma_max_deg": sc.Number(lo=0.0, hi=90.0, lo_open=True, unit="degrees"),
+    "notes": sc.Text(max_len=10_000, multiline=True),
+}, what="a table with file, lambertian or model + params")
+_BOX_FACES = sc.Table({face: _MATERIAL_REF for face in ("x0", "x1", "y0", "y1", "bottom", "top",
+                                                        "sides")})
+_BOX = sc.Table({
+    "name": sc.Name(), "min_m": _POINT, "max_m": _POINT,
+    "material": sc.AnyOf(shape=lambda v: _BOX_FACES if isinstance(v, dict) else _MATERIAL_REF,
+                         expected="a material, or a table of materials per face"),
+}, required=("min_m", "max_m", "material"))
+_EMITTER = sc.Table({
+    "name": sc.Name(), "position_m": _POINT, "direction": _DIRECTION,
+    "lambertian_order": sc.Number(lo=0.0, hi=1e4),
+    "half_power_angle_deg": sc.Number(lo=1.0, hi=90.0, hi_open=True, unit="degrees"),
+    "power_w": sc.Number(lo=0.0, hi=1e6, lo_open=True, unit="W"),
+    "modulation_frequency_hz": sc.Number(lo=0.0, hi=1e12, unit="Hz"),
+}, required=("position_m", "direction"),
+    defaults={"power_w": 1.0, "modulation_frequency_hz": 0.0})
+_RECEIVER_KEYS = {
+    "direction": _DIRECTION,
+    "area_m2": sc.Number(lo=0.0, hi=1.0, lo_open=True, unit="m^2"),
+    "fov_deg": sc.Number(lo=0.0, hi=90.0, lo_open=True, unit="degrees"),
+    "filter_gain": sc.Number(lo=0.0, hi=1e6, lo_open=True),
+    "concentrator_gain": sc.Number(lo=0.0, hi=1e6, lo_open=True),
+}
+_RECEIVER_DEFAULTS = {"direction": [0, 0, 1], "area_m2": 1e-4, "fov_deg": 90.0,
+                      "filter_gain": 1.0, "concentrator_gain": 1.0}
+_RECEIVER = sc.Table({"name": sc.Name(), "position_m": _POINT, **_RECEIVER_KEYS},
+                     required=("position_m",), defaults=_RECEIVER_DEFAULTS)
+_RANGE = sc.Vector(2, item=sc.Number(lo=0.0, hi=ROOM_SIDE_M[1]), what="[min, max] in metres")
+_GRID = sc.Table({
+    "name": sc.Name(), "z_m": sc.Number(lo=0.0, hi=ROOM_SIDE_M[1], unit="m"),
+    "x_m": _RANGE, "y_m": _RANGE,
+    "n": sc.ListOf(sc.Integer(lo=1, hi=MAX_GRID_AXIS), min_items=2, max_items=2,
+                   what="[nx, ny], two integers"),
+    **_RECEIVER_KEYS,
+}, required=("z_m", "n"), defaults=_RECEIVER_DEFAULTS)
+_SIMULATION = sc.Table({
+    "method": sc.Choice(options=METHODS), "bounces": sc.Integer(lo=0, hi=50),
+    "cell_m": sc.Number(lo=0.0, hi=ROOM_SIDE_M[1], lo_open=True, unit="m"),
+    "rays": sc.Integer(lo=1, hi=10**12), "seed": sc.Integer(lo=0, hi=2**63 - 1),
+    "time_resolution_ns": sc.Number(lo=0.0, hi=1e6, lo_open=True, unit="ns"),
+})
+
+
+def _array(item, what, max_items, min_items=0):
+    return sc.ListOf(item, min_items=min_items, max_items=max_items,
+                     what=f"an array of tables [[{what}]]")
+
+
+#: The declared schema of a scene file: every key, its type, range and default.
+SCENE_SCHEMA = sc.Table({
+    "scene": sc.Table({"name": sc.Name(), "notes": sc.Text(max_len=100_000, multiline=True)}),
+    "room": sc.Table({
+        "size_m": sc.Vector(3, item=sc.Number(lo=ROOM_SIDE_M[0], hi=ROOM_SIDE_M[1]),
+                            what="[x, y, z] in metres"),
+        "materials": sc.Table({face: _MATERIAL_REF for face in ROOM_FACES + ("walls",)}),
+    }, required=("size_m", "materials")),
+    "materials": sc.MapOf(keys=sc.Name(), values=_MATERIAL, max_items=256,
+                          what="tables [materials.NAME]"),
+    "box": _array(_BOX, "box", MAX_BOXES),
+    "emitter": _array(_EMITTER, "emitter", MAX_EMITTERS, min_items=1),
+    "receiver": _array(_RECEIVER, "receiver", 100_000),
+    "receiver_grid": _array(_GRID, "receiver_grid", MAX_GRIDS),
+    "simulation": _SIMULATION,
+}, required=("room", "emitter"))
+
+
+_ARRAYS = ("box", "emitter", "receiver", "receiver_grid")
+
+
+# ----------------------------------------------------------------------------- reading
 class _Ctx:
-    def __init__(self, path):
+    """Where a scene came from: its file (messages), its folder (material files) and the
+    folders material files may be read from."""
+
+    def __init__(self, path, materials_dir=None):
         self.path = path
         self.base = Path(path).parent if path else Path.cwd()
+        self.roots = [self.base] + ([Path(materials_dir)] if materials_dir is not None else [])
+        self.schema = sc.Context(path, "toml", _ARRAYS, SceneError)
 
-    def fail(self, where: str, msg: str):
-        prefix = f"{self.path}: " if self.path else ""
-        raise IrreflectError(f"{prefix}{where}: {msg}")
+    def fail(self, key, msg: str):
+        """``FILE: TABLE: msg`` (``key`` names the table or array item)."""
+        self.schema.fail(tuple(key), msg)
 
-
-def _number(ctx, where, key, value, *, lo=None, hi=None, lo_open=False, positive=False):
-    if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value):
-        ctx.fail(where, f"{key} must be a finite number; found {value!r}")
-    value = float(value)
-    if positive and value <= 0:
-        ctx.fail(where, f"{key} must be > 0; found {value:g}")
-    if lo is not None and (value < lo or (lo_open and value == lo)):
-        ctx.fail(where, f"{key} must be {'>' if lo_open else '>='} {lo:g}; found {value:g}")
-    if hi is not None and value > hi:
-        ctx.fail(where, f"{key} must be <= {hi:g}; found {value:g}")
-    return value
+    def fail_value(self, key, msg: str):
+        """``FILE: TABLE: KEY: msg`` (``key`` names a value: its table, then its name)."""
+        key = tuple(key)
+        j = 2 if len(key) > 2 and isinstance(key[1], int) else len(key) - 1
+        self.schema.fail(key[:j], f"{sc.dotted(key[j:])}: {msg}")
 
 
-def _vector(ctx, where, key, value, *, unit=False):
-    if (not isinstance(value, list) or len(value) != 3
-            or not all(isinstance(v, int | float) and not isinstance(v, bool)
-                       and math.isfinite(v) for v in value)):
-        ctx.fail(where, f"{key} must be 3 numbers [x, y, z]; found {value!r}")
-    vec = np.array(value, float)
-    if unit:
-        norm = np.linalg.norm(vec)
-        if norm == 0:
-            ctx.fail(where, f"{key} must not be [0, 0, 0]: give the direction it faces, "
-                            "e.g. [0, 0, -1] for down")
-        vec = vec / norm
-    return vec
+def load_scene(path, *, materials_dir=None) -> Scene:
+    """Read and validate a scene TOML file (see the module docstring).
 
-
-def _check_keys(ctx, where, table, allowed, required=()):
-    if not isinstance(table, dict):
-        ctx.fail(where, f"expected a table of keys; found {table!r}")
-    for key in required:
-        if key not in table:
-            ctx.fail(where, f"missing key '{key}' (expected {', '.join(required)})")
-    unknown = [k for k in table if k not in allowed]
-    if unknown:
-
-        close = difflib.get_close_matches(unknown[0], allowed, n=1)
-        hint = f"; did you mean '{close[0]}'?" if close else f"; allowed: {', '.join(allowed)}"
-        ctx.fail(where, f"unknown key '{unknown[0]}'{hint}")
-
-
-def _inside(ctx, where, key, pos, size):
-    tol = 1e-9
-    if np.any(pos < -tol) or np.any(pos > size + tol):
-        ctx.fail(where, f"{key} {pos.tolist()} is outside the room [0..{size[0]:g}, "
-                        f"0..{size[1]:g}, 0..{size[2]:g}]: move it inside")
-
-
-def load_scene(path) -> Scene:
-    """Read and validate a scene TOML file."""
-    path = Path(path)
-    if not path.exists():
-        raise IrreflectError(f"{path}: no such file: expected a scene TOML file "
-                             "(see datasets/rooms/office.toml)")
+    ``materials_dir``: a folder from which material files may be read besides the scene's
+    own folder.
+    """
     try:
-        doc = tomllib.loads(path.read_text())
-    except tomllib.TOMLDecodeError as exc:
-        raise IrreflectError(f"{path}: not valid TOML ({exc}): fix the syntax") from exc
-    except UnicodeDecodeError as exc:
-        raise IrreflectError(f"{path}: not a text file; expected a scene TOML file") from exc
-    return scene_from_dict(doc, path=str(path))
+        text = read_text(path, "scene", "a scene TOML file (see datasets/rooms/office.toml)",
+                         fix="a scene is a few KB of text")
+        doc = parse_toml(text, str(path), "a scene TOML file")
+    except SceneError:
+        raise
+    except IrreflectError as exc:
+        raise SceneError(str(exc)) from None
+    return scene_from_dict(doc, path=str(path), materials_dir=materials_dir)
 
 
-def scene_from_dict(doc: dict, path: str | None = None) -> Scene:
-    """Build and validate a scene from the TOML structure (a dict)."""
-    ctx = _Ctx(path)
-    _check_keys(ctx, "top level", doc,
-                ("scene", "room", "materials", "box", "emitter", "receiver", "receiver_grid",
-                 "simulation"), ("room", "emitter"))
+def scene_from_dict(doc: dict, path: str | None = None, *, materials_dir=None) -> Scene:
+    """Build and validate a scene from the TOML structure (a dict): the schema first, then
+    the rules that tie keys together (see the module docstring)."""
+    if materials_dir is not None:
+        _check_materials_dir(materials_dir)
+    if not isinstance(path, str | os.PathLike | None):
+        raise SceneError(f"path must be the scene file's path (or None); found {path!r}")
+    ctx = _Ctx(path, materials_dir)
+    doc = sc.validate(SCENE_SCHEMA, doc, path, "toml", _ARRAYS, SceneError)
+    size = np.array(doc["room"]["size_m"])
+    materials = _Materials(ctx, doc.get("materials", {}))
+    faces = _room_faces(ctx, doc["room"]["materials"], materials)
+    boxes = _boxes(ctx, doc.get("box", []), size, materials)
+    emitters = _emitters(ctx, doc["emitter"], size, boxes)
+    receivers, grids = _receivers(ctx, doc, size, boxes)
+    _check_names(ctx, emitters, receivers, grids)
+    _check_distances(ctx, emitters, receivers)
     info = doc.get("scene", {})
-    _check_keys(ctx, "[scene]", info, ("name", "notes"))
-    name = str(info.get("name", Path(path).stem if path else "scene"))
+    name = info.get("name") or _default_name(path)
+    return Scene(name=name, size=size, room_materials=tuple(faces),
+                 materials=materials.table, emitters=tuple(emitters),
+                 receivers=tuple(receivers), boxes=tuple(boxes), grids=tuple(grids),
+                 settings=dict(doc.get("simulation", {})), path=path)
 
-    room = doc["room"]
-    _check_keys(ctx, "[room]", room, ("size_m", "materials"), ("size_m", "materials"))
-    size = _vector(ctx, "[room]", "size_m", room["size_m"])
-    if np.any(size <= 0):
-        ctx.fail("[room]", f"size_m must be 3 positive lengths; found {size.tolist()}")
 
-    # materials
-    raw_mats = doc.get("materials", {})
-    if not isinstance(raw_mats, dict):
-        ctx.fail("[materials]", "expected tables [materials.NAME]")
-    materials: dict[str, Material] = {}
-    for mname, spec in raw_mats.items():
-        materials[mname] = _material(ctx, mname, spec)
+def _default_name(path) -> str:
+    stem = Path(path).stem if path else "scene"
+    return "".join(c if c.isalnum() or c in sc.NAME_PUNCTUATION else "_" for c in stem)[:64] \
+        or "scene"
 
-    def resolve(where, value) -> str:
-        if not isinstance(value, str) or not value.strip():
-            ctx.fail(where, f"material must be a name, \"lambertian(RHO)\" or a .json file; "
-                            f"found {value!r}")
-        if value in materials:
+
+def _check_materials_dir(folder) -> None:
+    if not isinstance(folder, str | os.PathLike) or not Path(folder).is_dir():
+        raise SceneError(f"--materials-dir {folder}: expected an existing folder of "
+                             "material files")
+
+
+# ----------------------------------------------------------------------------- materials
+class _Materials:
+    """The scene's materials by name: its [materials.NAME] tables, then every
+    "lambertian(RHO)" and .json file the faces name."""
+
+    def __init__(self, ctx: _Ctx, specs: dict):
+        self.ctx = ctx
+        self.table: dict[str, Material] = {}
+        for name, spec in specs.items():
+            self.table[name] = _material(ctx, name, spec)
+
+    def resolve(self, key, value: str) -> str:
+        """The material name a face uses (adding lambertian(RHO) and files as needed)."""
+        ctx = self.ctx
+        if not value.strip():
+            ctx.fail_value(key, 'material must be a name, "lambertian(RHO)" or a .json file; '
+                          "found an empty name")
+        if value in self.table:
             return value
-        rho = parse_lambertian(value)
+        try:
+            rho = parse_lambertian(value)
+        except IrreflectError as exc:
+            ctx.fail_value(key, str(exc))
         if rho is not None:
-            key = f"lambertian({rho:g})"
-            if key not in materials:
+            name = f"lambertian({rho:g})"
+            if name not in self.table:
                 try:
-                    materials[key] = lambertian(rho, name=key)
+                    self.table[name] = lambertian(rho, name=name)
                 except IrreflectError as exc:
-                    ctx.fail(where, str(exc))
-            return key
+                    ctx.fail_value(key, str(exc))
+            return name
         if value.lower().endswith(".json"):
-            if value not in materials:
-                try:
-                    materials[value] = load_material(ctx.base / value, name=value)
-                except IrreflectError as exc:
-                    ctx.fail(where, str(exc))
+            file = material_path(ctx, key, value)
+            try:
+                self.table[value] = load_material(file, name=value)
+            except IrreflectError as exc:
+                ctx.fail_value(key, str(exc))
             return value
-
-        close = difflib.get_close_matches(value, list(materials), n=1)
+        close = difflib.get_close_matches(value, list(self.table), n=1)
         hint = f"did you mean '{close[0]}'?" if close else (
-            "define it in [materials." + value + "] or use lambertian(RHO)")
-        ctx.fail(where, f"unknown material '{value}': {hint}")
+            f"define it in [materials.{value}] or use lambertian(RHO)")
+        ctx.fail_value(key, f"unknown material '{value}': {hint}")
         return value  # unreachable
 
-    room_mats = room["materials"]
-    _check_keys(ctx, "[room.materials]", room_mats, ROOM_FACES + ("walls",))
+
+def material_path(ctx: _Ctx, key, value: str) -> Path:
+    """The path of a material file named by a scene, refused (before anything is opened,
+    with one message whether or not it exists) when it leaves the scene's folder and
+    ``materials_dir``, by an absolute path, '..' or a symlink."""
+    candidate = Path(value) if Path(value).is_absolute() else ctx.base / value
+    lexical = Path(os.path.normpath(candidate.absolute()))
+    real = Path(os.path.realpath(candidate))
+    for root in ctx.roots:
+        inside_lexically = _within(lexical, Path(os.path.normpath(root.absolute())))
+        if inside_lexically and _within(real, Path(os.path.realpath(root))):
+            return candidate
+    folders = " or ".join(f"'{r}'" for r in ctx.roots)
+    ctx.fail_value(key, f"material file '{value}' is outside the scene's folder {folders}: a scene "
+                  "reads material files only from its own folder; copy the file there, or "
+                  "allow another folder with 'irreflect room --materials-dir DIR' "
+                  "(load_scene(path, materials_dir=DIR))")
+    return candidate  # unreachable
+
+
+def _within(path: Path, root: Path) -> bool:
+    return path == root or root in path.parents
+
+
+def _material(ctx: _Ctx, name: str, spec: dict) -> Material:
+    key = ("materials", name)
+    kinds = [k for k in ("file", "lambertian", "model") if k in spec]
+    if len(kinds) != 1:
+        ctx.fail(key, 'give exactly one of file = "MATERIAL.json", lambertian = RHO, or '
+                      'model = "NAME" with params = {...}')
+    try:
+        if "file" in spec:
+            file = material_path(ctx, (*key, "file"), spec["file"])
+            return load_material(file, name=name, reflectance=spec.get("reflectance"))
+        if "lambertian" in spec:
+            return lambertian(spec["lambertian"], name=name)
+        if "params" not in spec:
+            ctx.fail(key, "model needs params = {NAME = VALUE, ...} (see 'irreflect models')")
+        if "reflectance" not in spec:
+            ctx.fail(key, 'give reflectance = RHO (total reflectance, 0..1) or "K"')
+        check_params(spec["model"], spec["params"], f"[materials.{name}]: params")
+        return from_model(spec["model"], spec["params"], spec["reflectance"], name=name,
+                          source=f"{spec['model']} (scene)",
+                          gamma_max_deg=spec.get("gamma_max_deg"))
+    except SceneError:
+        raise
+    except IrreflectError as exc:
+        if ctx.path and str(exc).startswith(str(ctx.path)):
+            raise
+        ctx.fail(key, str(exc))
+        raise  # unreachable
+
+
+# ----------------------------------------------------------------------------- geometry
+def _room_faces(ctx: _Ctx, spec: dict, materials: _Materials) -> list[str]:
     faces = []
     for face in ROOM_FACES:
-        value = room_mats.get(face, room_mats.get("walls") if face.startswith("wall") else None)
-        if value is None:
-            ctx.fail("[room.materials]", f"no material for the {face}: set '{face}'"
+        given = face if face in spec or not face.startswith("wall") else "walls"
+        if given not in spec:
+            ctx.fail(("room", "materials"), f"no material for the {face}: set '{face}'"
                      + (" or 'walls'" if face.startswith("wall") else ""))
-        faces.append(resolve(f"[room.materials] {face}", value))
+        faces.append(materials.resolve(("room", "materials", given), spec[given]))
+    return faces
 
-    # boxes
+
+def _inside(ctx, key, name, pos, size):
+    if np.any(pos < -_TOL) or np.any(pos > size + _TOL):
+        ctx.fail(key, f"{name} {list(map(float, pos))} is outside the room [0..{size[0]:g}, "
+                      f"0..{size[1]:g}, 0..{size[2]:g}]: move it inside")
+
+
+def _boxes(ctx: _Ctx, specs: list, size, materials: _Materials) -> list[Box]:
     boxes = []
-    for i, b in enumerate(_array_of_tables(ctx, doc, "box"), 1):
-        where = f"[[box]] {i}"
-        _check_keys(ctx, where, b, ("name", "min_m", "max_m", "material"),
-                    ("min_m", "max_m", "material"))
-        lo = _vector(ctx, where, "min_m", b["min_m"])
-        hi = _vector(ctx, where, "max_m", b["max_m"])
+    for i, b in enumerate(specs):
+        key = ("box", i)
+        lo, hi = np.array(b["min_m"]), np.array(b["max_m"])
         if np.any(hi <= lo):
-            ctx.fail(where, f"max_m must exceed min_m on every axis; found min {lo.tolist()} "
-                            f"max {hi.tolist()}")
-        _inside(ctx, where, "min_m", lo, size)
-        _inside(ctx, where, "max_m", hi, size)
-        mspec = b["material"]
-        if isinstance(mspec, dict):
-            _check_keys(ctx, where + " material", mspec, BOX_FACES + ("sides",))
-            names = []
-            for face in BOX_FACES:
-                value = mspec.get(face, mspec.get("sides") if face[0] in "xy" else None)
-                if value is None:
-                    ctx.fail(where, f"material has no entry for face '{face}'")
-                names.append(resolve(f"{where} material {face}", value))
-        else:
-            names = [resolve(f"{where} material", mspec)] * 6
-        boxes.append(Box(str(b.get("name", f"box{i}")), lo, hi, tuple(names)))
-    for i in range(len(boxes)):
-        for j in range(i + 1, len(boxes)):
-            a, c = boxes[i], boxes[j]
+            ctx.fail(key, f"max_m must exceed min_m on every axis; found min {lo.tolist()} "
+                          f"max {hi.tolist()}")
+        _inside(ctx, key, "min_m", lo, size)
+        _inside(ctx, key, "max_m", hi, size)
+        if np.all(lo <= _TOL) and np.all(hi >= size - _TOL):
+            ctx.fail(key, "the box fills the whole room: nothing is left to light; make it "
+                          "smaller than the room")
+        names = _box_materials(ctx, key, b["material"], materials)
+        boxes.append(Box(b.get("name", f"box{i + 1}"), lo, hi, tuple(names)))
+    for j, c in enumerate(boxes):
+        for a in boxes[:j]:
             if np.all(a.lo < c.hi) and np.all(c.lo < a.hi):
-                ctx.fail(f"[[box]] {j + 1}", f"box '{c.name}' overlaps box '{a.name}': boxes "
-                                             "must not overlap (split or move them)")
+                ctx.fail(("box", j), f"box '{c.name}' overlaps box '{a.name}': boxes must not "
+                                     "overlap (split or move them)")
+    return boxes
 
-    def not_in_box(where, pos):
+
+def _box_materials(ctx, key, spec, materials: _Materials) -> list[str]:
+    if not isinstance(spec, dict):
+        return [materials.resolve((*key, "material"), spec)] * 6
+    names = []
+    for face in BOX_FACES:
+        value = spec.get(face, spec.get("sides") if face[0] in "xy" else None)
+        if value is None:
+            ctx.fail(key, f"material has no entry for face '{face}'")
+        names.append(materials.resolve((*key, "material", face), value))
+    return names
+
+
+def _check_placement(ctx, key, pos, direction, size, boxes, what: str, fov_deg=90.0) -> None:
+    """``pos`` inside the room and not inside a box, and ``direction`` not turned away
+    from the room by the wall, floor, ceiling or box face it sits on (an emitter pointing
+    straight into it sends nothing into the room; a receiver turned away by more than its
+    field of view receives nothing)."""
+    _inside(ctx, key, "position_m", pos, size)
+    for b in boxes:
+        if np.all(pos > b.lo + _TOL) and np.all(pos < b.hi - _TOL):
+            ctx.fail(key, f"position {list(map(float, pos))} is inside box '{b.name}': move it "
+                          "onto or out of the box")
+    # what a source or detector on this surface must not face: cos(angle to the normal
+    # into the room) at most this
+    worst = -1.0 + 1e-9 if what == "emitter" else -math.sin(math.radians(fov_deg)) + 1e-9
+    for surface, normal in _surfaces_at(pos, size, boxes):
+        if float(direction @ normal) <= worst:
+            ctx.fail(key, f"the {what} sits on {surface} and faces into it, so no light "
+                          f"{'leaves it' if what == 'emitter' else 'reaches it'}: turn its "
+                          f"direction into the room, e.g. direction = "
+                          f"{[int(v) for v in normal]}")
+
+
+_FACE_NAMES = (("the wall x = 0", "the wall x = size_x"), ("the wall y = 0", "the wall y = size_y"),
+               ("the floor", "the ceiling"))
+
+
+def _surfaces_at(pos, size, boxes):
+    """(name, unit normal into the room) of every room or box face ``pos`` lies on."""
+    for axis in range(3):
+        normal = np.zeros(3)
+        normal[axis] = 1.0
+        if abs(pos[axis]) <= _TOL:
+            yield _FACE_NAMES[axis][0], normal
+        if abs(pos[axis] - size[axis]) <= _TOL:
+            yield _FACE_NAMES[axis][1], -normal
         for b in boxes:
-            if np.all(pos > b.lo + 1e-9) and np.all(pos < b.hi - 1e-9):
-                ctx.fail(where, f"position {pos.tolist()} is inside box '{b.name}': move it "
-                                "onto or out of the box")
+            if not _strictly_within(pos, b, axis):
+                continue
+            if abs(pos[axis] - b.lo[axis]) <= _TOL:
+                yield f"a face of box '{b.name}'", -normal
+            if abs(pos[axis] - b.hi[axis]) <= _TOL:
+                yield f"a face of box '{b.name}'", normal
 
-    # emitters
+
+def _strictly_within(pos, box: Box, axis: int) -> bool:
+    """``pos`` lies inside the face of ``box`` normal to ``axis`` (not on its edge)."""
+    others = [a for a in range(3) if a != axis]
+    return all(box.lo[a] + _TOL < pos[a] < box.hi[a] - _TOL for a in others)
+
+
+def _emitters(ctx: _Ctx, specs: list, size, boxes) -> list[Emitter]:
     emitters = []
-    for i, e in enumerate(_array_of_tables(ctx, doc, "emitter"), 1):
-        where = f"[[emitter]] {i}"
-        _check_keys(ctx, where, e, ("name", "position_m", "direction", "lambertian_order",
-                                    "half_power_angle_deg", "power_w", "modulation_frequency_hz"),
-                    ("position_m", "direction"))
-        pos = _vector(ctx, where, "position_m", e["position_m"])
-        _inside(ctx, where, "position_m", pos, size)
-        not_in_box(where, pos)
-        direction = _vector(ctx, where, "direction", e["direction"], unit=True)
+    for i, e in enumerate(specs):
+        key = ("emitter", i)
+        pos, direction = np.array(e["position_m"]), _unit(e["direction"])
+        _check_placement(ctx, key, pos, direction, size, boxes, "emitter")
         if ("lambertian_order" in e) == ("half_power_angle_deg" in e):
-            ctx.fail(where, "give exactly one of lambertian_order (1 = Lambertian) or "
-                            "half_power_angle_deg (60 = Lambertian)")
-        if "lambertian_order" in e:
-            order = _number(ctx, where, "lambertian_order", e["lambertian_order"], lo=0.0)
-        else:
-            half = _number(ctx, where, "half_power_angle_deg", e["half_power_angle_deg"],
-                           lo=0.0, hi=90.0, lo_open=True)
-            if half >= 90:
-                ctx.fail(where, "half_power_angle_deg must be < 90")
-            order = -math.log(2) / math.log(math.cos(math.radians(half)))  # Eq. 3
-        power = _number(ctx, where, "power_w", e.get("power_w", 1.0), positive=True)
-        fmod = _number(ctx, where, "modulation_frequency_hz", e.get("modulation_frequency_hz", 0.0),
-                       lo=0.0)
-        emitters.append(Emitter(str(e.get("name", f"emitter{i}")), pos, direction, order, power, fmod))
-    if not emitters:
-        ctx.fail("[[emitter]]", "the scene needs at least one emitter")
+            ctx.fail(key, "give exactly one of lambertian_order (1 = Lambertian) or "
+                          "half_power_angle_deg (60 = Lambertian)")
+        order = e.get("lambertian_order")
+        if order is None:  # Eq. 3; the schema keeps the angle within [1, 90) degrees
+            order = -math.log(2) / math.log(math.cos(math.radians(e["half_power_angle_deg"])))
+        emitters.append(Emitter(e.get("name", f"emitter{i + 1}"), pos, direction, float(order),
+                                e["power_w"], e["modulation_frequency_hz"]))
+    return emitters
 
-    # receivers
-    receivers, grids = [], []
-    rx_keys = ("name", "position_m", "direction", "area_m2", "fov_deg", "filter_gain",
-               "concentrator_gain")
 
-    def rx_common(where, r):
-        area = _number(ctx, where, "area_m2", r.get("area_m2", 1e-4), positive=True)
-        fov = _number(ctx, where, "fov_deg", r.get("fov_deg", 90.0), lo=0.0, hi=90.0, lo_open=True)
-        filt = _number(ctx, where, "filter_gain", r.get("filter_gain", 1.0), lo=0.0)
-        conc = _number(ctx, where, "concentrator_gain", r.get("concentrator_gain", 1.0), lo=0.0)
-        direction = _vector(ctx, where, "direction", r.get("direction", [0, 0, 1]), unit=True)
-        return direction, area, fov, filt, conc
+def _unit(vector) -> np.ndarray:
+    """A direction scaled to unit length (scaled by its largest component first, so that
+    neither 1e308 nor 1e-320 components overflow or vanish)."""
+    v = np.array(vector, float)
+    v = v / np.max(np.abs(v))
+    return v / np.linalg.norm(v)
 
-    for i, r in enumerate(_array_of_tables(ctx, doc, "receiver"), 1):
-        where = f"[[receiver]] {i}"
-        _check_keys(ctx, where, r, rx_keys, ("position_m",))
-        pos = _vector(ctx, where, "position_m", r["position_m"])
-        _inside(ctx, where, "position_m", pos, size)
-        not_in_box(where, pos)
-        receivers.append(Receiver(str(r.get("name", f"rx{i}")), pos, *rx_common(where, r)))
-    for i, g in enumerate(_array_of_tables(ctx, doc, "receiver_grid"), 1):
-        where = f"[[receiver_grid]] {i}"
-        _check_keys(ctx, where, g, ("name", "z_m", "x_m", "y_m", "n", "direction", "area_m2",
-                                    "fov_deg", "filter_gain", "concentrator_gain"),
-                    ("z_m", "n"))
-        gname = str(g.get("name", f"grid{i}"))
-        z = _number(ctx, where, "z_m", g["z_m"], lo=0.0, hi=float(size[2]))
-        n = g["n"]
-        if (not isinstance(n, list) or len(n) != 2
-                or not all(isinstance(v, int) and not isinstance(v, bool) and 1 <= v <= 500 for v in n)):
-            ctx.fail(where, f"n must be [nx, ny], two integers 1..500; found {n!r}")
-        xs = _range(ctx, where, "x_m", g.get("x_m", [0.0, float(size[0])]), float(size[0]), n[0])
-        ys = _range(ctx, where, "y_m", g.get("y_m", [0.0, float(size[1])]), float(size[1]), n[1])
-        common = rx_common(where, g)
-        grids.append(Grid(gname, z, xs, ys))
-        for iy, y in enumerate(ys):
-            for ix, x in enumerate(xs):
-                pos = np.array([x, y, z])
-                if any(np.all(pos > b.lo - 1e-9) and np.all(pos < b.hi + 1e-9) for b in boxes):
-                    continue  # inside furniture: no receiver there (a gap in the map)
-                receivers.append(Receiver(f"{gname}[{ix},{iy}]", pos, *common, grid=gname,
-                                          grid_index=(ix, iy)))
+
+def _receivers(ctx: _Ctx, doc: dict, size, boxes):
+    specs, grid_specs = doc.get("receiver", []), doc.get("receiver_grid", [])
+    total = len(specs) + sum(g["n"][0] * g["n"][1] for g in grid_specs)
+    limit = budget("receivers")
+    if total > limit:
+        ctx.fail(("receiver_grid",) if grid_specs else ("receiver",),
+                 f"{total} receivers is more than this machine's budget of {limit:,.0f} "
+                 "receivers per scene: use fewer grid points (n = [nx, ny]) or receivers "
+                 "(or raise the budget: IRREFLECT_BUDGET_RECEIVERS=N)")
+    receivers = []
+    for i, r in enumerate(specs):
+        key = ("receiver", i)
+        pos, common = np.array(r["position_m"]), _rx_common(r)
+        _check_placement(ctx, key, pos, common[0], size, boxes, "receiver", r["fov_deg"])
+        receivers.append(Receiver(r.get("name", f"rx{i + 1}"), pos, *common))
+    grids = []
+    for i, g in enumerate(grid_specs):
+        grid, members = _grid(ctx, i, g, size, boxes)
+        grids.append(grid)
+        receivers.extend(members)
     if not receivers:
-        ctx.fail("[[receiver]]", "the scene needs at least one [[receiver]] or [[receiver_grid]]")
-    names = [r.name for r in receivers]
-    dup = {n for n in names if names.count(n) > 1}
-    if dup:
-        ctx.fail("[[receiver]]", f"receiver names must be distinct; '{sorted(dup)[0]}' repeats")
-
-    settings = _settings(ctx, doc.get("simulation", {}))
-    return Scene(name=name, size=size, room_materials=tuple(faces), materials=materials,
-                 emitters=tuple(emitters), receivers=tuple(receivers), boxes=tuple(boxes),
-                 grids=tuple(grids), settings=settings, path=path)
+        ctx.fail((), "the scene needs at least one [[receiver]] or [[receiver_grid]] (with a "
+                     "point outside the boxes)")
+    return receivers, grids
 
 
-def _range(ctx, where, key, value, top, n):
-    if (not isinstance(value, list) or len(value) != 2
-            or not all(isinstance(v, int | float) and not isinstance(v, bool) for v in value)):
-        ctx.fail(where, f"{key} must be [min, max] in metres; found {value!r}")
-    lo, hi = float(value[0]), float(value[1])
-    if not (0 <= lo <= hi <= top):
-        ctx.fail(where, f"{key} must satisfy 0 <= min <= max <= {top:g}; found {value!r}")
+def _rx_common(r: dict):
+    return (_unit(r["direction"]), r["area_m2"], r["fov_deg"], r["filter_gain"],
+            r["concentrator_gain"])
+
+
+def _grid(ctx: _Ctx, i: int, g: dict, size, boxes):
+    key = ("receiver_grid", i)
+    name = g.get("name", f"grid{i + 1}")
+    z = g["z_m"]
+    if z > size[2] + _TOL:
+        ctx.fail(key, f"z_m {z:g} is above the ceiling ({size[2]:g} m): move the grid inside")
+    nx, ny = g["n"]
+    xs = _span(ctx, key, "x_m", g.get("x_m", (0.0, float(size[0]))), float(size[0]), nx)
+    ys = _span(ctx, key, "y_m", g.get("y_m", (0.0, float(size[1]))), float(size[1]), ny)
+    common = _rx_common(g)
+    members = []
+    for iy, y in enumerate(ys):
+        for ix, x in enumerate(xs):
+            pos = np.array([x, y, z])
+            if any(np.all(pos > b.lo - _TOL) and np.all(pos < b.hi + _TOL) for b in boxes):
+                continue  # inside furniture: no receiver there (a gap in the map)
+            members.append(Receiver(f"{name}[{ix},{iy}]", pos, *common, grid=name,
+                                    grid_index=(ix, iy)))
+    corners = {(0, 0), (nx - 1, 0), (0, ny - 1), (nx - 1, ny - 1)}
+    for m in members:  # the grid's extreme points: on a wall if any point is
+        if m.grid_index in corners:
+            _check_placement(ctx, key, m.position, common[0], size, (), "receiver grid",
+                             g["fov_deg"])
+    return Grid(name, z, xs, ys), members
+
+
+def _span(ctx, key, name, value, top, n):
+    lo, hi = value
+    if not (0 <= lo <= hi <= top + _TOL):
+        ctx.fail(key, f"{name} must satisfy 0 <= min <= max <= {top:g}; found "
+                      f"[{lo:g}, {hi:g}]")
     if n == 1:
         return np.array([(lo + hi) / 2])
     return np.linspace(lo, hi, n)
 
 
-def _array_of_tables(ctx, doc, key):
-    value = doc.get(key, [])
-    if isinstance(value, dict):
-        ctx.fail(f"[{key}]", f"write [[{key}]] (an array of tables), not [{key}]")
-    return value
+# ----------------------------------------------------------------------------- cross-checks
+def _check_names(ctx: _Ctx, emitters, receivers, grids) -> None:
+    """Distinct names, also as file names (figures are named after emitters, receivers and
+    grids: 'a b' and 'a_b' would overwrite each other's)."""
+    from .results import safe_name
+
+    for what, key, names in (("emitter", "emitter", [e.name for e in emitters]),
+                             ("receiver", "receiver", [r.name for r in receivers]),
+                             ("grid", "receiver_grid", [g.name for g in grids])):
+        counts = Counter(names)
+        dup = next((n for n, k in counts.items() if k > 1), None)
+        if dup is not None:
+            ctx.fail((key,), f"{what} names must be distinct; '{dup}' is used "
+                             f"{counts[dup]} times: rename them")
+        files: dict[str, str] = {}
+        for n in names:
+            stem = safe_name(n).lower()
+            if stem in files:
+                ctx.fail((key,), f"{what} names '{files[stem]}' and '{n}' give the same file "
+                                 f"name '{safe_name(n)}' (figures would overwrite each other): "
+                                 "rename one")
+            files[stem] = n
 
 
-def _material(ctx, name, spec) -> Material:
-    where = f"[materials.{name}]"
-    if not isinstance(spec, dict):
-        ctx.fail(where, f"expected a table with file, lambertian or model + params; found {spec!r}")
-    _check_keys(ctx, where, spec, ("file", "lambertian", "model", "params", "reflectance",
-                                   "gamma_max_deg", "notes"))
-    kinds = [k for k in ("file", "lambertian", "model") if k in spec]
-    if len(kinds) != 1:
-        ctx.fail(where, "give exactly one of file = \"MATERIAL.json\", lambertian = RHO, or "
-                        "model = \"NAME\" with params = {...}")
-    try:
-        if "file" in spec:
-            return load_material(ctx.base / str(spec["file"]), name=name,
-                                 reflectance=spec.get("reflectance"))
-        if "lambertian" in spec:
-            return lambertian(spec["lambertian"], name=name)
-        if "params" not in spec or not isinstance(spec["params"], dict):
-            ctx.fail(where, "model needs params = {NAME = VALUE, ...} (see 'irreflect models')")
-        if "reflectance" not in spec:
-            ctx.fail(where, "give reflectance = RHO (total reflectance, 0..1) or \"K\"")
-        return from_model(str(spec["model"]), spec["params"], spec["reflectance"], name=name,
-                          source=f"{spec['model']} (scene)", gamma_max_deg=spec.get("gamma_max_deg"))
-    except IrreflectError as exc:
-        if ctx.path and str(exc).startswith(str(ctx.path)):
-            raise
-        ctx.fail(where, str(exc))
-        raise  # unreachable
-
-
-def _settings(ctx, sim) -> dict:
-    where = "[simulation]"
-    _check_keys(ctx, where, sim, ("method", "bounces", "cell_m", "rays", "seed",
-                                  "time_resolution_ns"))
-    out = {}
-    if "method" in sim:
-        if sim["method"] not in METHODS:
-            ctx.fail(where, f"method must be one of {', '.join(METHODS)}; found {sim['method']!r}")
-        out["method"] = sim["method"]
-    for key, lo in (("bounces", 0), ("rays", 1), ("seed", 0)):
-        if key in sim:
-            v = sim[key]
-            if not isinstance(v, int) or isinstance(v, bool) or v < lo:
-                ctx.fail(where, f"{key} must be an integer >= {lo}; found {v!r}")
-            out[key] = v
-    for key in ("cell_m", "time_resolution_ns"):
-        if key in sim:
-            out[key] = _number(ctx, where, key, sim[key], positive=True)
-    return out
+def _check_distances(ctx: _Ctx, emitters, receivers) -> None:
+    """No receiver at an emitter (the line of sight would be undefined)."""
+    if not emitters or not receivers:
+        return
+    pos_r = np.array([r.position for r in receivers])
+    for i, e in enumerate(emitters):
+        d = np.linalg.norm(pos_r - e.position, axis=1)
+        j = int(np.argmin(d))
+        if d[j] < MIN_DISTANCE_M:
+            ctx.fail(("emitter", i), f"receiver '{receivers[j].name}' is at emitter '{e.name}' "
+                                     f"(distance {d[j]:.3g} m, less than {MIN_DISTANCE_M:g} m): "
+                                     "the line of sight is undefined; move one of them")
 
 
 __all__ = ["Scene", "Emitter", "Receiver", "Box", "Grid", "load_scene", "scene_from_dict",
-           "ROOM_FACES", "BOX_FACES", "METHODS"]
+           "SCENE_SCHEMA", "ROOM_FACES", "BOX_FACES", "METHODS"]

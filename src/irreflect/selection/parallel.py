@@ -16,12 +16,13 @@ import contextlib
 import multiprocessing as mp
 import os
 import re
-from dataclasses import dataclass
+import warnings
+from dataclasses import dataclass, field
 from pathlib import Path
 
 from ..data import Measurements, as_measurements
 from ..errors import IrreflectError
-from ..validation import check_seed, short_list
+from ..validation import check_int, check_seed, short_list
 from .run import SelectionResult, compare_methods, run_selection
 
 
@@ -33,6 +34,9 @@ class RunOutcome:
     seed: int
     result: SelectionResult
     methods: dict | None
+    #: warnings the run raised, (category, message): raised again in the calling process
+    #: (a worker process would print them with its own source lines)
+    warned: list = field(default_factory=list)
 
 
 @dataclass
@@ -45,13 +49,24 @@ class _Task:
 
 
 def _run_task(task: _Task) -> RunOutcome:
-    res = run_selection(task.meas, seed=task.seed, checkpoint=task.checkpoint, progress=False,
-                        **task.kwargs)
-    methods = None
-    if task.with_methods and not res.interrupted:
-        methods = compare_methods(task.meas, res, model=task.kwargs.get("model", "two-lobe"),
-                                  seed=task.seed)
-    return RunOutcome(task.meas.name, task.seed, res, methods)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        res = run_selection(task.meas, seed=task.seed, checkpoint=task.checkpoint,
+                            progress=False, **task.kwargs)
+        methods = None
+        if task.with_methods and not res.interrupted:
+            methods = compare_methods(task.meas, res, model=task.kwargs.get("model", "two-lobe"),
+                                      seed=task.seed)
+    warned = [(w.category, str(w.message)) for w in caught]
+    return RunOutcome(task.meas.name, task.seed, res, methods, warned)
+
+
+def _warn_again(outcomes) -> None:
+    """The runs' warnings, raised in this process (the CLI prints each once, one line)."""
+    for outcome in outcomes:
+        for category, message in outcome.warned:
+            warnings.warn(message, category if isinstance(category, type)
+                          and issubclass(category, Warning) else UserWarning, stacklevel=3)
 
 
 def _tasks(datasets, seeds, kwargs, with_methods, checkpoint_dir) -> list[_Task]:
@@ -128,6 +143,16 @@ def run_many(datasets, seeds=(0,), *, scheduler=None, workers: int | None = None
     -------
     (outcomes in task order, interrupted)
     """
+    if workers is not None:
+        check_int(workers, "workers", 1)
+    if scheduler is not None and not isinstance(scheduler, str):
+        from distributed import Client
+
+        if not isinstance(scheduler, Client):
+            raise IrreflectError(f"scheduler must be an address such as tcp://host:8786 or a "
+                                 f"distributed.Client; found {type(scheduler).__name__}")
+    elif scheduler is not None:
+        check_scheduler_address(scheduler)
     if checkpoint_dir is not None:
         Path(checkpoint_dir).mkdir(parents=True, exist_ok=True)
     tasks = _tasks(datasets, seeds, kwargs, with_methods, checkpoint_dir)
@@ -138,11 +163,14 @@ def run_many(datasets, seeds=(0,), *, scheduler=None, workers: int | None = None
         bar = progress_display(total=len(tasks), desc="select runs", unit="run")
     try:
         if scheduler is not None:
-            return _run_dask(tasks, scheduler, bar)
-        n_workers = min(workers, len(tasks)) if workers else default_workers(len(tasks))
-        if n_workers <= 1:
-            return _run_serial(tasks, bar)
-        return _run_pool(tasks, n_workers, bar)
+            outcomes, interrupted = _run_dask(tasks, scheduler, bar)
+        else:
+            n_workers = min(workers, len(tasks)) if workers else default_workers(len(tasks))
+            run = _run_serial if n_workers <= 1 else (
+                lambda t, b: _run_pool(t, n_workers, b))
+            outcomes, interrupted = run(tasks, bar)
+        _warn_again(outcomes)
+        return outcomes, interrupted
     finally:
         if bar is not None:
             bar.close()

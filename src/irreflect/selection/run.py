@@ -15,6 +15,7 @@ import contextlib
 import dataclasses
 import hashlib
 import numbers
+import os
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -32,7 +33,13 @@ from ..fitting import fit
 from ..models import get_model
 from ..protocol.points import as_points as _as_points
 from ..protocol.points import paper_protocol_points, protocol_points_mask, snap_points  # noqa: F401
-from ..validation import check_int, check_masks, check_seed, check_selection_budget
+from ..validation import (
+    check_int,
+    check_masks,
+    check_search_budget,
+    check_seed,
+    check_selection_budget,
+)
 from .front import (  # noqa: F401  (knee_index, knee_point, non_dominated re-exported)
     FrontSummary,
     finish_front,
@@ -289,8 +296,12 @@ def run_selection(measurements, model="two-lobe", selector: str = "nsga2",
         )
     if max_points is not None:
         max_points = check_int(max_points, "max_points", 1)
+    checkpoint_every = check_int(checkpoint_every, "checkpoint_every", 1)
+    if checkpoint is not None and not isinstance(checkpoint, str | os.PathLike):
+        raise IrreflectError(f"checkpoint must be a file path (or None); found {checkpoint!r}")
     n = meas.n_points
     check_selection_budget(n, max_points, meas.name, option="max_points")
+    check_search_budget(pop_size, generations, n)
     cand = np.ones(n, bool) if candidates is None else np.asarray(candidates, bool)
     n_min, n_max = check_sizes(n, model_obj.n_params, max_points, candidates)
     if initial is not None:

@@ -112,7 +112,8 @@ def nsga2(spec: SearchSpec) -> None:
     algorithm.setup(problem, termination=("n_gen", spec.generations), seed=spec.seed,
                     verbose=False)
     if spec.checkpoint is not None and Path(spec.checkpoint).exists():
-        state = load_checkpoint(Path(spec.checkpoint), spec.fingerprint, spec.evaluator.n)
+        state = load_checkpoint(Path(spec.checkpoint), spec.fingerprint, spec.evaluator.n,
+                                spec.evaluator.model.n_nonlinear)
         generation = restore(state, algorithm, spec.evaluator)
         previous_seconds = state["meta"]["seconds"]
         spec.info["resumed_from_generation"] = generation
@@ -289,6 +290,6 @@ SELECTORS: dict[str, Selector] = {
 
 def get_selector(name: str) -> Selector:
     """The selector called ``name`` (see :data:`SELECTORS`)."""
-    if name not in SELECTORS:
+    if not isinstance(name, str) or name not in SELECTORS:
         raise unknown_name("selector", name, SELECTORS)
     return SELECTORS[name]
