@@ -175,7 +175,7 @@ def test_tables_over_a_command_budget_are_refused_up_front(table_10_001, tmp_pat
                                                            monkeypatch):
     # the computation must not start: any fit would raise here (the search itself is
     # patched: a module imported meanwhile that binds `fit` would keep a patched `fit`)
-    monkeypatch.setattr("irreflect.fitting._fit_search", _must_not_run)
+    monkeypatch.setattr("irreflect.fitting.api._fit_search", _must_not_run)
     argv = {
         "diagnose": ["diagnose", str(table_10_001)],
         "reproduce": ["reproduce", "--data-dir", str(table_10_001.parent), "--out",
