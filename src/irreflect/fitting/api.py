@@ -19,13 +19,13 @@ from ..models import (
 )
 from ..validation import check_fit_options, check_seed, check_starts, short_list
 from .engine import _kernel_codes, _kernel_geometry
-from .finish import finish
+from .finish import finish, finished_by_kernel
 from .options import (
     FIT_SETTINGS,
     FitOptions,
 )
 from .results import FitResult, _check_sigma, _radians_and_weights, check_fit_data, judge
-from .search import global_search
+from .search import search_and_finish
 
 #: :func:`retry_reasons`: an R^2 below this, or (weighted by 1/sigma^2) a reduced chi^2
 #: above the other, looks like a local optimum rather than the model's best.
@@ -221,18 +221,20 @@ def _fit_search(meas, model, t0, opts: FitOptions) -> FitResult:
         _check_sigma(sigma, source)
     gamma, theta, weights = _radians_and_weights(meas, sigma)
     codes = _kernel_codes(model_obj, opts.engine)
-    kgeo = _kernel_geometry(gamma, theta) if codes is not None else None
+    # the plain two-lobe model's fit computes its geometry in the kernel (fit_plain)
+    kgeo = _kernel_geometry(gamma, theta) if codes is not None and codes.size else None
     table = (gamma, theta, meas.power, weights)
-    out = global_search(model_obj, table, opts, kgeo)
+    out, fin, exact = search_and_finish(model_obj, table, opts, kgeo, sigma is not None)
     if out is None:
         raise FitError(
             f"fit of '{model_obj.name}' to {source} failed: no start reached a finite cost; "
             "check the data for extreme values"
         )
     zb, ab, cb, converged, message, n_starts, n_evals = out
-    fin = finish(model_obj, zb, ab, cb, table, sigma is not None, opts.engine, kgeo, source)
+    fin = (finished_by_kernel(model_obj, fin, meas.power, source) if fin is not None else
+           finish(model_obj, zb, ab, cb, table, sigma is not None, opts.engine, kgeo, source))
     # the distinct angles of incidence stand for all (judge's checks look at each once)
-    angles = gamma if kgeo is None else kgeo.exact
+    angles = gamma if exact is None else exact
     at_bound, ill, warnings = judge(model_obj, fin.values, fin.stderr, fin.singular, angles,
                                     converged, message)
     dof = meas.n_points - model_obj.n_params

@@ -152,12 +152,7 @@ def finish(model, z, alpha, cost, table, absolute_sigma, engine, kgeo, source) -
         kgeo = kgeo if kgeo is not None else _kernel_geometry(gamma, theta)
         fin = tl_finish(_w(z), _w(alpha), tuple(kgeo.geo), kgeo.glcg, _w(weights), _w(power),
                         absolute_sigma, cost, model.n_params)
-        values, round_trip, fitted = fin.values, fin.round_trip, fin.fitted
-        _check_values(model, values, round_trip, source)
-        r2 = _check_r2(model, fin.r2, source)
-        stderr = np.sqrt(np.clip(np.diag(fin.covariance), 0, None))
-        return Finished(values, stderr, fin.covariance, fin.singular, r2, float(fin.rmse),
-                        float(fin.mse), power - fitted)
+        return finished_by_kernel(model, fin, power, source)
     values = model.to_natural(z[None], alpha[None])[0]
     _check_values(model, values, True, source)
     fitted, jfull = _fitted_and_jacobian(model, z, alpha, gamma, theta, weights, engine, kgeo)
@@ -171,6 +166,16 @@ def finish(model, z, alpha, cost, table, absolute_sigma, engine, kgeo, source) -
     return Finished(values, np.sqrt(np.clip(np.diag(cov), 0, None)), cov, singular, r2,
                     float(metrics.rmse(power, fitted)), float(metrics.mse(power, fitted)),
                     power - fitted)
+
+
+def finished_by_kernel(model, fin, power, source) -> Finished:
+    """The kernel's finish (:class:`~.kernel_types.Finish` of
+    :func:`~.finish_kernel.tl_finish`) as :func:`finish` returns it, checked."""
+    _check_values(model, fin.values, fin.round_trip, source)
+    r2 = _check_r2(model, fin.r2, source)
+    stderr = np.sqrt(np.clip(np.diag(fin.covariance), 0, None))
+    return Finished(fin.values, stderr, fin.covariance, fin.singular, r2, float(fin.rmse),
+                    float(fin.mse), power - fin.fitted)
 
 
 def _check_values(model, values, round_trip, source) -> None:

@@ -107,13 +107,10 @@ def _kernel_draws(seed, n_random: int, n_hops: int, rounds: int, p: int):
     return jitter, hops
 
 
-def _kernel_context(model, kt, table, opts: FitOptions, n_screen: int, n_hops: int):
-    """The compiled search's context (see :mod:`.search_kernel`) for one table."""
-    from .search_kernel import work_for
-
+def _kernel_inputs(model, opts: FitOptions, n_screen: int, n_hops: int):
+    """The compiled search's model, draws and stopping rule (see :mod:`.search_kernel`)."""
     static = _kernel_static(model)
     p = model.n_nonlinear
-    _, _, power, weights = table
     jitter, jumps = _kernel_draws(opts.seed, opts.n_random_starts, n_hops, opts.max_rounds, p)
     extra = (np.zeros((0, p)) if opts.extra_starts is None else
              np.clip(np.asarray(opts.extra_starts, float).reshape(-1, p), model.z_lower,
@@ -121,10 +118,18 @@ def _kernel_context(model, kt, table, opts: FitOptions, n_screen: int, n_hops: i
     screen = per_model(model, ("clipped screen", n_screen, opts.seed), lambda: _w(np.clip(
         screen_samples(model, n_screen, opts.seed) if n_screen else np.zeros((0, p)),
         model.z_lower, model.z_upper)))
-    kt = (tuple(kt.geo), kt.glcg, kt.levels, kt.group, kt.exact)
     draws = (_w(jitter * static.jitter_width), _w(extra), screen, _w(jumps), static.hop_width)
-    return (static.plain, kt, work_for(kt, _w(power), _w(weights)), draws,
-            (int(opts.max_iter), 1e-10, 1e-9))
+    return static.plain, draws, (int(opts.max_iter), 1e-10, 1e-9)
+
+
+def _kernel_context(model, kt, table, opts: FitOptions, n_screen: int, n_hops: int):
+    """The compiled search's context (see :mod:`.search_kernel`) for one table."""
+    from .search_kernel import work_for
+
+    _, _, power, weights = table
+    plain, draws, stop = _kernel_inputs(model, opts, n_screen, n_hops)
+    kt = (tuple(kt.geo), kt.glcg, kt.levels, kt.group, kt.exact)
+    return (plain, kt, work_for(kt, _w(power), _w(weights)), draws, stop)
 
 
 def global_search(model_obj, table, opts: FitOptions, kgeo=None):
@@ -137,6 +142,16 @@ def global_search(model_obj, table, opts: FitOptions, kgeo=None):
     The power is divided by its weighted root mean square first (and the linear
     coefficients and the cost scaled back), so that the search sees the same numbers
     whatever the unit of power: the shape coefficients do not depend on it."""
+    return search_and_finish(model_obj, table, opts, kgeo)[0]
+
+
+def search_and_finish(model_obj, table, opts: FitOptions, kgeo=None, absolute_sigma=None):
+    """:func:`global_search`, and with ``absolute_sigma`` (True or False: how fit() takes
+    sigma) on the plain two-lobe model in the compiled kernel the whole fit in one call
+    (:func:`~.search_kernel.fit_plain`: geometry, search and, when the search met its
+    tolerance, the finish). Returns (the search's end as global_search returns it, the
+    kernel's :class:`~.kernel_types.Finish` or None (fit() finishes it), the exact angles
+    of incidence or None (the numpy engine))."""
     gamma, theta, power, weights = table
     power = np.asarray(power, float)
     scale = float(np.sqrt(np.mean(weights * power * power)))
@@ -147,20 +162,29 @@ def global_search(model_obj, table, opts: FitOptions, kgeo=None):
                                                        opts.n_data_starts)
     n_hops = _default_hops(model_obj, n_keep) if opts.n_hops is None else int(opts.n_hops)
     codes = _kernel_codes(model_obj, opts.engine)
+    fin = exact = None
+    sizes = (int(n_data_starts), int(n_keep), int(opts.max_rounds))
     if codes is None:
         backend = NumpyBackend(model_obj, unit, opts, n_screen, n_hops)
-        best, n_starts, n_evals = run_search_numpy(backend, n_data_starts, n_keep,
-                                                   opts.max_rounds)
+        best, n_starts, n_evals = run_search_numpy(backend, *sizes)
+    elif absolute_sigma is not None and codes.size == 0:
+        from .search_kernel import fit_plain
+
+        model, draws, stop = _kernel_inputs(model_obj, opts, n_screen, n_hops)
+        best, (n_starts, n_evals), (done, fin), exact = fit_plain(
+            model, (_w(gamma), _w(theta), _w(unit[2]), _w(weights), _w(power)), draws,
+            (sizes, stop, (bool(absolute_sigma), scale, model_obj.n_params)))
+        fin = fin if done else None
     else:
         from .search_kernel import search
 
         kgeo = kgeo if kgeo is not None else _kernel_geometry(gamma, theta)
+        exact = kgeo.exact
         ctx = _kernel_context(model_obj, kgeo, unit, opts, n_screen, n_hops)
-        best, n_starts, n_evals = search(ctx, int(n_data_starts), int(n_keep),
-                                         int(opts.max_rounds))
+        best, n_starts, n_evals = search(ctx, *sizes)
     if not math.isfinite(best.cost):
-        return None
+        return None, None, exact
     found = (best.z, best.alpha, float(best.cost), int(best.reason), int(n_starts),
              int(n_evals))
     z, alpha, cost, *rest = _conclude(model_obj, *unit, found, opts.polish, opts.max_iter)
-    return (z, alpha * scale, cost * scale * scale, *rest)
+    return (z, alpha * scale, cost * scale * scale, *rest), fin, exact

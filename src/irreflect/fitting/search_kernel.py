@@ -28,10 +28,11 @@ from .fast_kernel import (
     tl_points,
     tl_work,
 )
-from .kernel_math import STOP_NONFINITE
-from .kernel_types import KModel, KTable, Solution, Work
+from .finish_kernel import tl_finish
+from .kernel_math import STOP_MAXITER, STOP_NONFINITE, STOP_STUCK
+from .kernel_types import Finish, KModel, KTable, Solution, Work
 from .local_kernel import _costs, _lm, _scan_candidates
-from .model_kernel import _sizes
+from .model_kernel import _sizes, kernel_geometry
 from .starts_kernel import _diverse, _own_starts, _tl_profile
 
 
@@ -162,3 +163,65 @@ def clip(ctx, rows):
 #: The driver (:func:`irreflect.fitting.driver.run_search`) on these steps, compiled:
 #: ``search(ctx, n_data_starts, n_keep, max_rounds) -> (Solution, n_starts, n_evals)``.
 search = njit(cache=True)(types.FunctionType(run_search.__code__, globals(), "run_search"))
+
+
+
+@njit(cache=True)
+def _plain_work(kt, power, weights):
+    """:func:`work_for` in the kernel (the same arrays, the same tuple types)."""
+    n, n_groups = power.size, kt[1].size
+    sw = np.sqrt(weights)
+    ws = tl_work(n, n_groups)
+    cap = ws.cap
+    # one structure (Work, as a plain tuple: the type the search's steps were compiled for)
+    work = ((kt[0], kt[1], sw, sw * power), power, np.empty((_TL_ROWS, n)),
+            np.empty(n_groups + 1, np.int64), np.empty(n, np.int64),
+            (ws.vec, ws.lin, ws.coef, ws.grad, ws.hess, ws.a, ws.rhs, ws.step, ws.z, ws.zt,
+             ws.pinned, ws.gbuf, (cap.sums, cap.tau, cap.order, cap.lin, cap.s_g)))
+    return work
+
+
+@njit(cache=True)
+def fit_plain(model, columns, draws, config):
+    """A fit of the plain two-lobe model in one call, as main's tl_fit was: the table's
+    kernel geometry (:func:`~.model_kernel.kernel_geometry`), the search's scratch
+    (:func:`work_for`), :func:`search`, and, when the search met a tolerance (nothing for
+    :func:`~.finish._conclude` to polish), the finish (:func:`~.finish_kernel.tl_finish`)
+    of its end point. ``model``: the model's :class:`~.kernel_types.KModel` as a tuple;
+    ``columns``: (gamma, theta (radians), power / scale, weights, power); ``draws`` as in
+    the context; ``config``: ((n_data_starts, n_keep, max_rounds), (max_iter, ftol, xtol),
+    (absolute_sigma, scale, n_params)). Returns (Solution, (n_starts, n_evals), (finished,
+    Finish; a placeholder when not finished), the exact angles of incidence)."""
+    gamma, theta, unit_power, weights, power = columns
+    sizes, stop, fin_in = config
+    kg = kernel_geometry(gamma, theta)
+    g = kg.geo
+    kt = ((g.gamma, g.theta, g.lcg, g.lct, g.pt, g.lcp, g.pp, g.group), kg.glcg, kg.levels,
+          kg.group, kg.exact)
+    ctx = (model, kt, _plain_work(kt, unit_power, weights), draws, stop)
+    best, counts, done, fin = search_finish(ctx, sizes, (weights, power) + fin_in)
+    return best, counts, (done, fin), kg.exact
+
+
+@njit(cache=True)
+def search_finish(ctx, sizes, fin_in):
+    """:func:`search` of the plain two-lobe model, then, when it met a tolerance (nothing
+    for :func:`~.finish._conclude` to polish), the fit's finish
+    (:func:`~.finish_kernel.tl_finish`) of its end point in the same call, as fit() would
+    compute it after. ``sizes``: (n_data_starts, n_keep, max_rounds); ``fin_in``: the
+    table's own weights and power, whether sigma is absolute, the power's scale and the
+    model's parameter count. Returns (Solution, (n_starts, n_evals), finished, Finish);
+    the Finish is a placeholder when not finished."""
+    best, n_starts, n_evals = search(ctx, sizes[0], sizes[1], sizes[2])
+    weights, power, absolute_sigma, scale, n_params = fin_in
+    kt = ctx[1]
+    done = (math.isfinite(best.cost) and best.reason != STOP_STUCK
+            and best.reason != STOP_MAXITER)
+    if done:
+        fin = tl_finish(best.z, best.alpha * scale, kt[0], kt[1], weights, power,
+                        absolute_sigma, best.cost * scale * scale, n_params)
+    else:
+        k = best.z.size + best.alpha.size
+        fin = Finish(np.full(k, np.nan), False, np.full(power.size, np.nan), np.nan, np.nan,
+                     np.nan, np.full((k, k), np.nan), np.zeros(k, np.bool_))
+    return best, (n_starts, n_evals), done, fin
