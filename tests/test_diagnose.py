@@ -470,3 +470,27 @@ def test_noise_proportional_to_the_power_is_estimated_and_a_misfit_is_not_taken_
     assert est.sigma[low] == pytest.approx(case.truth["noise"]["a"], rel=0.35)
     peaks = case.clean > 100 * np.median(case.clean)
     assert np.all(est.sigma[peaks] > 10 * case.truth["noise"]["a"])
+
+
+def test_restrict_undoes_embed():
+    from irreflect.diagnose.search import ModelSets
+
+    sets = ModelSets(get_model("two-lobe"))
+    small = ("angle_offset",)
+    big = ("angle_offset", "offspecular_peak", "retroreflection")
+    n = sets.model(small).n_nonlinear
+    z = np.linspace(0.1, 0.9, n)
+    np.testing.assert_array_equal(sets.restrict(sets.embed(z, small, big), big, small), z)
+
+
+def test_a_parent_is_refitted_from_its_extensions_when_they_all_improve_it_alike():
+    # held-out blind case 10020 (glossy base, Cornell grid, mixed noise, no effect): the
+    # weighted base fit stopped in a worse optimum, every effect improved it by the same
+    # likelihood ratio (~110) and the verdict was a false alarm ('ambiguous between
+    # offspecular_peak and angle_offset and background'); refitted from its extensions'
+    # optima the base model is consistent with the noise
+    case = blind_case(10020)
+    assert case.effects == ()
+    d = diagnose(case.measurements, seed=0)
+    assert d.verdict == "no missing effect", d.verdict
+    assert not d.effects

@@ -1,5 +1,6 @@
-"""Room multipath: checks against closed forms, numerical integration, reciprocity, energy,
-Monte Carlo vs the recursive method, seeds and parallel runs, scenes, files and the CLI."""
+"""Room multipath: the surface models (reciprocity, energy, fidelity to the fitted curve),
+the recursive method against closed forms, numerical integration and converged Monte Carlo,
+swapped links, energy in closed rooms, scenes, files and the CLI."""
 
 from __future__ import annotations
 
@@ -20,94 +21,221 @@ from irreflect.room import (
     scene_from_dict,
     simulate,
 )
+from irreflect.room.kernels import hemisphere_integral, pack_materials, sampled_albedo
 from irreflect.room.materials import lobe_fraction_above
 from irreflect.room.validation import (
+    GLOSSY_PARAMS,
     barry_configuration_a,
+    glossy_material,
+    glossy_room,
     line_of_sight_closed_form,
     one_bounce_reference,
     single_floor_scene,
+    swap_ready,
 )
 
 ROOT = Path(__file__).resolve().parents[1]
 ROOMS = ROOT / "datasets" / "rooms"
 
 
-def _mc_vs(result_mc, reference, k, extra=0.0):
-    """|MC - reference| within 4 standard errors (+ an allowance) at order k."""
-    link = result_mc.link()
-    diff = abs(link.power_w[k] - reference)
-    return diff <= 4 * link.stderr_w[k] + extra * reference, (link.power_w[k], reference,
-                                                              link.stderr_w[k])
+def _ward_params():
+    from irreflect.models import get_model
+
+    m = get_model("ward")
+    return {p.name: (min(max(0.3, p.lower), p.upper) if np.isfinite(p.upper) else 1.0)
+            for p in m.params}
 
 
-# ----------------------------------------------------------------------------- materials
+#: every kind of material the room builds: name -> factory
+MATERIALS = {
+    "lambertian": lambda: lambertian(0.6),
+    "two-lobe terrazzo": lambda: load_material(ROOMS / "terrazzo.json", reflectance=0.6),
+    "two-lobe glossy": lambda: glossy_material(0.5),
+    # a share that saturates (a_s = min(1, u_as cos^v_as) reaches 1 above gamma = 48 deg):
+    # the diffuse lobe vanishes there in the fitted curve, as on the real Krylon paint
+    "two-lobe saturating": lambda: from_model(
+        "two-lobe", dict(GLOSSY_PARAMS, u_as=0.3, v_as=-3.0), 0.5, gamma_max_deg=70.0,
+        metadata={"gamma_range_deg": [10.0, 70.0]}),
+    "phong": lambda: from_model("phong", {"k_s": 0.3, "n": 40.0, "K": 1.0}, 0.6),
+    "single-lobe": lambda: from_model("single-lobe", {"n": 8.0, "K": 1.0}, 0.5),
+    "n-lobe": lambda: from_model("n-lobe:2", {"t_1": 0.0, "a_1": 0.7, "n_1": 1.5, "t_2": 1.0,
+                                              "a_2": 0.3, "n_2": 30.0, "K": 1.0}, 0.6),
+    "ward (tabulated)": lambda: from_model("ward", _ward_params(), 0.6),
+}
+
+
+def _random_pairs(n, seed):
+    rng = np.random.default_rng(seed)
+    v = rng.normal(size=(2, n, 3))
+    v[..., 2] = np.abs(v[..., 2]) + 1e-3
+    return v / np.linalg.norm(v, axis=-1, keepdims=True)
+
+
+# ----------------------------------------------------------------------------- surface models
+@pytest.mark.parametrize("kind", list(MATERIALS))
+def test_reciprocity_over_random_direction_pairs(kind):
+    """Helmholtz reciprocity f(i, o) = f(o, i) of the room's (default) surface model, over
+    2000 random pairs of directions above the surface."""
+    mat = MATERIALS[kind]()
+    i, o = _random_pairs(2000, seed=1)
+    f_io, f_oi = mat.brdf_value(i, o), mat.brdf_value(o, i)
+    assert mat.is_reciprocal and np.all(f_io >= 0) and np.any(f_io > 0)
+    np.testing.assert_allclose(f_io, f_oi, rtol=1e-10, atol=1e-14)
+
+
+def test_the_papers_form_is_not_reciprocal_and_says_so():
+    """The paper's form (kept on request) breaks reciprocity on a glossy material: the same
+    check finds ratios far from 1, and the material carries the warning."""
+    mat = glossy_material(0.5, brdf="paper")
+    i, o = _random_pairs(2000, seed=1)
+    f_io, f_oi = mat.brdf_value(i, o), mat.brdf_value(o, i)
+    both = (f_io > 0) & (f_oi > 0)
+    ratio = f_io[both] / f_oi[both]
+    assert both.sum() > 1000 and np.max(np.abs(np.log(ratio))) > np.log(1.3)
+    assert not mat.is_reciprocal and any("not reciprocal" in w for w in mat.warnings)
+
+
+@pytest.mark.parametrize("kind", list(MATERIALS))
+def test_white_furnace(kind):
+    """Energy: the albedo the room uses (its tables) against two independent integrals of
+    the evaluated BRDF, a brute-force quadrature over the hemisphere and the Monte Carlo
+    sampler's mean weight (f cos / pdf), at angles of incidence 0-85 deg; <= 1 everywhere."""
+    mat = MATERIALS[kind]()
+    packed = pack_materials([mat])
+    g = np.radians([0.0, 30.0, 60.0, 75.0, 85.0])
+    table = mat.rho(g)
+    assert mat.rho_table.max() <= 1.0 + 1e-9
+    brute = hemisphere_integral(packed, 0, g, n_mu=400, n_az=512)
+    np.testing.assert_allclose(brute, table, rtol=4e-3)
+    mean, err = sampled_albedo(packed, 0, g, 200_000, 7)
+    assert np.all(np.abs(mean - table) < 4 * err + 2e-3 * table), (mean, table, err)
+
+
+def test_reciprocal_form_reproduces_the_fitted_curve():
+    """The reciprocal form's in-plane curve against the fitted two-lobe curve (its R^2 over
+    the measured incidences), on the material's own table, and the kernels' evaluation is
+    the fitted sum of terms."""
+    mat = load_material(ROOMS / "terrazzo.json", reflectance=0.3)
+    fid = mat.fidelity
+    assert fid["r2_curve"] > 0.98 and fid["gamma_range_deg"] == pytest.approx([10.0, 60.0])
+    assert fid["r2_table_reciprocal"] > 0.95 and fid["r2_table_paper"] > 0.98
+    from irreflect.room.reciprocal import plane_columns
+
+    terms = mat.terms[:, :3].astype(int)
+    theta = np.linspace(-85, 85, 35)
+    for gamma in (15.0, 45.0):
+        cols = plane_columns(terms, np.radians(gamma), np.radians(theta))
+        # amplitudes in the kernels = coefficient x normalising constant; columns carry it
+        from irreflect.room.reciprocal import amplitude
+
+        coef = mat.terms[:, 3] / amplitude(terms, np.ones(len(terms)))
+        np.testing.assert_allclose(mat.intensity(gamma, theta), cols @ coef, rtol=1e-9,
+                                   atol=1e-12)
+
+
+def test_reciprocal_form_against_the_papers_curve_per_incidence():
+    """Where the fit is good the two forms' in-plane shapes agree to a few percent of the
+    peak at every measured incidence (after the per-gamma scale of the paper's form)."""
+    rec = glossy_material(0.5)
+    pap = glossy_material(0.5, brdf="paper")
+    theta = np.linspace(-85, 85, 171)
+    for gamma in (20.0, 40.0, 60.0):
+        a, b = rec.intensity(gamma, theta), pap.intensity(gamma, theta)
+        scale = np.dot(a, b) / np.dot(b, b)
+        assert np.max(np.abs(a - scale * b)) < 0.15 * a.max()
+
+
+def test_energy_cap_keeps_albedo_at_most_one():
+    """A bright glossy material whose fitted albedo rises towards grazing incidence: the
+    reciprocal form is capped at albedo 1 (reciprocally) with a warning; the paper's form
+    with "K" beyond 1 is refused."""
+    bright = glossy_material(0.9)
+    assert bright.rho_table.max() <= 1.0 + 1e-9 and bright.rho_table.max() > 0.95
+    assert any("capped at 1" in w for w in bright.warnings)
+    assert bright.energy_cap is not None and bright.energy_cap.min() < 1.0
+    i, o = _random_pairs(500, seed=3)
+    np.testing.assert_allclose(bright.brdf_value(i, o), bright.brdf_value(o, i), rtol=1e-10)
+    assert bright.reflectance == pytest.approx(0.9, rel=5e-3)
+    with pytest.raises(IrreflectError, match="more than the incident power"):
+        from_model("two-lobe", GLOSSY_PARAMS | {"K": 3.0}, "K", brdf="paper")
+
+
 def test_lobe_fraction_above_limits():
-    # axis on the normal: the whole lobe is above; axis in the surface: half of it
     assert lobe_fraction_above(0.0, 5.0) == pytest.approx(1.0, abs=1e-12)
     assert lobe_fraction_above(np.pi / 2, 5.0) == pytest.approx(0.5, abs=1e-6)
-    # Lambertian lobe tilted by 60 deg: the analytic fraction (1 + cos 60)/2 = 0.75
     assert lobe_fraction_above(np.radians(60), 1.0) == pytest.approx(0.75, abs=1e-6)
 
 
-@pytest.mark.parametrize("spec", [
-    ("two-lobe", "terrazzo.json"), ("two-lobe", "foam_board.json"),
-    ("phong", {"k_s": 0.3, "n": 40.0, "K": 1.0}),
-    ("ward", None),
-])
-def test_reflected_power_equals_reflectance(spec):
-    """Energy: the 3D intensity integrated over the hemisphere is rho at every angle of
-    incidence (here rho = 0.6), by a brute-force quadrature independent of the normaliser."""
-    model, source = spec
-    if isinstance(source, str):
-        mat = load_material(ROOMS / source, reflectance=0.6)
-    elif source is None:
-        from irreflect.models import get_model
-
-        m = get_model(model)
-        params = {p.name: (min(max(0.3, p.lower), p.upper) if np.isfinite(p.upper) else 1.0)
-                  for p in m.params}
-        mat = from_model(model, params, 0.6, name=model)
-    else:
-        mat = from_model(model, source, 0.6, name=model)
-    from irreflect.room.kernels import hemisphere_integral, pack_materials
-
-    gammas = np.radians([0.0, 20.0, 45.0, 70.0, 85.0])
-    total = hemisphere_integral(pack_materials([mat]), 0, gammas, n_mu=500, n_az=600)
-    np.testing.assert_allclose(total, 0.6, rtol=3e-3)
-
-
-def test_3d_extension_keeps_the_fitted_curve_in_the_plane_of_incidence():
-    """In the plane of incidence the 3D two-lobe intensity is proportional to the fitted
-    model at every theta (only the overall scale changes with gamma)."""
+def test_papers_form_keeps_the_fitted_curve_in_the_plane_of_incidence():
     doc = json.loads((ROOMS / "terrazzo.json").read_text())
-    mat = load_material(ROOMS / "terrazzo.json", reflectance=0.3)
+    mat = from_model("two-lobe", doc["params"], 0.3, brdf="paper", gamma_max_deg=60)
     from irreflect.models import get_model
 
     model = get_model("two-lobe")
     params = [doc["params"][k] for k in model.param_names]
     for gamma in (10.0, 40.0, 60.0):
         theta = np.linspace(-80, 80, 33)
-        fitted = model.predict_deg(params, -gamma, theta)
-        ratio = mat.intensity(gamma, theta) / fitted
+        ratio = mat.intensity(gamma, theta) / model.predict_deg(params, -gamma, theta)
         assert np.ptp(ratio) / ratio.mean() < 1e-9
-    # out of the plane the specular lobe is a solid of revolution about the mirror direction:
-    # at gamma = 60 deg, theta = 60 deg rotated 20 deg in azimuth is 17 deg from the mirror
-    peak, off = mat.intensity(60, 60, 0.0), mat.intensity(60, 60, 20.0)
-    assert peak > 1.2 * off
+    # constant albedo rho at every incidence (the paper form's per-gamma scale)
+    np.testing.assert_allclose(mat.rho_table, 0.3)
 
 
-def test_material_scale_K_is_checked_against_energy():
-    # BRDF x cos units: K = 0.9 with a lobe that keeps ~all its power above the surface is fine,
-    params = {"u_as": 0.1, "v_as": 0.0, "u_nd": 1.0, "v_nd": 0.0, "u_ns": 30.0, "v_ns": 0.0,
-              "K": 0.9}
-    mat = from_model("two-lobe", params, "K")
-    assert mat.rho_table.max() <= 0.9 + 1e-12
-    assert mat.rho_table[0] == pytest.approx(0.9, rel=1e-6)
-    # K = 1.2 would reflect more than arrives
-    with pytest.raises(IrreflectError, match="more than the incident power"):
-        from_model("two-lobe", params | {"K": 1.2}, "K")
-    with pytest.raises(IrreflectError, match=r"in \[0, 1\]"):
-        lambertian(1.3)
+# ----------------------------------------------------------------------------- geometry kernels
+def test_rectangle_coupling_is_exact():
+    """The contour-integral form factor of two axis-aligned rectangles: two unit squares
+    sharing an edge at 90 deg (0.20004, the textbook value), facing at distance 1 (0.19982),
+    and an offset pair against a fine quadrature."""
+    from irreflect.room.transport import CellPack, rect_coupling
+
+    def cells(rects):
+        pos = np.array([r[0] for r in rects], float)
+        nrm = np.array([r[1] for r in rects], float)
+        half = np.array([r[2] for r in rects], float)
+        axes = np.array([r[3] for r in rects], np.int64)
+        area = 4 * half[:, 0] * half[:, 1]
+        return CellPack(pos, nrm, area, np.zeros(len(rects), np.int64),
+                        np.arange(len(rects)), half, axes, np.zeros((0, 2, 3)))
+
+    floor = ([0.5, 0.5, 0.0], [0, 0, 1], [0.5, 0.5], [0, 1, 2])
+    wall = ([0.0, 0.5, 0.5], [1, 0, 0], [0.5, 0.5], [1, 2, 0])
+    ceil = ([0.5, 0.5, 1.0], [0, 0, -1], [0.5, 0.5], [0, 1, 2])
+    box = ([0.3, 0.2, 2.0], [0, 0, -1], [0.2, 0.1], [0, 1, 2])
+    c = cells([floor, wall, ceil, box])
+    assert rect_coupling(c, 0, 1) / np.pi == pytest.approx(0.200044, rel=1e-5)
+    assert rect_coupling(c, 0, 2) / np.pi == pytest.approx(0.199825, rel=1e-5)
+    x, w = np.polynomial.legendre.leggauss(16)
+    x, w = (x + 1) / 2, w / 2  # smooth at distance 2: Gauss-Legendre 16 x 16 on each side
+    X, Y = np.meshgrid(x, x, indexing="ij")
+    W = np.outer(w, w).ravel()
+    p1 = np.column_stack([X.ravel(), Y.ravel()])
+    p2 = np.column_stack([0.1 + 0.4 * p1[:, 0], 0.1 + 0.2 * p1[:, 1]])
+    r2 = ((p2[None, :, 0] - p1[:, None, 0]) ** 2 + (p2[None, :, 1] - p1[:, None, 1]) ** 2 + 4.0)
+    brute = W @ (4.0 / r2 ** 2) @ W * 0.08  # cos cos / r^2 = h^2 / r^4; areas 1 and 0.08
+    assert rect_coupling(c, 0, 3) == pytest.approx(brute, rel=1e-4)
+
+
+def test_far_field_correction_beats_the_point_coupling():
+    """The second-order (quadrupole) correction of the point coupling: 0.5 m squares three
+    sizes apart, against the exact coupling."""
+    from irreflect.room.transport import taylor
+
+    a = (0.0, 0.0, 0.0)
+    b = (0.25, 1.5, 1.5)
+    na, nb = (0.0, 0.0, 1.0), (0.0, -1.0, 0.0)
+    v = np.subtract(b, a)
+    point = np.dot(na, v) * -np.dot(nb, v) / np.dot(v, v) ** 2
+    corr = taylor(a, na, (0, 1), (0.25 ** 2 / 3, 0.25 ** 2 / 3, 0.0), b, nb, (0, 2),
+                  (0.25, 0.25))
+    x = (np.arange(40) + 0.5) / 40 - 0.5
+    P = np.stack(np.meshgrid(x * 0.5, x * 0.5, indexing="ij"), -1).reshape(-1, 2)
+    src = np.column_stack([P[:, 0], P[:, 1], np.zeros(len(P))])
+    dst = np.column_stack([0.25 + P[:, 0], np.full(len(P), 1.5), 1.5 + P[:, 1]])
+    V = dst[None] - src[:, None]
+    d2 = np.sum(V ** 2, -1)
+    exact = np.mean(V[..., 2] * V[..., 1] / d2 ** 2)
+    assert abs(point / exact - 1) > 0.01
+    assert abs(point * corr / exact - 1) < 3e-3
 
 
 # ----------------------------------------------------------------------------- line of sight
@@ -116,8 +244,7 @@ def test_line_of_sight_against_closed_form(method):
     scene = barry_configuration_a()
     power, tau = line_of_sight_closed_form(scene.emitters[0], scene.receivers[0])
     assert power == pytest.approx(1.2318e-6, rel=1e-4)  # Barry's configuration A
-    res = simulate(scene, method=method, bounces=0)
-    link = res.link()
+    link = simulate(scene, method=method, bounces=0).link()
     assert link.power_w[0] == pytest.approx(power, rel=1e-12)
     assert link.los_delay_s == pytest.approx(tau, rel=1e-12)
     assert tau * 1e9 == pytest.approx(13.026, abs=1e-3)
@@ -133,101 +260,136 @@ def test_line_of_sight_blocked_by_a_box():
     assert simulate(blocked, method="recursive", bounces=0).link().power_w[0] == 0.0
 
 
-# ----------------------------------------------------------------------------- one bounce
+# ----------------------------------------------------------------------------- accuracy
 def test_one_bounce_converges_to_numerical_integration():
     scene = single_floor_scene()
     reference = one_bounce_reference(scene)
-    errors = []
-    for cell in (0.5, 0.25, 0.125):
-        res = simulate(scene, method="recursive", bounces=1, cell_m=cell)
-        errors.append(abs(res.link().power_w[1] / reference - 1))
-    assert errors[0] > errors[1] > errors[2]
-    assert errors[2] < 2e-3
-    mc = simulate(scene, method="montecarlo", bounces=1, rays=40000, seed=3)
-    ok, info = _mc_vs(mc, reference, 1)
-    assert ok, info
+    errors = [abs(simulate(scene, method="recursive", bounces=1, cell_m=c,
+                           estimate_error=False).link().power_w[1] / reference - 1)
+              for c in (0.5, 0.25, 0.125)]
+    assert errors[0] > errors[2] and errors[2] < 2e-3
+    mc = simulate(scene, method="montecarlo", bounces=1, rays=40000, seed=3).link()
+    assert abs(mc.power_w[1] - reference) < 4 * mc.stderr_w[1]
 
 
-# ----------------------------------------------------------------------------- Barry, MC
-def test_configuration_a_recursive_and_montecarlo_agree():
-    """Barry's configuration A: the recursive method (0.125 m cells) and Monte Carlo agree
-    per order within the Monte Carlo error plus 2 % (the recursive discretisation)."""
+def _within(rec, mc, k, rel=0.01):
+    return abs(rec.power_w[k] / mc.power_w[k] - 1) < rel + 3 * mc.stderr_w[k] / mc.power_w[k]
+
+
+def test_configuration_a_every_order_within_one_percent_of_monte_carlo():
+    """Barry's configuration A at the default 0.25 m cells: every order within 1 % (+ 3
+    Monte Carlo standard errors) of Monte Carlo (Barry's point-to-point coupling was +2 %
+    at order 2; vlc-rm, which keeps it, is compared in experiments/bench_room.py)."""
     scene = barry_configuration_a()
-    rec = simulate(scene, method="recursive", bounces=3, cell_m=0.125)
-    gains = rec.link().power_w
-    # independent implementation (vlc-rm, same cells; see experiments/bench_room.py)
-    np.testing.assert_allclose(gains, [1.2318e-06, 5.0568e-07, 4.3237e-07, 2.6319e-07], rtol=2e-3)
-    mc = simulate(scene, method="montecarlo", bounces=3, rays=60000, seed=1)
+    rec = simulate(scene, method="recursive", bounces=3).link()
+    mc = simulate(scene, method="montecarlo", bounces=3, rays=600_000, seed=1).link()
     for k in (1, 2, 3):
-        ok, info = _mc_vs(mc, gains[k], k, extra=0.02)
-        assert ok, (k, info)
-    # moments: the recursive mean delay of order 1 is between the first arrival and the end
-    link = rec.link()
-    assert 15e-9 < link.m1[1] / link.power_w[1] < 25e-9
-    # h(t) carries the same power as the exact sums
-    np.testing.assert_allclose(link.hist.sum(axis=1), link.power_w, rtol=1e-3)
+        assert _within(rec, mc, k), (k, rec.power_w[k], mc.power_w[k])
+    # h(t) carries the same power as the exact sums; bins start at b dt
+    np.testing.assert_allclose(rec.hist.sum(axis=1), rec.power_w, rtol=2e-3)
+    assert 15e-9 < rec.m1[1] / rec.power_w[1] < 25e-9
 
 
-def test_reciprocity_on_lambertian_surfaces():
-    """Swap emitter and receiver (order-1 emitters, 90 deg fields of view, equal areas):
-    the same response, exactly for the recursive method, within errors for Monte Carlo."""
-    scene = barry_configuration_a(receiver_fov_deg=90.0)
-    scene = replace(scene, boxes=(Box("desk", np.array([1.5, 0.5, 0.0]), np.array([2.5, 1.2, 0.8]),
-                                      ("walls",) * 6),))
-    swapped = scene.swapped()
-    a = simulate(scene, method="recursive", bounces=3, cell_m=0.5).link()
-    b = simulate(swapped, method="recursive", bounces=3, cell_m=0.5).link()
-    np.testing.assert_allclose(a.power_w, b.power_w, rtol=1e-9)
-    np.testing.assert_allclose(a.m1, b.m1, rtol=1e-9)
-    ma = simulate(scene, method="montecarlo", bounces=2, rays=30000, seed=2).link()
-    mb = simulate(swapped, method="montecarlo", bounces=2, rays=30000, seed=2).link()
-    for k in (1, 2):
-        assert abs(ma.power_w[k] - mb.power_w[k]) < 4 * np.hypot(ma.stderr_w[k], mb.stderr_w[k])
+@pytest.mark.parametrize("case", ["glossy floor", "glossy floor and walls", "narrow fov"])
+def test_glossy_rooms_every_order_within_one_percent_of_monte_carlo(case):
+    """A glossy floor (the two-lobe material of :mod:`.validation`), Lambertian or glossy
+    walls, a wide and a narrow (30 deg, facing a wall) receiver: every order of the
+    recursive method at the default cells within 1 % (+ 3 standard errors) of Monte Carlo."""
+    walls = glossy_material(0.6) if case != "glossy floor" else None
+    kw = dict(receiver_facing=(-1.0, 0.0, 0.2), fov_deg=30.0) if case == "narrow fov" else {}
+    scene = glossy_room(walls=walls, **kw)
+    rec = simulate(scene, method="recursive", bounces=3).link()
+    mc = simulate(scene, method="montecarlo", bounces=3, rays=600_000, seed=2).link()
+    for k in (1, 2, 3):
+        assert _within(rec, mc, k), (k, rec.power_w[k] / mc.power_w[k] - 1)
 
 
-@pytest.mark.parametrize("material", ["lambertian", "two-lobe"])
-def test_energy_closed_room_bounded_by_rho_k(material):
-    """In a closed room of reflectance rho the power left after k reflections is rho^k times
-    the emitted power (Monte Carlo: exactly, since every reflection keeps rho of a ray)."""
-    rho = 0.7
-    scene = barry_configuration_a(walls=rho, floor=rho, ceiling=rho)
-    if material == "two-lobe":
-        mat = load_material(ROOMS / "terrazzo.json", reflectance=rho)
-        scene = scene.with_materials({"walls": mat, "floor": mat, "ceiling": mat})
-    link = simulate(scene, method="montecarlo", bounces=4, rays=5000, seed=0).link()
-    left = link.reflected_w / scene.emitters[0].power_w
-    expected = rho ** np.arange(1, 5)
-    assert np.all(left <= expected * (1 + 1e-12))
-    np.testing.assert_allclose(left, expected, rtol=1e-9)
-    if material == "lambertian":
-        # Barry's point-to-point couplings overestimate between near cells (edges, corners):
-        # the excess over rho^k is small and shrinks with the cell size
-        excess = [simulate(scene, method="recursive", bounces=3, cell_m=c).link().reflected_w[:2]
-                  / expected[:2] - 1 for c in (0.5, 0.25)]
-        assert np.all(excess[1] < excess[0])
-        assert np.all(excess[1] < 0.025)
+def test_far_field_grouping_error_is_small():
+    """The quadtree's far-field groups (each scene's default opening angle) against every
+    cell pair (the exact sum at the same cells): per order within 0.3 %."""
+    from irreflect.room import recursive as R
+    from irreflect.room.geometry import boxes_array
+
+    for scene in (barry_configuration_a(), glossy_room(walls=glossy_material(0.6))):
+        geo = R.prepare(scene, 0.25, boxes_array(scene))
+        out = []
+        for theta in (0.0, None):
+            st = R.emitter_state(geo, scene.emitters[0], 3, 0.25e-9, 200, theta_open=theta)
+            out.append(R.receiver_link(geo, st, scene.receivers[0], 200)[0])
+        np.testing.assert_allclose(out[1], out[0], rtol=3e-3)
 
 
-def test_recursive_fourth_order_converges_to_montecarlo():
-    """Order 4 (one cell-to-cell propagation of delay histograms) approaches Monte Carlo as
-    the cells shrink (0.5 m: +24 %, 0.25 m: +9 %, 0.125 m: +4 % in our runs)."""
-    scene = barry_configuration_a()
-    mc = simulate(scene, method="montecarlo", bounces=4, rays=40000, seed=5).link()
-    errors = [simulate(scene, method="recursive", bounces=4, cell_m=c).link().power_w[4]
-              / mc.power_w[4] - 1 for c in (0.5, 0.25)]
-    assert errors[1] < errors[0]
-    assert abs(errors[1]) < 0.12 + 4 * mc.stderr_w[4] / mc.power_w[4]
-
-
-def test_non_lambertian_recursive_orders_1_2_are_exact():
-    """With the fitted two-lobe materials, orders 1 and 2 of the recursive method use the
-    exact incidence at every reflection: they agree with Monte Carlo within its error."""
+def test_a_receiver_gets_the_same_alone_or_among_many():
+    """The transfers are computed once for all receivers: a receiver's result does not
+    depend on the others (and a hundred receivers reuse one emitter state)."""
     scene = load_scene(ROOMS / "office.toml")
-    scene = scene.with_receivers(scene.receivers[:1])
-    rec = simulate(scene, method="recursive", bounces=2, cell_m=0.25).link()
-    mc = simulate(scene, method="montecarlo", bounces=2, rays=40000, seed=4).link()
-    for k in (1, 2):
-        assert abs(rec.power_w[k] - mc.power_w[k]) < 4 * mc.stderr_w[k] + 0.03 * rec.power_w[k], k
+    many = simulate(scene.with_receivers(scene.receivers[:12]), method="recursive",
+                    bounces=3, cell_m=0.5, estimate_error=False)
+    alone = simulate(scene.with_receivers(scene.receivers[5:6]), method="recursive",
+                     bounces=3, cell_m=0.5, estimate_error=False)
+    np.testing.assert_allclose(alone.link(0, 0).power_w, many.link(0, 5).power_w, rtol=1e-12)
+
+
+def test_error_estimate_is_reported():
+    scene = glossy_room()
+    res = simulate(scene, method="recursive", bounces=3, cell_m=0.5)
+    err = res.error_estimate[(0, 0)]
+    assert err.shape == (4,) and err[0] == 0 and np.all(err[1:] >= 0)
+    # at 0.5 m cells in a 4 m room the estimate is well above the 1 % where a note appears
+    assert any("estimated error" in n for n in res.notes) == (err[1:].max() > 0.01)
+
+
+# ----------------------------------------------------------------------------- reciprocity
+def _swap_check(scene, method, **kw):
+    a = simulate(scene, method=method, bounces=3, **kw).link()
+    b = simulate(scene.swapped(), method=method, bounces=3, **kw).link()
+    return a, b
+
+
+def test_swapped_links_are_equal_on_glossy_floor_and_walls():
+    """Emitter and receiver exchanged (the same pattern at both ends) on a room with a
+    glossy floor and glossy walls: every order equal within 1 % (recursive) and within 3
+    Monte Carlo standard errors (Monte Carlo). The paper's form fails the same check."""
+    scene = swap_ready(glossy_room(walls=glossy_material(0.6), receiver_pos=(2.9, 1.1, 0.9)))
+    a, b = _swap_check(scene, "recursive", estimate_error=False)
+    np.testing.assert_allclose(a.power_w, b.power_w, rtol=0.01)
+    ma, mb = _swap_check(scene, "montecarlo", rays=300_000, seed=4)
+    for k in (1, 2, 3):
+        assert abs(ma.power_w[k] - mb.power_w[k]) < 3 * np.hypot(ma.stderr_w[k], mb.stderr_w[k])
+    pa, pb = _swap_check(scene.with_brdf("paper"), "montecarlo", rays=300_000, seed=4)
+    assert np.max(np.abs(pa.power_w[1:] / pb.power_w[1:] - 1)) > 0.05
+
+
+def test_swapped_links_are_equal_on_lambertian_surfaces_with_a_box():
+    scene = barry_configuration_a(receiver_fov_deg=90.0)
+    scene = replace(scene, boxes=(Box("desk", np.array([1.5, 0.5, 0.0]),
+                                      np.array([2.5, 1.2, 0.8]), ("walls",) * 6),))
+    a, b = _swap_check(scene, "recursive", cell_m=0.5, estimate_error=False)
+    np.testing.assert_allclose(a.power_w, b.power_w, rtol=0.01)
+
+
+# ----------------------------------------------------------------------------- energy
+def test_closed_room_energy_follows_the_evaluated_albedo():
+    """In a closed room every reflected watt lands on a surface: the recursive method's power
+    arriving after k + 1 reflections equals the power reflected at the k-th (sum rule) within
+    0.3 %; Lambertian 0.7 everywhere gives 0.7^k; with glossy materials the power left after
+    each reflection agrees between the recursive method (albedo evaluated by quadrature at
+    every cell's incidence) and Monte Carlo (weights f cos / pdf from the sampler)."""
+    from irreflect.room import recursive as R
+    from irreflect.room.geometry import boxes_array
+
+    lam = barry_configuration_a(walls=0.7, floor=0.7, ceiling=0.7)
+    geo = R.prepare(lam, 0.25, boxes_array(lam))
+    st = R.emitter_state(geo, lam.emitters[0], 4, 0.25e-9, 200)
+    np.testing.assert_allclose(st.arrived[1:], st.reflected[:-1], rtol=3e-3)
+    np.testing.assert_allclose(st.reflected, 0.7 ** np.arange(1, 5), rtol=3e-3)
+
+    gl = glossy_room(walls=glossy_material(0.6))
+    geo = R.prepare(gl, 0.25, boxes_array(gl))
+    st = R.emitter_state(geo, gl.emitters[0], 3, 0.25e-9, 200)
+    np.testing.assert_allclose(st.arrived[1:], st.reflected[:-1], rtol=1e-2)
+    mc = simulate(gl, method="montecarlo", bounces=3, rays=200_000, seed=5).link()
+    np.testing.assert_allclose(mc.reflected_w, st.reflected, rtol=1e-2)
 
 
 # ----------------------------------------------------------------------------- ranging
@@ -236,14 +398,26 @@ def test_range_error_of_a_single_delayed_path():
 
     f = 10e6
     tau0 = 10e-9
-    # LoS 1 W at tau0, one echo 0.5 W delayed by 2 ns: phase of 1 + 0.5 exp(-j w 2ns)
     w = 2 * np.pi * f
     phasor = np.exp(-1j * w * tau0) * (1 + 0.5 * np.exp(-1j * w * 2e-9))
     phase, rng = ranging_error(phasor, tau0, f)
     expected = np.angle(1 + 0.5 * np.exp(-1j * w * 2e-9))
     assert phase == pytest.approx(np.degrees(expected))
     assert rng == pytest.approx(-299_792_458.0 * expected / w)
-    assert 0 < rng < 0.2  # a later echo makes the range look longer, by less than 1/3 of 60 cm
+    assert 0 < rng < 0.2
+
+
+def test_impulse_response_bins_start_at_t_ns():
+    """``t_ns`` is the start of each bin: the line of sight lands in the bin [t, t + dt)."""
+    from irreflect.room.results import impulse_table
+
+    res = simulate(barry_configuration_a(), method="recursive", bounces=1, cell_m=0.5,
+                   estimate_error=False)
+    table = impulse_table(res)
+    los = table[table.order == 0].iloc[0]
+    tau = res.link().los_delay_s * 1e9
+    assert los.t_ns <= tau < los.t_ns + res.dt_s * 1e9
+    np.testing.assert_allclose(res.time_ns[:3], [0.0, 0.25, 0.5])
 
 
 # ----------------------------------------------------------------------------- seeds, parallel
@@ -287,12 +461,27 @@ BASE = {
                                                   "ceiling": "lambertian(0.8)"}}}, r"in \[0, 1\]"),
     ({"receivr": []}, "did you mean 'receiver'"),
     ({"simulation": {"method": "raytrace"}}, "method must be one of"),
+    ({"simulation": {"brdf": "phong"}}, "brdf must be one of reciprocal, paper"),
 ])
 def test_scene_errors_are_one_line(patch, message):
     with pytest.raises(IrreflectError, match=message) as info:
         scene_from_dict(BASE | patch, path="bad.toml")
     assert "\n" not in str(info.value)
     assert str(info.value).startswith("bad.toml: ")
+
+
+def test_scene_brdf_setting_switches_the_surface_model():
+    doc = json.loads(json.dumps(BASE))
+    doc["room"]["materials"]["floor"] = "terrazzo"
+    doc["materials"] = {"terrazzo": {"file": str(ROOMS / "terrazzo.json"), "reflectance": 0.3}}
+    scene = scene_from_dict(doc)
+    assert scene.materials["terrazzo"].brdf == "reciprocal"
+    paper = scene.with_brdf("paper")
+    assert paper.materials["terrazzo"].brdf == "paper"
+    assert paper.with_brdf("reciprocal").materials["terrazzo"].kind == scene.materials["terrazzo"].kind
+    doc["simulation"] = {"brdf": "paper"}
+    res = simulate(scene_from_dict(doc), method="montecarlo", bounces=1, rays=200)
+    assert res.brdf == "paper"
 
 
 def test_material_file_round_trip(tmp_path):
@@ -306,9 +495,8 @@ def test_material_file_round_trip(tmp_path):
     assert doc["reflectance"] == 0.4 and doc["wavelength_nm"] == 850.0
     assert set(doc["stderr"]) == set(doc["params"]) and doc["r2"] > 0.98
     mat = load_material(out)
-    assert mat.reflectance == 0.4 and mat.model == "two-lobe"
+    assert mat.reflectance == pytest.approx(0.4, rel=5e-3) and mat.model == "two-lobe"
     assert mat.params["u_ns"] == pytest.approx(doc["params"]["u_ns"])
-    # no reflectance anywhere: refused with the fix
     doc["reflectance"] = None
     out.write_text(json.dumps(doc))
     with pytest.raises(IrreflectError, match="gives no total reflectance"):
@@ -324,6 +512,7 @@ def test_room_cli_writes_results_and_refuses_bad_input(tmp_path, capsys):
     assert code == 0
     text = capsys.readouterr().out
     assert "beacon -> barry_A" in text and "range error" in text
+    assert "reciprocal form" in text and "R^2" in text
     import pandas as pd
 
     summary = pd.read_parquet(out / "summary.parquet")
@@ -333,8 +522,7 @@ def test_room_cli_writes_results_and_refuses_bad_input(tmp_path, capsys):
     assert (summary.dc_gain_total > 0).all()
     assert (out / "map_range_error_m_desk_plane_beacon.png").exists()
     run = json.loads((out / "run.json").read_text())
-    assert run["rays_per_link"] == 500 and run["seed"] == 0
-    # bad scene: exit 2, one line, nothing written
+    assert run["rays_per_link"] == 500 and run["seed"] == 0 and run["brdf"] == "reciprocal"
     bad = tmp_path / "bad.toml"
     bad.write_text("[room]\nsize_m = [4, 4, 3]\n")
     target = tmp_path / "never"
@@ -342,6 +530,17 @@ def test_room_cli_writes_results_and_refuses_bad_input(tmp_path, capsys):
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "missing key" in err and "Traceback" not in err
     assert not target.exists()
+
+
+def test_room_cli_paper_form_warns(tmp_path, capsys):
+    from irreflect.cli import main
+
+    out = tmp_path / "room"
+    assert main(["room", str(ROOMS / "office.toml"), "--out", str(out), "--rays", "200",
+                 "--bounces", "1", "--quiet", "--no-figures", "--brdf", "paper"]) == 0
+    captured = capsys.readouterr()
+    assert "not reciprocal" in captured.err
+    assert json.loads((out / "run.json").read_text())["brdf"] == "paper"
 
 
 def test_report_room_section(tmp_path):
@@ -359,9 +558,15 @@ def test_report_room_section(tmp_path):
     assert barry.loc[0, "closed form"] == pytest.approx(1.2318e-6, rel=1e-4)
     one = section.tables["room_one_bounce"]
     assert abs(one["relative error"]).is_monotonic_decreasing
+    swap = section.tables["room_swapped"]
+    rec = swap[swap.method == "recursive"]
+    assert (abs(rec["swapped / direct - 1"]) < 0.01).all()
+    conv = section.tables["room_convergence"]
+    assert {"order", "recursive / Monte Carlo - 1", "Monte Carlo 3 sigma"} <= set(conv.columns)
     for key in ("room_impulse", "room_map_range_change"):
         assert Path(section.figures[key]).exists()
-    for name in ("room_scene", "room_comparison", "room_barry_a", "room_checks"):
+    for name in ("room_scene", "room_comparison", "room_barry_a", "room_checks", "room_swapped",
+                 "room_convergence", "room_materials"):
         assert "{table:" + name + "}" in section.markdown
 
 
@@ -374,3 +579,4 @@ def test_reproduce_refuses_a_bad_scene_first(tmp_path, capsys):
                  "--scene", str(bad)]) == 2
     assert "missing key" in capsys.readouterr().err
     assert not (tmp_path / "out").exists()
+

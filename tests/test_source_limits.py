@@ -44,17 +44,6 @@ KNOWN = {
     "report/fits.py:section": "issue 26: report sections as result objects",
     "report/room.py:section": "issue 26: report sections as result objects",
     "report/selection.py:section": "issue 26: report sections as result objects",
-    "room/engine.py:_recursive_link": "issue 26: the room (rooms work)",
-    "room/kernels.py:backward_cells": "issue 26: room kernels (rooms work)",
-    "room/kernels.py:forward_cells": "issue 26: room kernels (rooms work)",
-    "room/kernels.py:propagate_cells": "issue 26: room kernels (rooms work)",
-    "room/kernels.py:trace_rays": "issue 26: room kernels (rooms work)",
-    "room/kernels.py:forward_cells_lambertian": "issue 26: room kernels (rooms work)",
-    "room/kernels.py:backward_cells_lambertian": "issue 26: room kernels (rooms work)",
-    "room/kernels.py:material_value": "issue 26: room kernels (rooms work)",
-    "room/kernels.py:first_bounce": "issue 26: room kernels (rooms work)",
-    "room/kernels.py:_basis": "issue 26: room kernels (rooms work)",
-    "room/kernels.py:_intersect": "issue 26: room kernels (rooms work)",
     "selection/run.py:run_selection": "issue 26: the selection's run",
 }
 

@@ -366,8 +366,9 @@ BUDGETS = {b.name: b for b in (
     Budget("ray-bounces", 1e9, "ray-bounces",
            "Monte Carlo rays x emitter-receiver pairs x bounces of one room run"),
     Budget("cell-pairs", 3e11, "cell pairs",
-           "cells^2 x (emitter-receiver pairs + emitters x (bounces - 2)) of one recursive "
-           "room run, a pair counted 30 times when a material is not Lambertian"),
+           "cells x cells met (at most 128 log2 cells) x emitters x (bounces - 1) + cells x "
+           "emitter-receiver pairs of one recursive room run, a pair counted 30 times when "
+           "a material is not Lambertian"),
     Budget("receivers", 40_000, "receivers", "receivers of one scene (grids included)"),
     Budget("subset-fits", 5e6, "subset fits",
            "generations x population of one selection run"),

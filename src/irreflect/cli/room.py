@@ -27,12 +27,16 @@ def _room(args) -> int:
         check_scheduler_address(args.scheduler)
     out = Path(args.out)
     scene = load_scene(resolve_scene(args.scene), materials_dir=args.materials_dir)
+    brdf = args.brdf or scene.settings.get("brdf")
+    if brdf is not None:
+        scene = scene.with_brdf(brdf)
     settings = resolve_settings(scene, {"method": args.method, "bounces": args.bounces,
                                         "cell_m": args.cell, "rays": args.rays,
                                         "time_resolution_ns": args.dt})
     check_room_budget(scene, settings, CLI_OPTIONS, args.workers)  # before any work
     for line in material_notes(scene, allow_unphysical=args.allow_unphysical):
         print(line)
+    _warn_materials(scene)
     result = simulate(scene, method=args.method, bounces=args.bounces, cell_m=args.cell,
                       rays=args.rays, seed=args.seed, time_resolution_ns=args.dt,
                       scheduler=args.scheduler, workers=args.workers, progress=not args.quiet)
@@ -46,6 +50,24 @@ def _room(args) -> int:
     print(f"wrote {out}/: {', '.join(written[:6])}{' ...' if len(written) > 6 else ''} "
           f"({len(written)} files)")
     return 0
+
+
+def _warn_materials(scene) -> None:
+    """Each material's warnings (energy cap; the paper's form is not reciprocal), once, on
+    stderr."""
+    import sys
+
+    seen = set()
+    for mat in scene.materials.values():
+        for w in mat.warnings:
+            text = w.replace(f"material '{mat.name}': ", "")
+            if text.startswith("the paper's surface model"):
+                if "paper" in seen:
+                    continue
+                seen.add("paper")
+                print(f"irreflect: warning: {text} (--brdf paper)", file=sys.stderr)
+                continue
+            print(f"irreflect: warning: material '{mat.name}': {text}", file=sys.stderr)
 
 
 def _warn_dark(summary) -> None:
@@ -63,6 +85,8 @@ def _warn_dark(summary) -> None:
 
 
 def _report(result, summary) -> str:
+    import numpy as np
+
     scene = result.scene
     lines = [f"{scene.name}: {len(scene.emitters)} emitter(s), {len(scene.receivers)} receiver(s), "
              f"method {result.method}, {result.bounces} bounce(s)"
@@ -71,6 +95,14 @@ def _report(result, summary) -> str:
              + f", {result.seconds:.1f} s"]
     if result.ray_bounces_per_s:
         lines.append(f"  Monte Carlo: {result.ray_bounces_per_s:,.0f} ray-bounces/s per process (tracing time only)")
+    for name, mat in scene.materials.items():
+        lines.append(f"  material {name}: {mat.describe()}")
+    est = np.array(list((result.error_estimate or {}).values()), float)
+    if est.size and np.isfinite(est).any():
+        worst = np.max(np.where(np.isfinite(est), est, 0.0), axis=0)
+        lines.append("  recursive method, estimated error per order (worst link; the error that "
+                     "shrinks with the cells, from a run at twice the cell size): " + ", ".join(
+                         f"{k} {100 * worst[k]:.2f} %" for k in range(1, len(worst))))
     for note in result.notes:
         lines.append(f"  note: {note}")
     singles = summary[summary.grid == ""]
@@ -113,6 +145,10 @@ def register(sub) -> None:
                    help="reflections to follow (default 3)")
     p.add_argument("--cell", type=POSITIVE, default=None, metavar="M",
                    help="cell size of the recursive method in metres (default 0.25)")
+    p.add_argument("--brdf", choices=("reciprocal", "paper"), default=None,
+                   help="surface model of the fitted materials: 'reciprocal' (default: obeys "
+                        "Helmholtz reciprocity, fitted to the material's curve) or 'paper' (the "
+                        "paper's lobes of revolution; not reciprocal, with a warning)")
     p.add_argument("--rays", type=POSITIVE_INT, default=None, metavar="R",
                    help="Monte Carlo rays per emitter-receiver pair (default 20000)")
     p.add_argument("--seed", type=SEED, default=None, metavar="S",

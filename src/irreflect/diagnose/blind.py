@@ -265,6 +265,9 @@ def _noise(rng, clean, forced=None):
         kind = forced
     med = float(np.median(np.abs(clean)))
     a = med * (rng.uniform(0.005, 0.03) if kind != "proportional" else 0.001)
+    # a floor: a glossy table whose median power is ~0 next to its peak would get an
+    # additive noise below what a table's sigma may be (1e-12 of the largest power)
+    a = max(a, 1e-9 * float(np.max(np.abs(clean))))
     b = rng.uniform(0.01, 0.05) if kind != "additive" else 0.0
     return kind, float(a), float(b)
 

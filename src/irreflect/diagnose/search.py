@@ -98,6 +98,20 @@ class ModelSets:
             out.append(parts[n] if n in parts else self.block(n)[1])
         return np.concatenate(out)
 
+    def restrict(self, z, names, target) -> np.ndarray:
+        """The coordinates ``z`` of the model of ``names`` as a point of the model of
+        ``target`` (a subset): the blocks of the extensions ``target`` lacks dropped."""
+        keep = set(canonical_order(target))
+        pb = self.base.n_nonlinear
+        z = np.asarray(z, float).ravel()
+        out, at = [z[:pb]], pb
+        for n in canonical_order(names):
+            size, _ = self.block(n)
+            if n in keep:
+                out.append(z[at:at + size])
+            at += size
+        return np.concatenate(out)
+
     def block_slice(self, name, names) -> slice:
         """Where ``name``'s block lies in the coordinates of the model of ``names``."""
         at = self.base.n_nonlinear

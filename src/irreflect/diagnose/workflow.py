@@ -571,6 +571,33 @@ class _Search:
             return None
         return self.add(key, result, effects)
 
+    def settle(self, effects, children) -> Assessment:
+        """The fit of ``effects`` again, started from each fitted superset in ``children``
+        with the extensions it adds dropped: a larger model that every added effect
+        improves by the same amount has usually found a better optimum of the smaller one
+        (a nested model's fit can never be better than its parent's). The better fit is
+        kept; returns the assessment."""
+        key = set_name(effects)
+        old = self.get(effects)
+        rows = [self.sets.restrict(self.z[set_name(c)], c, effects) for c in children
+                if set_name(c) in self.z]
+        if old is None or not rows:
+            return old
+        model = self.sets.model(canonical_order(effects))
+        starts = np.clip(np.unique(np.vstack(rows), axis=0), model.z_lower, model.z_upper)
+        try:
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore", FitWarning)
+                result = fit(self.work, model, seed=self.seed, extra_starts=starts,
+                             retry=False)
+        except (FitError, IrreflectError):
+            return old
+        new = assess(result, self.noise, effects, polar=False)
+        if new.deviance < old.deviance - 1e-6 * max(1.0, abs(old.deviance)):
+            self.say(f"{key or 'the base model'}: a better optimum from its extensions")
+            return self.add(key, result, effects)
+        return old
+
     def dev(self, effects) -> float:
         return self.get(effects).deviance
 
@@ -636,6 +663,10 @@ def _select(search: _Search, names, max_effects: int, alpha: float, min_share: f
                 continue
             level = alpha / len(tried)
             counted_here = False
+            children = [canonical_order(s + (x,)) for x in tried]
+            for u in children:
+                search.get(u)
+            parent = search.settle(s, [u for u in children if search.get(u) is not None])
             for x in tried:
                 u = canonical_order(s + (x,))
                 a = search.get(u)

@@ -8,12 +8,15 @@ range error of phase-based ranging, in a room of known geometry.
     result.write("out/room")    # CSV / Parquet of every number
     result.write("out/room", figures=irreflect.plots.room.write_figures)  # and the figures
 
-Modules: :mod:`.materials` (the 3D extension of the plane-of-incidence models and material
-files), :mod:`.scene` (TOML scenes), :mod:`.geometry` (cells, line of sight),
-:mod:`.engine` (recursive method and Monte Carlo), :mod:`.results` (metrics, files),
-:mod:`.validation` (checks against closed forms and Barry's configuration A). The command
-``irreflect room``: :mod:`irreflect.cli.room`; figures: :mod:`irreflect.plots.room`; the
-``reproduce --scene`` section: :mod:`irreflect.report.room`.
+Modules: :mod:`.materials` (the surface models of the fitted materials and material files),
+:mod:`.reciprocal` (the reciprocal lobe family they are fitted to), :mod:`.checks` (what a
+scene's materials say of themselves), :mod:`.scene` (TOML scenes), :mod:`.geometry` (cells,
+line of sight), :mod:`.engine` (``simulate``: both methods, the error estimate),
+:mod:`.recursive` and :mod:`.transport` (the receiver-independent recursive method),
+:mod:`.kernels` (compiled reflection and Monte Carlo kernels), :mod:`.results` (metrics,
+files), :mod:`.validation` (closed forms, Barry's configuration A, the glossy test rooms).
+The command ``irreflect room``: :mod:`irreflect.cli.room`; figures:
+:mod:`irreflect.plots.room`; the ``reproduce --scene`` section: :mod:`irreflect.report.room`.
 """
 
 import importlib

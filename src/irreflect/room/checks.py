@@ -5,8 +5,9 @@ The size of a run is known before it starts:
 
 * **Monte Carlo**: ``rays x emitter-receiver pairs x bounces`` ray-bounces (budget
   ``ray-bounces``, about 1e9: tens of minutes on one core);
-* **recursive method**: ``cells^2 x (pairs + emitters x (bounces - 2))`` cell pairs (budget
-  ``cell-pairs``; a pair costs :data:`GENERAL_PAIR_COST` when a material is not
+* **recursive method**: ``cells x min(cells, NODES_PER_LOG2 x log2 cells) x emitters x
+  (bounces - 1) + cells x pairs`` cell pairs (budget ``cell-pairs``; the receiver-independent
+  method with its quadtree; a pair costs :data:`GENERAL_PAIR_COST` when a material is not
   Lambertian), the cells counted as :func:`irreflect.room.geometry.discretize` cuts them;
 * **memory**: the impulse responses kept for every pair, ``pairs x (bounces + 1) x time
   bins`` (the bins follow ``--dt`` and the room's diagonal), and for the recursive method the
@@ -43,6 +44,9 @@ C_LIGHT = 299_792_458.0
 #: A cell pair of the recursive method costs this many Lambertian ones when some material is
 #: not Lambertian (lobes evaluated per pair: 2e6 against 7e7 pairs/s on a busy 2-core machine).
 GENERAL_PAIR_COST = 30
+#: cells and far-field groups a cell meets per reflection, per log2(cells) (the quadtree
+#: of the recursive method; about 1,900 at 28,160 cells)
+NODES_PER_LOG2 = 128
 #: Bytes each kept time bin of each emitter-receiver pair and order costs: the float64
 #: histogram while it is computed, the float32 one kept, and its row of the long-form
 #: impulse response table written at the end.
@@ -205,9 +209,12 @@ def _check_recursive(scene, settings, pairs, emitters, bounces, dt, options,
     cost = 1 if all(m.is_lambertian for m in scene.materials.values()) else GENERAL_PAIR_COST
 
     def work(c: float) -> float:
-        n = count_cells(scene, c)
-        passes = pairs * (bounces >= 2) + emitters * max(bounces - 2, 0)
-        return (float(n) ** 2 * passes + n * pairs) * cost
+        # the receiver-independent method (irreflect.room.recursive): per emitter and
+        # reflection every cell meets the cells and far-field groups of a quadtree, at most
+        # NODES_PER_LOG2 x log2(cells) of them; each receiver then gathers from every cell
+        n = float(count_cells(scene, c))
+        met = min(n, NODES_PER_LOG2 * math.log2(max(n, 2.0)))
+        return (n * met * emitters * max(bounces - 1, 0) + n * pairs) * cost
 
     results = results_memory(scene, settings)
 

@@ -1,25 +1,24 @@
 """Room simulation: line of sight exactly, reflections by Barry's recursive method or by
 modified Monte Carlo with next-event estimation, for every emitter-receiver pair.
 
-**Recursive method** (Barry et al. 1993, on cells of about ``cell_m``): the light arriving at
-every cell after one reflection is computed once per emitter (a pass over all cell pairs,
-with exact delay moments and phase); per receiver, a second pass over all cell pairs gives
-what a unit power arriving at each cell delivers to the receiver after two more reflections.
-Orders 1 and 2 are accumulated directly; order ``k >= 3`` is the per-cell convolution of the
-two (meet in the middle, by FFT), after ``k - 3`` more cell-to-cell legs for ``k >= 4``. No
-cell-by-cell matrix is ever stored: memory is O(cells x time bins). Exact for Lambertian
-surfaces (up to the cell discretisation); for other materials orders 1 and 2 use the exact
-incidence direction at every reflection, and from order 3 on the reflection at the middle
-cells uses the power-weighted mean incidence direction of the once-reflected light arriving
-there (Monte Carlo has no such approximation). Delay moments, DC gains and phases are exact
-sums over cell paths; ``h(t)`` of order >= 3 is binned twice (within one bin).
+**Recursive method** (Barry et al. 1993, on cells of about ``cell_m``), receiver-independent
+(:mod:`.recursive`): the light arriving at every cell after 0, 1, ..., K-1 reflections is
+carried once per emitter, with exact delay moments and phases, the separable diffuse part
+of every material exactly and its lobes through per-cell maps of the directions the light
+came from; each receiver then gathers one more leg per order. Near cell pairs are
+integrated (Gauss points, exact Lambertian form factors), far groups of cells act as one
+source (a quadtree), and cells across a receiver's field-of-view edge are split. The error
+of each order is estimated against a coarser run (:attr:`RoomResult.error_estimate`).
 
 **Monte Carlo** (Lopez-Hernandez et al. 2000): rays from the emitter; at every hit the
 deterministic contribution of the hit point to the receiver is added (next-event
-estimation), then a new direction is drawn from the material's lobes. Any material, any
-number of bounces; per-bounce standard errors. Seeded per emitter-receiver pair
-(``SeedSequence(seed, spawn_key=(emitter, receiver))``), so serial, process-pool and Dask runs
-give identical results.
+estimation), then a new direction is drawn from the material and the ray's weight is
+multiplied by the evaluated ``f cos / pdf``. Any material, any number of bounces; per-bounce
+standard errors. Seeded per emitter-receiver pair (``SeedSequence(seed, spawn_key=(emitter,
+receiver))``), so serial, process-pool and Dask runs give identical results.
+
+Both methods use the scene's materials as built: the reciprocal surface model by default,
+the paper's form with ``brdf="paper"`` (:mod:`.materials`).
 """
 
 from __future__ import annotations
@@ -29,7 +28,6 @@ import math
 import multiprocessing as mp
 import os
 import time
-from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field, replace
 
 import numpy as np
@@ -37,22 +35,19 @@ import numpy as np
 from .._progress import progress as progress_display
 from ..errors import IrreflectError
 from . import kernels as K
+from . import recursive as R
 from .checks import DEFAULTS, check_room_budget, check_simulate_arguments
-from .geometry import (
-    Cells,
-    boxes_array,
-    cells_to_receiver,
-    discretize,
-    emitter_to_cells,
-    face_material_indices,
-    line_of_sight,
-)
+from .geometry import boxes_array, face_material_indices, line_of_sight
+from .materials import check_brdf
 from .results import summary_table, write_results
 from .scene import METHODS, Scene
 
 #: receivers per task of a process pool or Dask cluster (fixed: results do not depend on it)
 TASK_RECEIVERS = 8
-_CHUNK = 16  # cells per chunk of the backward pass (per-chunk buffers, thread-independent)
+#: the recursive method's error estimate: the same run at this multiple of the cell size
+ESTIMATE_COARSEN = 2.0
+#: a recursive order whose estimated error exceeds this gets a printed note
+ERROR_NOTE = 0.01
 
 
 @dataclass
@@ -64,7 +59,8 @@ class LinkResult:
     m1, m2 : (K+1,) sums of power x delay (W s) and power x delay^2 (W s^2)
     phasor : (K+1,) complex, sum of power x exp(-j 2 pi f tau) at the emitter's modulation
     stderr_w : (K+1,) standard error of ``power_w`` (Monte Carlo; 0 when exact)
-    hist : (K+1, T) received power per delay bin (W)
+    hist : (K+1, T) received power per delay bin (W); bin ``b`` covers delays
+        ``[b dt, (b + 1) dt)`` (its start is ``b dt``)
     reflected_w : (K,) power left after k reflections, all surfaces together (W)
     """
 
@@ -84,7 +80,12 @@ class LinkResult:
 
 @dataclass
 class RoomResult:
-    """Results of :func:`simulate` for every emitter-receiver pair (see :mod:`.results`)."""
+    """Results of :func:`simulate` for every emitter-receiver pair (see :mod:`.results`).
+
+    ``error_estimate`` (recursive method): per emitter-receiver pair, the estimated relative
+    error of each order (0 for the line of sight), from a run at twice the cell size
+    (Richardson: ``|H(h) - H(2h)| / 3``, the method converging as h^2), or None.
+    """
 
     scene: Scene
     method: str
@@ -98,6 +99,8 @@ class RoomResult:
     seconds: float = 0.0
     ray_bounces_per_s: float | None = None
     notes: list = field(default_factory=list)
+    brdf: str = "reciprocal"
+    error_estimate: dict | None = None
 
     def link(self, emitter=0, receiver=0) -> LinkResult:
         e = self._index(emitter, [x.name for x in self.scene.emitters], "emitter")
@@ -114,6 +117,7 @@ class RoomResult:
 
     @property
     def time_ns(self) -> np.ndarray:
+        """The start of each delay bin (ns)."""
         any_link = next(iter(self.links.values()))
         return np.arange(any_link.hist.shape[1]) * self.dt_s * 1e9
 
@@ -137,9 +141,8 @@ class _Context:
     rays: int
     seed: int
     mats: tuple
-    cells: Cells | None = None
+    geo: R.Geometry | None = None
     boxes: np.ndarray | None = None
-    general: bool = False
     emitter_states: dict = field(default_factory=dict)
     threads: int = 1
 
@@ -166,8 +169,9 @@ def _resolve(scene: Scene, **overrides) -> dict:
 
 
 def simulate(scene: Scene, *, method=None, bounces=None, cell_m=None, rays=None, seed=None,
-             time_resolution_ns=None, scheduler=None, workers: int | None = None,
-             threads: int | None = None, progress: bool = False) -> RoomResult:
+             time_resolution_ns=None, brdf=None, scheduler=None, workers: int | None = None,
+             threads: int | None = None, progress: bool = False,
+             estimate_error: bool = True) -> RoomResult:
     """Impulse response, DC gain, delays and phase for every emitter-receiver pair.
 
     Parameters
@@ -186,16 +190,25 @@ def simulate(scene: Scene, *, method=None, bounces=None, cell_m=None, rays=None,
         Seed of the Monte Carlo rays. Default 0.
     time_resolution_ns : float
         Width of the h(t) bins (ns). Default 0.25.
+    brdf : "reciprocal" or "paper", optional
+        Rebuild the scene's fitted materials in this surface model (default: as built,
+        which is "reciprocal" unless the scene says otherwise).
     scheduler : str or distributed.Client, optional
         Spread the receivers over a Dask cluster.
     workers : int, optional
         Local worker processes for the receivers (default 1: this process).
     threads : int, optional
-        Threads of the recursive passes within one process (default: CPU count, 1 in workers).
+        Threads of the recursive method within one process (default: CPU count).
     progress : bool
         Show a progress bar on stderr.
+    estimate_error : bool
+        Recursive method: estimate each order's error from a run at twice the cell size
+        (default True; about a tenth of the run's time).
     """
     check_simulate_arguments(scene, scheduler, workers, threads)
+    want = brdf or scene.settings.get("brdf")
+    if want is not None:
+        scene = scene.with_brdf(check_brdf(want))
     s = _resolve(scene, method=method, bounces=bounces, cell_m=cell_m, rays=rays, seed=seed,
                  time_resolution_ns=time_resolution_ns)
     check_room_budget(scene, s, workers=workers)  # refused before any work when too large
@@ -206,39 +219,65 @@ def simulate(scene: Scene, *, method=None, bounces=None, cell_m=None, rays=None,
     n_bins = int(math.ceil((K_ + 1) * scene.diagonal / K.C_LIGHT / dt)) + 2
     ctx = _Context(scene, s["method"], K_, dt, n_bins, int(s["rays"]), int(s["seed"]),
                    K.pack_materials(mats), boxes=boxes_array(scene),
-                   general=any(not m.is_lambertian for m in mats),
                    threads=threads or os.cpu_count() or 1)
+    kinds = {m.brdf for m in mats if not m.is_lambertian}
     result = RoomResult(scene, s["method"], K_, s["cell_m"] if s["method"] == "recursive" else None,
-                        s["rays"] if s["method"] == "montecarlo" else None, int(s["seed"]), dt)
+                        s["rays"] if s["method"] == "montecarlo" else None, int(s["seed"]), dt,
+                        brdf="paper" if "paper" in kinds else "reciprocal")
     pairs = [(e, r) for e in range(len(scene.emitters)) for r in range(len(scene.receivers))]
     bar = None
     if progress:
-
         bar = progress_display(total=len(pairs), desc=f"room ({s['method']})", unit="link")
     try:
         if s["method"] == "recursive" and K_ >= 1:
-            ctx.cells = discretize(scene, s["cell_m"])
-            result.n_cells = ctx.cells.n
-            if K_ >= 3:
-                for e in range(len(scene.emitters)):
-                    if bar is not None:
-                        bar.set_postfix_str(f"bounce-1 light of {scene.emitters[e].name}")
-                    ctx.emitter_states[e] = _emitter_state(ctx, e)
-            if ctx.general and K_ >= 3:
-                result.notes.append(
-                    "recursive method with non-Lambertian materials: orders 1-2 exact, from order "
-                    "3 on the middle reflections use the mean incidence direction per cell "
-                    "(Monte Carlo is exact for any material)")
+            ctx.geo = R.prepare(scene, s["cell_m"], ctx.boxes)
+            result.n_cells = ctx.geo.n
+            for e in range(len(scene.emitters)):
+                if bar is not None:
+                    bar.set_postfix_str(f"light of {scene.emitters[e].name} over the cells")
+                ctx.emitter_states[e] = R.emitter_state(ctx.geo, scene.emitters[e], K_, dt,
+                                                        n_bins, ctx.threads)
         links = _run(ctx, pairs, scheduler, workers, bar)
     finally:
         if bar is not None:
             bar.close()
     result.links = {(lk.emitter, lk.receiver): lk for lk in links}
+    if s["method"] == "recursive" and K_ >= 1 and estimate_error:
+        result.error_estimate = _error_estimate(scene, s, result, ctx.threads)
+        worst = {k: max(v[k] for v in result.error_estimate.values())
+                 for k in range(1, K_ + 1)}
+        high = {k: v for k, v in worst.items() if v > ERROR_NOTE}
+        if high:
+            result.notes.append(
+                "recursive method: estimated error above 1 % at order(s) "
+                + ", ".join(f"{k} ({100 * v:.1f} %)" for k, v in high.items())
+                + f" at {s['cell_m']:g} m cells (worst receiver; from a run at "
+                f"{ESTIMATE_COARSEN * s['cell_m']:g} m): use a smaller --cell or Monte Carlo")
     result.seconds = time.perf_counter() - t0
     if s["method"] == "montecarlo" and K_ >= 1:
         busy = sum(lk.kernel_seconds for lk in links)
         result.ray_bounces_per_s = len(links) * ctx.rays * K_ / busy if busy > 0 else None
     return result
+
+
+def _error_estimate(scene, s, fine: RoomResult, threads) -> dict:
+    """Per link, the estimated relative error of each order: ``|H(h) - H(2h)| / 3 / H(h)``
+    (Richardson for a method of order h^2) from the same run at twice the cell size."""
+    coarse_cell = ESTIMATE_COARSEN * s["cell_m"]
+    if coarse_cell > float(min(scene.size)):
+        return {key: np.full(fine.bounces + 1, np.nan) for key in fine.links}
+    coarse = simulate(scene, method="recursive", bounces=fine.bounces, cell_m=coarse_cell,
+                      time_resolution_ns=s["time_resolution_ns"], threads=threads,
+                      estimate_error=False)
+    out = {}
+    for key, lk in fine.links.items():
+        a = lk.power_w
+        b = coarse.links[key].power_w
+        with np.errstate(divide="ignore", invalid="ignore"):
+            err = np.where(a > 0, np.abs(a - b) / 3.0 / a, 0.0)
+        err[0] = 0.0
+        out[key] = err
+    return out
 
 
 # ----------------------------------------------------------------------------- execution
@@ -254,6 +293,13 @@ def _run(ctx, pairs, scheduler, workers, bar):
         return _run_dask(ctx, tasks, scheduler, tick)
     n_workers = min(int(workers or 1), len(tasks))
     if n_workers <= 1:
+        if ctx.method == "recursive" and ctx.threads > 1 and len(tasks) > 1:
+            # receivers' gathers are independent: threads (the kernels release the GIL)
+            with cf.ThreadPoolExecutor(max_workers=ctx.threads) as pool:
+                for res in pool.map(lambda t: _run_task(ctx, t), tasks):
+                    out.extend(res)
+                    tick(len(res))
+            return out
         for task in tasks:
             out.extend(_run_task(ctx, task))
             tick(len(task))
@@ -349,6 +395,16 @@ def link_seed(seed: int, emitter: int, receiver: int) -> int:
     return int(ss.generate_state(1, np.uint32)[0])
 
 
+def _trace_inputs(ctx, em, rx):
+    room_mat, box_mat = face_material_indices(ctx.scene)
+    scene = K.TraceScene(np.asarray(ctx.scene.size, float), ctx.boxes, room_mat, box_mat)
+    link = K.TraceLink(np.asarray(em.position, float), np.asarray(em.direction, float),
+                       (float(em.order), float(em.power_w)), np.asarray(rx.position, float),
+                       np.asarray(rx.direction, float),
+                       (float(rx.gain_area), float(np.cos(np.radians(rx.fov_deg)))))
+    return scene, link
+
+
 def _montecarlo_link(ctx: _Context, e: int, r: int) -> LinkResult:
     scene = ctx.scene
     em, rx = scene.emitters[e], scene.receivers[r]
@@ -359,240 +415,57 @@ def _montecarlo_link(ctx: _Context, e: int, r: int) -> LinkResult:
     stderr = np.zeros(Kb + 1)
     reflected = np.zeros(Kb)
     tau_los = _los(ctx, e, r, hist, power, m1, m2, phasor)
+    kernel_s = 0.0
     if Kb >= 1:
-        h = np.zeros((Kb, ctx.n_bins))
-        mom = np.zeros((Kb, 3))
-        ph = np.zeros((Kb, 2))
-        sumsq = np.zeros(Kb)
-        room_mat, box_mat = face_material_indices(scene)
-        _warm_tracer(ctx, em, rx, room_mat, box_mat, Kb)
+        out = K.TraceOut(np.zeros((Kb, ctx.n_bins)), np.zeros((Kb, 3)), np.zeros((Kb, 2)),
+                         np.zeros(Kb), reflected, np.zeros(Kb + K.TERMS_MAX))
+        tscene, tlink = _trace_inputs(ctx, em, rx)
+        _warm_tracer(ctx, tscene, tlink, Kb)
         t0 = time.perf_counter()
-        K.trace_rays(link_seed(ctx.seed, e, r), ctx.rays, em.position, em.direction,
-                     float(em.order), float(em.power_w), rx.position, rx.direction,
-                     float(rx.gain_area), float(np.cos(np.radians(rx.fov_deg))),
-                     np.asarray(scene.size, float), ctx.boxes, room_mat, box_mat, ctx.mats, Kb,
-                     ctx.dt, 2 * np.pi * em.modulation_hz, h, mom, ph, sumsq, reflected)
+        K.trace_rays(link_seed(ctx.seed, e, r), ctx.rays, tscene, tlink, ctx.mats,
+                     (ctx.dt, 2 * np.pi * em.modulation_hz), out)
         kernel_s = time.perf_counter() - t0
-        hist[1:] = h
-        power[1:], m1[1:], m2[1:] = mom[:, 0], mom[:, 1], mom[:, 2]
-        phasor[1:] = ph[:, 0] + 1j * ph[:, 1]
-        stderr[1:] = np.sqrt(np.maximum(sumsq - mom[:, 0] ** 2 / ctx.rays, 0.0))
+        hist[1:] = out.hist
+        power[1:], m1[1:], m2[1:] = out.mom[:, 0], out.mom[:, 1], out.mom[:, 2]
+        phasor[1:] = out.ph[:, 0] + 1j * out.ph[:, 1]
+        stderr[1:] = np.sqrt(np.maximum(out.sumsq - out.mom[:, 0] ** 2 / ctx.rays, 0.0))
     link = LinkResult(e, r, power, m1, m2, phasor, stderr, hist.astype(np.float32), reflected,
                       tau_los)
-    link.kernel_seconds = kernel_s if Kb >= 1 else 0.0
+    link.kernel_seconds = kernel_s
     return link
 
 
 _TRACER_READY = False
 
 
-def _warm_tracer(ctx, em, rx, room_mat, box_mat, Kb):
+def _warm_tracer(ctx, tscene, tlink, Kb):
     """Load the compiled tracer once per process (so that ray rates exclude it)."""
     global _TRACER_READY
     if _TRACER_READY:
         return
-    K.trace_rays(0, 1, em.position, em.direction, float(em.order), 1.0, rx.position,
-                 rx.direction, 1e-4, 0.0, np.asarray(ctx.scene.size, float), ctx.boxes, room_mat,
-                 box_mat, ctx.mats, Kb, ctx.dt, 0.0, np.zeros((Kb, 4)), np.zeros((Kb, 3)),
-                 np.zeros((Kb, 2)), np.zeros(Kb), np.zeros(Kb))
+    out = K.TraceOut(np.zeros((Kb, 4)), np.zeros((Kb, 3)), np.zeros((Kb, 2)), np.zeros(Kb),
+                     np.zeros(Kb), np.zeros(Kb + K.TERMS_MAX))
+    K.trace_rays(0, 1, tscene, tlink, ctx.mats, (ctx.dt, 0.0), out)
     _TRACER_READY = True
 
 
 # ----------------------------------------------------------------------------- recursive
-def _bins(ctx, legs: int) -> int:
-    return int(math.ceil(legs * ctx.scene.diagonal / K.C_LIGHT / ctx.dt)) + legs + 2
-
-
-def _in_chunks(n, threads, fn, size=None):
-    """Run ``fn(start, stop)`` over [0, n) in chunks, on ``threads`` threads (nogil kernels)."""
-    size = size or max(1, min(256, -(-n // (4 * max(threads, 1)))))
-    bounds = [(i, min(i + size, n)) for i in range(0, n, size)]
-    if threads <= 1 or len(bounds) == 1:
-        for a, b in bounds:
-            fn(a, b)
-        return
-    with ThreadPoolExecutor(max_workers=threads) as pool:
-        list(pool.map(lambda ab: fn(*ab), bounds))
-
-
-@dataclass
-class _EmitterState:
-    epow: np.ndarray
-    etau: np.ndarray
-    edir: np.ndarray
-    omega: float
-    orders: list = field(default_factory=list)  # [(hist, mom, ph)] for light after 1, 2, ... reflections
-    ubar: np.ndarray | None = None
-    prep_u: tuple | None = None  # lobes of every cell prepared for the incidence ubar
-
-
-def _emitter_state(ctx: _Context, e: int) -> _EmitterState:
-    cells = ctx.cells
-    em = ctx.scene.emitters[e]
-    epow, etau, edir = emitter_to_cells(ctx.scene, em, cells)
-    st = _EmitterState(epow, etau, np.ascontiguousarray(edir), 2 * np.pi * em.modulation_hz)
-    if ctx.bounces < 3:
-        return st
-    N = cells.n
-    hist = np.zeros((N, _bins(ctx, 2)), np.float32)
-    mom = np.zeros((N, 3))
-    ph = np.zeros((N, 2))
-    ubar = np.zeros((N, 3))
-
-    if ctx.general:
-        prep_e = K.prepare_cells(ctx.mats, cells.material, cells.normal, st.edir)
-
-        def run(a, b):
-            K.forward_cells(a, b, cells.pos, cells.normal, cells.area, cells.material, epow, etau,
-                            st.edir, ctx.boxes, ctx.mats, prep_e, ctx.dt, st.omega, hist, mom,
-                            ph, ubar)
-    else:
-        ubar[:] = -cells.normal
-        crho = ctx.mats[1][cells.material]
-
-        def run(a, b):
-            K.forward_cells_lambertian(a, b, cells.pos, cells.normal, cells.area, crho, epow,
-                                       etau, ctx.boxes, ctx.dt, st.omega, hist, mom, ph)
-
-    _in_chunks(N, ctx.threads, run)
-    st.ubar = ubar
-    st.prep_u = K.prepare_cells(ctx.mats, cells.material, cells.normal, ubar)
-    st.orders.append((hist, mom, ph))
-    for m in range(2, ctx.bounces - 1):  # light after m reflections, for orders m + 2
-        hin, momin, phin = st.orders[-1]
-        hout = np.zeros((N, _bins(ctx, m + 1)), np.float32)
-        momout = np.zeros((N, 3))
-        phout = np.zeros((N, 2))
-
-        def prop(a, b, hin=hin, momin=momin, phin=phin, hout=hout, momout=momout, phout=phout):
-            K.propagate_cells(a, b, cells.pos, cells.normal, cells.area, cells.material, ubar,
-                              ctx.boxes, ctx.mats, st.prep_u, ctx.dt, st.omega, hin, momin, phin,
-                              hout, momout, phout)
-
-        _in_chunks(N, ctx.threads, prop)
-        st.orders.append((hout, momout, phout))
-    return st
-
-
 def _recursive_link(ctx: _Context, e: int, r: int) -> LinkResult:
     scene = ctx.scene
     Kb = ctx.bounces
-    T = ctx.n_bins
-    hist = np.zeros((Kb + 1, T))
+    T_ = ctx.n_bins
+    hist = np.zeros((Kb + 1, T_))
     power, m1, m2 = np.zeros(Kb + 1), np.zeros(Kb + 1), np.zeros(Kb + 1)
     phasor = np.zeros(Kb + 1, complex)
     reflected = np.full(Kb, np.nan)
     tau_los = _los(ctx, e, r, hist, power, m1, m2, phasor)
-    if Kb == 0:
-        return LinkResult(e, r, power, m1, m2, phasor, np.zeros(Kb + 1),
-                          hist.astype(np.float32), reflected, tau_los)
-    cells = ctx.cells
-    N = cells.n
-    st = ctx.emitter_states.get(e)
-    if st is None:
-        st = _emitter_state(ctx, e)
-    rx = scene.receivers[r]
-    rgain, rtau, rdir = cells_to_receiver(scene, rx, cells)
-    rdir = np.ascontiguousarray(rdir)
-    omega = st.omega
-    # order 1
-    h1 = np.zeros(T)
-    s = K.first_bounce(cells.normal, cells.material, st.epow, st.etau, st.edir, rgain, rtau,
-                       rdir, ctx.mats, ctx.dt, omega, h1)
-    hist[1] = h1
-    power[1], m1[1], m2[1] = s[0], s[1], s[2]
-    phasor[1] = s[3] + 1j * s[4]
-    reflected[0] = float(np.sum(st.epow * _rho_at(ctx, cells, st.edir)))
-    if Kb >= 2:
-        nB = _bins(ctx, 2)
-        histB = np.zeros((N, nB), np.float32)
-        momB = np.zeros((N, 3))
-        phB = np.zeros((N, 2))
-        n_chunks = -(-N // _CHUNK)
-        h2 = np.zeros((n_chunks, T))
-        h2mom = np.zeros((n_chunks, 3))
-        h2ph = np.zeros((n_chunks, 2))
-        ubar = st.ubar if st.ubar is not None else -cells.normal
-
-        if ctx.general:
-            prep_u = st.prep_u if st.prep_u is not None else K.prepare_cells(
-                ctx.mats, cells.material, cells.normal, np.ascontiguousarray(ubar))
-            prep_e = K.prepare_cells(ctx.mats, cells.material, cells.normal, st.edir)
-            ubar = np.ascontiguousarray(ubar)
-
-            def run(a, b):
-                K.backward_cells(a, b, _CHUNK, cells.pos, cells.normal, cells.area,
-                                 cells.material, rgain, rtau, rdir, ubar, st.epow, st.etau,
-                                 st.edir, ctx.boxes, ctx.mats, prep_u, prep_e, ctx.dt, omega,
-                                 ctx.general, histB, momB, phB, h2, h2mom, h2ph)
-        else:
-            crho = ctx.mats[1][cells.material]
-            rlam = rgain * crho * np.clip(np.einsum("ij,ij->i", cells.normal, rdir), 0, None) / np.pi
-
-            def run(a, b):
-                K.backward_cells_lambertian(a, b, cells.pos, cells.normal, cells.area, crho, rlam,
-                                            rtau, ctx.boxes, ctx.dt, omega, histB, momB, phB)
-
-        if ctx.general:
-            _in_chunks(n_chunks, ctx.threads, run,
-                       size=max(1, min(64, -(-n_chunks // (4 * ctx.threads)))))
-            hist[2] = h2.sum(axis=0)
-            power[2], m1[2], m2[2] = h2mom.sum(axis=0)
-            p2 = h2ph.sum(axis=0)
-            phasor[2] = p2[0] + 1j * p2[1]
-        else:
-            # emitter -> j -> l -> receiver: the emitter's light at j shifted through histB
-            _in_chunks(N, ctx.threads, run)
-            h2row = np.zeros(T)
-            K.shift_add(h2row, histB, st.epow, (st.etau / ctx.dt).astype(np.int64))
-            hist[2] = h2row
-            ep, et = st.epow, st.etau
-            b0, b1, b2 = momB[:, 0], momB[:, 1], momB[:, 2]
-            power[2] = np.sum(ep * b0)
-            m1[2] = np.sum(ep * (b1 + et * b0))
-            m2[2] = np.sum(ep * (b2 + 2 * et * b1 + et * et * b0))
-            phasor[2] = np.sum(ep * np.exp(-1j * omega * et) * (phB[:, 0] + 1j * phB[:, 1]))
-        for k in range(3, Kb + 1):
-            hin, momin, phin = st.orders[k - 3]
-            reflected[k - 2] = float(np.sum(momin[:, 0] * _rho_at(ctx, cells, ubar)))
-            hist[k] = _convolve_sum(hin, histB, T)
-            a0, a1, a2 = momin[:, 0], momin[:, 1], momin[:, 2]
-            b0, b1, b2 = momB[:, 0], momB[:, 1], momB[:, 2]
-            power[k] = np.sum(a0 * b0)
-            m1[k] = np.sum(a1 * b0 + a0 * b1)
-            m2[k] = np.sum(a2 * b0 + 2 * a1 * b1 + a0 * b2)
-            phasor[k] = np.sum((phin[:, 0] + 1j * phin[:, 1]) * (phB[:, 0] + 1j * phB[:, 1]))
+    if Kb >= 1:
+        st = ctx.emitter_states[e]
+        p, a1, a2, ph, h = R.receiver_link(ctx.geo, st, scene.receivers[r], T_)
+        power[1:], m1[1:], m2[1:], phasor[1:], hist[1:] = p, a1, a2, ph, h
+        reflected = st.reflected.copy()
     return LinkResult(e, r, power, m1, m2, phasor, np.zeros(Kb + 1), hist.astype(np.float32),
                       reflected, tau_los)
-
-
-def _rho_at(ctx, cells, din):
-    """Total reflectance of each cell for light arriving along ``din`` (N, 3)."""
-    cos_g = np.clip(-np.einsum("ij,ij->i", din, cells.normal), 0.0, 1.0)
-    g = np.arccos(cos_g)
-    rhotab = ctx.mats[7]
-
-    out = np.empty(cells.n)
-    for m in np.unique(cells.material):
-        sel = cells.material == m
-        out[sel] = np.interp(g[sel], K.GAMMA_NODES, rhotab[m])
-    return out
-
-
-def _convolve_sum(a, b, T, chunk: int = 256) -> np.ndarray:
-    """``sum_j conv(a[j], b[j])`` truncated to T bins, by FFT in chunks of cells."""
-    n = a.shape[1] + b.shape[1] - 1
-    nfft = 1 << (n - 1).bit_length()
-    acc = np.zeros(nfft // 2 + 1, complex)
-    for i in range(0, a.shape[0], chunk):
-        fa = np.fft.rfft(a[i:i + chunk].astype(np.float64), nfft, axis=1)
-        fb = np.fft.rfft(b[i:i + chunk].astype(np.float64), nfft, axis=1)
-        acc += np.einsum("ij,ij->j", fa, fb)
-    full = np.fft.irfft(acc, nfft)[:n]
-    out = np.zeros(T)
-    m = min(T, n)
-    out[:m] = full[:m]
-    return np.where(np.abs(out) < 1e-12 * max(np.abs(out).max(), 1e-300), 0.0, out)
 
 
 __all__ = ["simulate", "RoomResult", "LinkResult", "link_seed", "DEFAULTS"]

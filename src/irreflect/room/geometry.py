@@ -9,12 +9,15 @@ import numpy as np
 from ..errors import IrreflectError
 from .kernels import C_LIGHT, occluded
 from .scene import Receiver, Scene
+from .transport import CellPack, Faces, Tree
 
 
 @dataclass(frozen=True)
 class Cells:
     """Surface cells: centres (N, 3) m, normals (N, 3) pointing into the room, areas (N,) m^2,
-    material index (N,), surface index (N,)."""
+    material index (N,), surface index (N,); half-sizes (N, 2) along the surface's two axes
+    ``axes[:, :2]`` (global axis indices; ``axes[:, 2]`` the normal axis); ``grids``: per
+    surface the (nu, nv) array of its cell indices (-1 where a box covers the cell)."""
 
     pos: np.ndarray
     normal: np.ndarray
@@ -22,10 +25,18 @@ class Cells:
     material: np.ndarray
     surface: np.ndarray
     cell_m: float
+    half: np.ndarray = None
+    axes: np.ndarray = None
+    grids: tuple = ()
+    faces: Faces | None = None
 
     @property
     def n(self) -> int:
         return int(self.pos.shape[0])
+
+    def pack(self, boxes) -> CellPack:
+        return CellPack(self.pos, self.normal, self.area, self.material, self.surface,
+                        self.half, self.axes, np.asarray(boxes, float).reshape(-1, 2, 3))
 
 
 def boxes_array(scene: Scene) -> np.ndarray:
@@ -35,7 +46,9 @@ def boxes_array(scene: Scene) -> np.ndarray:
 
 
 def _rectangles(scene: Scene):
-    """(axis, coordinate, normal sign, (lo, hi) of the other two axes, material name)."""
+    """(axis, coordinate, normal sign, (lo, hi) of the other two axes, material name, label):
+    the six room faces (label: the face's name), then the box faces that do not lie on a
+    room face (label: (box index, face 0..5))."""
     size = scene.size
     rects = []
     for k, face in enumerate(("wall_x0", "wall_x1", "wall_y0", "wall_y1", "floor", "ceiling")):
@@ -43,7 +56,7 @@ def _rectangles(scene: Scene):
         others = [a for a in range(3) if a != axis]
         rects.append((axis, float(size[axis]) if high else 0.0, -1.0 if high else 1.0,
                       [(0.0, float(size[a])) for a in others], scene.room_materials[k], face))
-    for b in scene.boxes:
+    for bi, b in enumerate(scene.boxes):
         for k in range(6):
             axis, high = divmod(k, 2)
             coord = float(b.hi[axis] if high else b.lo[axis])
@@ -52,23 +65,26 @@ def _rectangles(scene: Scene):
             others = [a for a in range(3) if a != axis]
             rects.append((axis, coord, 1.0 if high else -1.0,
                           [(float(b.lo[a]), float(b.hi[a])) for a in others], b.materials[k],
-                          f"{b.name}:{k}"))
+                          (bi, k)))
     return rects
 
 
 def discretize(scene: Scene, cell_m: float) -> Cells:
     """Cut every surface into cells of about ``cell_m`` metres (at least one per side).
 
-    Room-surface cells covered by a box (a desk standing on the floor) are dropped: no light
-    reaches them.
+    Room-surface cells whose centre a box covers (a desk standing on the floor) are dropped:
+    no light reaches them.
     """
     if not cell_m > 0:
         raise IrreflectError(f"cell size must be > 0 m; found {cell_m}")
     names = list(scene.materials)
     index = {n: i for i, n in enumerate(names)}
     boxes = boxes_array(scene)
-    pos, nrm, area, mat, surf = [], [], [], [], []
-    for s, (axis, coord, sign, ranges, mname, _label) in enumerate(_rectangles(scene)):
+    pos, nrm, area, mat, surf, half, axes, grids = [], [], [], [], [], [], [], []
+    f_axes, f_geo, f_dims = [], [], []
+    start = 0
+    rects = _rectangles(scene)
+    for s, (axis, coord, sign, ranges, mname, _label) in enumerate(rects):
         others = [a for a in range(3) if a != axis]
         (a0, a1), (b0, b1) = ranges
         nu = max(1, int(round((a1 - a0) / cell_m)))
@@ -81,11 +97,18 @@ def discretize(scene: Scene, cell_m: float) -> Cells:
         p[:, axis] = coord
         p[:, others[0]] = U.ravel()
         p[:, others[1]] = V.ravel()
+        keep = np.ones(len(p), bool)
         if s < 6 and len(boxes):
-            covered = np.zeros(len(p), bool)
             for b in boxes:
-                covered |= np.all((p >= b[0] - 1e-9) & (p <= b[1] + 1e-9), axis=1)
-            p = p[~covered]
+                keep &= ~np.all((p >= b[0] - 1e-9) & (p <= b[1] + 1e-9), axis=1)
+        grid = np.full(U.size, -1, np.int64)
+        grid[keep] = start + np.arange(int(keep.sum()))
+        grids.append(grid.reshape(nu, nv))
+        f_axes.append([axis, others[0], others[1]])
+        f_geo.append([a0, b0, du, dv])
+        f_dims.append([nu, nv])
+        p = p[keep]
+        start += len(p)
         n = np.zeros((len(p), 3))
         n[:, axis] = sign
         pos.append(p)
@@ -93,8 +116,78 @@ def discretize(scene: Scene, cell_m: float) -> Cells:
         area.append(np.full(len(p), du * dv))
         mat.append(np.full(len(p), index[mname], np.int64))
         surf.append(np.full(len(p), s, np.int64))
+        half.append(np.tile([du / 2, dv / 2], (len(p), 1)))
+        axes.append(np.tile([others[0], others[1], axis], (len(p), 1)).astype(np.int64))
+    offset = np.zeros(len(grids), np.int64)
+    np.cumsum([g.size for g in grids[:-1]], out=offset[1:])
+    boxsurf = np.full((len(scene.boxes), 6), -1, np.int64)
+    for s, rect in enumerate(rects[6:], start=6):
+        b, k = rect[5]
+        boxsurf[b, k] = s
+    faces = Faces(np.array(f_axes, np.int64), np.array(f_geo, float), np.array(f_dims, np.int64),
+                  offset, np.concatenate([g.ravel() for g in grids]), boxsurf,
+                  np.asarray(scene.size, float))
     return Cells(np.concatenate(pos), np.concatenate(nrm), np.concatenate(area),
-                 np.concatenate(mat), np.concatenate(surf), float(cell_m))
+                 np.concatenate(mat), np.concatenate(surf), float(cell_m),
+                 np.concatenate(half), np.concatenate(axes), tuple(grids), faces)
+
+
+def build_tree(cells: Cells) -> tuple[Tree, np.ndarray]:
+    """A quadtree per surface over its cell grid (cells are the leaves, nodes 0..N-1; inner
+    nodes merge 2 x 2 blocks level by level up to one root per surface; a block with one
+    cell is that cell). Returns the tree and the inner nodes in an order with children
+    before parents."""
+    N = cells.n
+    cap = 2 * N + 8 * len(cells.grids) + 8
+    lo = np.zeros((cap, 3))
+    hi = np.zeros((cap, 3))
+    lo[:N] = cells.pos - _extent(cells)
+    hi[:N] = cells.pos + _extent(cells)
+    child = np.full((cap, 4), -1, np.int64)
+    surf = np.zeros(cap, np.int64)
+    surf[:N] = cells.surface
+    leaf = np.zeros(cap, np.int64)
+    leaf[:N] = np.arange(N)
+    roots, order = [], []
+    nxt = N
+    for s, grid in enumerate(cells.grids):
+        level = grid
+        while level.shape[0] > 1 or level.shape[1] > 1:
+            nu, nv = (level.shape[0] + 1) // 2, (level.shape[1] + 1) // 2
+            pad = np.full((2 * nu, 2 * nv), -1, np.int64)
+            pad[:level.shape[0], :level.shape[1]] = level
+            kids = pad.reshape(nu, 2, nv, 2).transpose(0, 2, 1, 3).reshape(nu * nv, 4)
+            # valid children first, in their order
+            kids = np.take_along_axis(kids, np.argsort(kids < 0, axis=1, kind="stable"), axis=1)
+            n_kids = (kids >= 0).sum(axis=1)
+            up = np.where(n_kids == 1, kids[:, 0], -1)
+            many = np.nonzero(n_kids >= 2)[0]
+            ids = nxt + np.arange(many.size)
+            up[many] = ids
+            k = kids[many]
+            child[ids] = k
+            valid = k >= 0
+            safe = np.where(valid, k, k[:, :1])
+            lo[ids] = np.min(lo[safe], axis=1)
+            hi[ids] = np.max(hi[safe], axis=1)
+            surf[ids] = s
+            leaf[ids] = leaf[k[:, 0]]
+            order.append(ids)
+            nxt += many.size
+            level = up.reshape(nu, nv)
+        roots.append(int(level[0, 0]))
+    lo, hi, child, surf, leaf = lo[:nxt], hi[:nxt], child[:nxt], surf[:nxt], leaf[:nxt]
+    size = np.max(hi - lo, axis=1)
+    order = np.concatenate(order) if order else np.zeros(0, np.int64)
+    return Tree(lo, hi, child, surf, np.array(roots, np.int64), size, leaf), order
+
+
+def _extent(cells: Cells) -> np.ndarray:
+    ext = np.zeros_like(cells.pos)
+    rows = np.arange(cells.n)
+    ext[rows, cells.axes[:, 0]] = cells.half[:, 0]
+    ext[rows, cells.axes[:, 1]] = cells.half[:, 1]
+    return ext
 
 
 def face_material_indices(scene: Scene) -> tuple[np.ndarray, np.ndarray]:
@@ -103,47 +196,6 @@ def face_material_indices(scene: Scene) -> tuple[np.ndarray, np.ndarray]:
     room = np.array([index[m] for m in scene.room_materials], np.int64)
     box = np.array([[index[m] for m in b.materials] for b in scene.boxes], np.int64).reshape(-1, 6)
     return room, box
-
-
-def _visible(p, qs, boxes) -> np.ndarray:
-    if len(boxes) == 0:
-        return np.ones(len(qs), bool)
-    return np.array([not occluded(p[0], p[1], p[2], q[0], q[1], q[2], boxes) for q in qs])
-
-
-def emitter_to_cells(scene: Scene, emitter, cells: Cells):
-    """Power (W), delay (s) and unit propagation direction of the light reaching each cell
-    straight from the emitter (Eq. 5 with the cell as receiver, Barry's h^(0))."""
-    v = cells.pos - emitter.position
-    d2 = np.einsum("ij,ij->i", v, v)
-    d = np.sqrt(d2)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        u = v / d[:, None]
-        cos_e = u @ emitter.direction
-        cos_c = -np.einsum("ij,ij->i", u, cells.normal)
-        ok = (d > 1e-9) & (cos_e > 0) & (cos_c > 0)
-        power = np.where(ok, emitter.power_w * (emitter.order + 1) / (2 * np.pi)
-                         * np.clip(cos_e, 0, None) ** emitter.order * cells.area
-                         * np.clip(cos_c, 0, None) / d2, 0.0)
-    vis = _visible(emitter.position, cells.pos, boxes_array(scene))
-    power = np.where(vis, power, 0.0)
-    return power, d / C_LIGHT, np.nan_to_num(u)
-
-
-def cells_to_receiver(scene: Scene, receiver: Receiver, cells: Cells):
-    """Per cell: ``A_R T_s g cos(psi) / d^2`` towards the receiver (0 outside the field of
-    view, behind the cell or hidden), delay (s) and unit direction cell -> receiver."""
-    v = receiver.position - cells.pos
-    d2 = np.einsum("ij,ij->i", v, v)
-    d = np.sqrt(d2)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        u = v / d[:, None]
-        cos_r = -(u @ receiver.direction)
-        cos_c = np.einsum("ij,ij->i", u, cells.normal)
-        ok = (d > 1e-9) & (cos_r >= np.cos(np.radians(receiver.fov_deg))) & (cos_r > 0) & (cos_c > 0)
-        gain = np.where(ok, receiver.gain_area * cos_r / d2, 0.0)
-    gain = np.where(_visible(receiver.position, cells.pos, boxes_array(scene)), gain, 0.0)
-    return gain, d / C_LIGHT, np.nan_to_num(u)
 
 
 def line_of_sight(scene: Scene, emitter, receiver: Receiver):
@@ -159,7 +211,8 @@ def line_of_sight(scene: Scene, emitter, receiver: Receiver):
     if cos_e <= 0 or cos_r <= 0 or cos_r < np.cos(np.radians(receiver.fov_deg)):
         return 0.0, tau
     boxes = boxes_array(scene)
-    if len(boxes) and occluded(*emitter.position, *receiver.position, boxes):
+    if len(boxes) and occluded(tuple(map(float, emitter.position)),
+                               tuple(map(float, receiver.position)), boxes):
         return 0.0, tau
     power = (emitter.power_w * (emitter.order + 1) / (2 * np.pi) * cos_e ** emitter.order
              * receiver.gain_area * cos_r / d**2)

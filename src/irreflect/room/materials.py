@@ -1,9 +1,23 @@
 """Surface materials in 3D: the plane-of-incidence reflection models extended to every direction.
 
 The fitted models describe the reflected radiant intensity in the plane of incidence. In a
-room, light leaves a surface point in every direction, so each model is extended to 3D the
-way the paper describes its components (section 3.4: "the 3D diagrams for each component
-are a revolution volume along their orientation axes"):
+room light leaves a surface point in every direction, so each model is extended to 3D. Two
+surface models are available (``brdf=``):
+
+**"reciprocal" (default).** A BRDF that obeys Helmholtz reciprocity, ``f(i, o) = f(o, i)``, by
+construction: a non-negative sum of symmetric diffuse, mirror-lobe and retro-lobe terms
+(:mod:`.reciprocal`) fitted to the material's fitted in-plane curve over its measured angles
+of incidence. The fit's R^2 against that curve, and on the material's own measurement table
+when it can be read, are in :attr:`Material.fidelity`. Its albedo (reflected / incident
+power) varies with the angle of incidence as the fitted curve's does (a reciprocal BRDF
+cannot be rescaled per angle of incidence without losing reciprocity): ``rho`` scales it so
+that the reflectance under diffuse illumination, ``int albedo(g) sin 2g dg``, is ``rho``
+(``"K"``: the fitted power was BRDF x cos(theta) in 1/sr and the fit's own scale is kept).
+Either way the albedo must stay <= 1 at every incidence: with ``"K"`` a larger one is an
+error; with ``rho`` the scale is lowered until it holds and the material carries a warning.
+
+**"paper".** The paper's own components as it describes them (section 3.4: "the 3D diagrams
+for each component are a revolution volume along their orientation axes"), not reciprocal:
 
 * **two-lobe** (Eqs. 19-22): the diffuse lobe ``(1-a_s)(n_d+1)/2pi cos^n_d(theta)`` is a
   solid of revolution about the surface normal (``theta`` = angle between the outgoing
@@ -23,31 +37,21 @@ are a revolution volume along their orientation axes"):
   the plane of incidence, a solid of revolution about the mirror direction for lobes about
   it, interpolated in between. The model is tabulated (0.25 deg in gamma and theta).
 
-Above the surface only: directions below it receive nothing, which cuts lobes whose axis
-is tilted (the specular lobe near grazing incidence).
+The shape ``s(gamma, omega)`` is scaled per angle of incidence so that the reflected power is
+the total reflectance times the incident power, ``f = rho(gamma) s / S(gamma)`` with ``S`` the
+integral of ``s`` over the hemisphere (or ``f = K s``, ``rho(gamma) = K S(gamma)``); in the
+plane of incidence it is exactly the fitted curve up to that per-gamma scale. The fitted
+share and index laws are used up to the largest measured angle of incidence and held
+constant beyond it; the specular share saturates at 1 by irreflect's one rule,
+:func:`irreflect.models.base.cap_share` (the kernels compile the same function).
 
-**Scale and energy.** The 3D shape ``s(gamma, omega)`` (radiant intensity per unit power,
-1/sr) is scaled per angle of incidence so that the reflected power is the material's total
-reflectance times the incident power:
-
-    f(gamma, omega) = rho(gamma) s(gamma, omega) / S(gamma),   S(gamma) = integral of s over the hemisphere
-
-``S`` is computed numerically per angle of incidence (for lobes of revolution by a 1-D
-quadrature of the part of each lobe above the surface; for tabulated models by a 2-D
-quadrature). The shape restricted to the plane of incidence is exactly the fitted curve at
-every gamma; only its overall scale changes with gamma (which is the paper's beta(gamma),
-Fig. 11). ``rho`` is either a constant total reflectance given by the user or the material
-file, or ``"K"``: the table's power was BRDF x cos(theta) in 1/sr (as for the real data in
-``../shared``), so ``f = K s`` and ``rho(gamma) = K S(gamma)``. Either way ``rho <= 1`` is
-checked: the reflected power never exceeds the incident power.
-
-The fitted share and index laws are used up to the largest measured angle of incidence
-(``gamma_range_deg`` of a material file) and held constant beyond it; the specular share is
-clipped to [0, 1].
+Both forms reflect nothing below the surface, and in both the reciprocal family's fit and
+the paper's laws use ``min(1, u_as cos^v_as(gamma))`` for the two-lobe share.
 """
 
 from __future__ import annotations
 
+import functools
 import json
 import math
 import numbers
@@ -62,14 +66,21 @@ from .._atomic import atomic_path
 from .._inputs import parse_json, read_text
 from ..errors import IrreflectError
 from ..models import get_model
+from ..models.base import cap_share
 from ..validation import check_output_path
+from . import reciprocal as _recip
 from .kernels import (  # noqa: F401  (the table constants are re-exported)
     GAMMA_NODES,
+    KIND_LAMBERTIAN,
+    KIND_LOBES,
+    KIND_RECIPROCAL,
+    KIND_TABLE,
     LOBE_MAX,
+    N_COS,
     N_GAMMA,
     TABLE_GAMMA,
     TABLE_THETA,
-    eval_material_directions,
+    eval_directions,
     hemisphere_integral,
     pack_materials,
 )
@@ -80,7 +91,11 @@ MATERIAL_FORMAT_VERSION = 1
 #: largest angle of incidence at which the share/index laws are evaluated
 GAMMA_LAW_MAX = np.radians(89.5)
 
-KIND_LAMBERTIAN, KIND_LOBES, KIND_TABLE = 0, 1, 2
+#: the surface models of a room: reciprocal by construction (default) or the paper's form
+BRDFS = ("reciprocal", "paper")
+PAPER_WARNING = ("the paper's surface model is not reciprocal (its share and lobe indices "
+                 "follow the angle of incidence only): swapping emitter and receiver changes "
+                 "the answer on glossy materials; the default 'reciprocal' model does not")
 
 
 @dataclass(frozen=True)
@@ -91,25 +106,43 @@ class Material:
     ----------
     name : str
     kind : int
-        0 Lambertian, 1 lobes of revolution, 2 tabulated plane-of-incidence equivalent.
+        0 Lambertian, 1 the paper's lobes of revolution, 2 the paper's tabulated
+        plane-of-incidence equivalent, 3 the reciprocal family.
     source : str
         Where it came from (``lambertian(0.8)``, ``terrazzo.json (two-lobe)``, ...).
     reflectance : float or None
-        Constant total reflectance (None when ``scale == "K"``).
+        Total reflectance: the constant albedo of the paper's form, the reflectance under
+        diffuse illumination of the reciprocal form (None when ``scale == "K"``).
     scale : str
         ``"reflectance"`` or ``"K"`` (see the module docstring).
+    brdf : str
+        ``"reciprocal"`` or ``"paper"`` (Lambertian materials are both).
     model, params, stderr : the fitted model spec and natural parameters (None for Lambertian)
     lobes : ndarray (L, 5)
-        ``[tilt t, c0, c1, u_n, v_n]``: axis at ``t gamma`` from the normal, weight
-        ``c0 + c1 a(gamma)``, index ``u_n cos^v_n(gamma)``.
+        Paper form: ``[tilt t, c0, c1, u_n, v_n]``: axis at ``t gamma`` from the normal,
+        weight ``c0 + c1 a(gamma)``, index ``u_n cos^v_n(gamma)``.
     share : (u_a, v_a)
-        ``a(gamma) = clip(u_a cos^v_a(gamma), 0, 1)`` (the two-lobe specular share).
+        Paper form: ``a(gamma) = min(1, u_a cos^v_a(gamma))`` (the two-lobe specular share).
     gamma_max_rad : float
         The laws are evaluated at ``min(gamma, gamma_max_rad)``.
     rho_table, norm_table : ndarray (N_GAMMA,)
-        ``rho(gamma)`` and ``rho(gamma) / S(gamma)`` at :data:`GAMMA_NODES`.
+        The albedo ``rho(gamma)`` at :data:`GAMMA_NODES`, and the paper form's per-gamma scale.
     table : ndarray (361, 721) or None
-        Plane-of-incidence shape for kind 2, at :data:`TABLE_GAMMA` x :data:`TABLE_THETA`.
+        Paper form, kind 2: the plane-of-incidence shape at :data:`TABLE_GAMMA` x :data:`TABLE_THETA`.
+    terms : ndarray (T, 4)
+        Reciprocal form: ``[kind, index, q, amplitude]`` per term (:mod:`.kernels`).
+    term_albedo : ndarray (T, N_GAMMA)
+        Reciprocal form: each term's albedo (the sampler's mixture weights).
+    fidelity : dict
+        Reciprocal form: how far its in-plane curve departs from the fitted one (see
+        :func:`from_model`).
+    warnings : tuple of str
+        What the user should know about this material (printed by ``irreflect room``).
+    requested : float, "K" or None
+        The reflectance asked for (before an energy cap).
+    energy_cap : ndarray (N_COS,) or None
+        Reciprocal form: ``g(cos theta)``, the factor ``g(cos theta_i) g(cos theta_o)`` that
+        keeps the albedo <= 1 where the scaled fit would exceed it (None: not needed).
     """
 
     name: str
@@ -127,13 +160,25 @@ class Material:
     norm_table: np.ndarray = field(default_factory=lambda: np.zeros(N_GAMMA), repr=False)
     table: np.ndarray | None = field(default=None, repr=False)
     metadata: dict = field(default_factory=dict, repr=False)
+    brdf: str = "reciprocal"
+    terms: np.ndarray = field(default_factory=lambda: np.zeros((0, 4)), repr=False)
+    term_albedo: np.ndarray = field(default_factory=lambda: np.zeros((0, N_GAMMA)), repr=False)
+    fidelity: dict = field(default_factory=dict, repr=False)
+    warnings: tuple[str, ...] = ()
+    requested: object = None
+    energy_cap: np.ndarray | None = field(default=None, repr=False)
 
     @property
     def is_lambertian(self) -> bool:
         return self.kind == KIND_LAMBERTIAN
 
+    @property
+    def is_reciprocal(self) -> bool:
+        return self.kind in (KIND_LAMBERTIAN, KIND_RECIPROCAL)
+
     def rho(self, gamma_rad) -> np.ndarray:
-        """Total reflectance at the angle of incidence ``gamma_rad`` (radians, magnitude)."""
+        """Albedo (reflected / incident power) at the angle of incidence ``gamma_rad``
+        (radians, magnitude)."""
         return np.interp(np.abs(gamma_rad), GAMMA_NODES, self.rho_table)
 
     @property
@@ -148,9 +193,19 @@ class Material:
     def describe(self) -> str:
         if self.kind == KIND_LAMBERTIAN:
             return f"Lambertian, reflectance {self.reflectance:g}"
+        lo, hi = self.rho_table[:-1].min(), self.rho_table[:-1].max()
+        if self.kind == KIND_RECIPROCAL:
+            fid = self.fidelity
+            text = (f"{self.model}, reciprocal form ({len(self.terms)} terms; diffuse reflectance "
+                    f"{self.diffuse_reflectance:.3g}, albedo {lo:.3g}-{hi:.3g} over incidence; "
+                    f"in-plane R^2 {fid.get('r2_curve', float('nan')):.4f} against the fitted curve")
+            if fid.get("r2_table_reciprocal") is not None:
+                text += (f", {fid['r2_table_reciprocal']:.4f} on its table (paper form "
+                         f"{fid['r2_table_paper']:.4f})")
+            return text + ")"
         rho = (f"reflectance {self.reflectance:g}" if self.scale == "reflectance"
-               else f"reflectance K x lobes = {self.rho_table.min():.3g}-{self.rho_table.max():.3g}")
-        return f"{self.model} ({rho})"
+               else f"reflectance K x lobes = {lo:.3g}-{hi:.3g}")
+        return f"{self.model}, paper form, not reciprocal ({rho})"
 
     def intensity(self, gamma_deg, theta_deg, azimuth_deg=0.0) -> np.ndarray:
         """Reflected radiant intensity per unit incident power (1/sr) in 3D.
@@ -160,16 +215,26 @@ class Material:
         ``azimuth_deg`` about the normal out of the plane of incidence (0 = in the plane).
         Evaluated by the same compiled code as the simulation.
         """
+        din, dout, shape = _directions(gamma_deg, theta_deg, azimuth_deg)
+        return eval_directions(pack_materials([self]), 0, din, dout, False).reshape(shape)
 
-        g = np.radians(np.abs(np.asarray(gamma_deg, float)))
-        t = np.radians(np.asarray(theta_deg, float))
-        a = np.radians(np.asarray(azimuth_deg, float))
-        g, t, a = np.broadcast_arrays(g, t, a)
-        din = np.stack([np.sin(g), np.zeros_like(g), -np.cos(g)], axis=-1)
-        dout = np.stack([np.sin(t) * np.cos(a), np.sin(t) * np.sin(a), np.cos(t)], axis=-1)
-        out = eval_material_directions(pack_materials([self]), 0, din.reshape(-1, 3),
-                                       dout.reshape(-1, 3))
-        return out.reshape(g.shape)
+    def brdf_value(self, incident, outgoing) -> np.ndarray:
+        """The BRDF ``f(i, o)`` (1/sr) for rows of unit vectors ``i`` (towards the light) and
+        ``o`` (outgoing), with the surface normal +z: for reciprocity checks."""
+        i = np.atleast_2d(np.asarray(incident, float))
+        o = np.atleast_2d(np.asarray(outgoing, float))
+        return eval_directions(pack_materials([self]), 0, np.ascontiguousarray(-i),
+                               np.ascontiguousarray(o), True)
+
+
+def _directions(gamma_deg, theta_deg, azimuth_deg):
+    g = np.radians(np.abs(np.asarray(gamma_deg, float)))
+    t = np.radians(np.asarray(theta_deg, float))
+    a = np.radians(np.asarray(azimuth_deg, float))
+    g, t, a = np.broadcast_arrays(g, t, a)
+    din = np.stack([np.sin(g), np.zeros_like(g), -np.cos(g)], axis=-1)
+    dout = np.stack([np.sin(t) * np.cos(a), np.sin(t) * np.sin(a), np.cos(t)], axis=-1)
+    return np.ascontiguousarray(din.reshape(-1, 3)), np.ascontiguousarray(dout.reshape(-1, 3)), g.shape
 
 
 # ----------------------------------------------------------------------------- construction
@@ -179,7 +244,8 @@ def lambertian(rho: float, name: str | None = None) -> Material:
     return Material(name=name or f"lambertian({rho:g})", kind=KIND_LAMBERTIAN,
                     source=f"lambertian({rho:g})", reflectance=rho,
                     lobes=np.array([[0.0, 1.0, 0.0, 1.0, 0.0]]),
-                    rho_table=np.full(N_GAMMA, rho), norm_table=np.full(N_GAMMA, rho))
+                    rho_table=np.full(N_GAMMA, rho), norm_table=np.full(N_GAMMA, rho),
+                    requested=rho)
 
 
 def parse_reflectance(value, name: str = "--reflectance"):
@@ -203,9 +269,16 @@ def _check_rho(rho, name) -> float:
     return rho
 
 
+def check_brdf(brdf: str) -> str:
+    if brdf not in BRDFS:
+        raise IrreflectError(f"surface model must be one of {', '.join(BRDFS)}; found {brdf!r}")
+    return brdf
+
+
 def from_model(model, params: dict, reflectance, *, name: str = "material",
                source: str | None = None, stderr: dict | None = None,
-               gamma_max_deg: float | None = None, metadata: dict | None = None) -> Material:
+               gamma_max_deg: float | None = None, metadata: dict | None = None,
+               brdf: str = "reciprocal") -> Material:
     """A material from a registered reflection model and its natural parameters.
 
     Parameters
@@ -215,13 +288,22 @@ def from_model(model, params: dict, reflectance, *, name: str = "material",
     params : dict
         Natural parameters by name (all of ``get_model(model).param_names``).
     reflectance : float in [0, 1] or "K"
-        Constant total reflectance; or ``"K"``: the power the model was fitted to was
-        BRDF x cos(theta) (1/sr), so ``K`` already sets the reflectance.
+        Total reflectance (see the module docstring); or ``"K"``: the power the model was
+        fitted to was BRDF x cos(theta) (1/sr), so ``K`` already sets the reflectance.
     gamma_max_deg : float, optional
-        Largest measured angle of incidence: the share and index laws are held constant
-        beyond it (default: used up to 89.5 deg).
+        Largest measured angle of incidence: the paper form's share and index laws are held
+        constant beyond it, and the reciprocal form is fitted up to it (default 89.5 deg;
+        a material file's ``gamma_range_deg`` in ``metadata`` gives the lower end too).
+    brdf : "reciprocal" or "paper"
+        The surface model (module docstring). The reciprocal form's ``fidelity``:
+        ``r2_curve`` (weighted R^2 of its in-plane curve against the fitted curve over the
+        fitted angles of incidence), ``gamma_range_deg``, ``terms``, and when the
+        material's measurement table (``metadata["data_file"]``) can be read,
+        ``r2_table_reciprocal`` and ``r2_table_paper`` (both forms' in-plane curves on it,
+        in the fit's units) and ``table``.
     """
 
+    check_brdf(brdf)
     model_obj = get_model(model)
     outside = _check_model_arguments(model_obj, params, gamma_max_deg, name)
     spec = model if isinstance(model, str) else model_obj.name
@@ -244,10 +326,11 @@ def from_model(model, params: dict, reflectance, *, name: str = "material",
         if reflectance.strip().upper() != "K":
             raise IrreflectError(f"material '{name}': reflectance must be a number in [0, 1] or "
                                  f"\"K\"; found '{reflectance}'")
-        scale, rho = "K", None
+        scale, rho, requested = "K", None, "K"
         K = values.get("K", 1.0)
     else:
         scale, rho = "reflectance", _check_rho(reflectance, name)
+        requested = rho
         K = 1.0
     lobes, share = _lobes_for(model_obj.name, values)
     metadata = dict(metadata or {})
@@ -259,15 +342,21 @@ def from_model(model, params: dict, reflectance, *, name: str = "material",
             f"{unphysical} ({outside.removeprefix(f'material {name!r}: ')})")
     base = dict(name=name, source=source or f"{spec} {values}", reflectance=rho, scale=scale,
                 model=spec, params=values, stderr=stderr, gamma_max_rad=float(gmax),
-                metadata=metadata)
+                metadata=metadata, requested=requested)
     if lobes is not None:
+        paper = Material(kind=KIND_LOBES, lobes=lobes, share=share, brdf="paper", **base)
         S = lobe_hemisphere_integral(lobes, share, gmax, GAMMA_NODES)
-        mat = Material(kind=KIND_LOBES, lobes=lobes, share=share, **base)
     else:
         table = _plane_table(model_obj, values, gmax)
-        mat = Material(kind=KIND_TABLE, table=table, **base)
-        S = table_hemisphere_integral(mat)
-    mat = _with_scale(mat, S, K)
+        paper = Material(kind=KIND_TABLE, table=table, brdf="paper", **base)
+        S = table_hemisphere_integral(paper)
+    if outside is not None and not (np.all(np.isfinite(S)) and np.all(S > 0)):
+        raise IrreflectError(outside)  # unphysical and not even simulable
+    _check_reflects(paper, S)
+    if brdf == "paper":
+        mat = _with_scale(paper, S, K)
+    else:
+        mat = _reciprocal(paper, K)
     if outside is not None and not (np.all(np.isfinite(mat.rho_table))
                                     and np.all(np.isfinite(mat.norm_table))):
         raise IrreflectError(outside)  # unphysical and not even simulable
@@ -339,24 +428,255 @@ def fit_notes(mat: Material) -> list[str]:
     return lines
 
 
-def _with_scale(mat: Material, S: np.ndarray, K: float) -> Material:
+def _check_reflects(mat: Material, S: np.ndarray) -> None:
     if np.any(~np.isfinite(S)) or np.any(S <= 0):
         raise IrreflectError(f"material '{mat.name}': its lobes reflect nothing above the surface "
                              "at some angle of incidence; check the coefficients")
+
+
+def _with_scale(mat: Material, S: np.ndarray, K: float) -> Material:
     if mat.scale == "K":
         rho = K * S
-        worst = int(np.argmax(rho))
-        if rho[worst] > 1.0 + 1e-9:
-            raise IrreflectError(
-                f"material '{mat.name}': with reflectance \"K\" the total reflectance K x "
-                f"(integral of the lobes) reaches {rho[worst]:.4g} at gamma = "
-                f"{np.degrees(GAMMA_NODES[worst]):.1f} deg, more than the incident power; give "
-                "reflectance = RHO <= 1 instead (the power was not BRDF x cos(theta) in 1/sr?)")
+        _check_energy_K(mat, rho)
         norm = np.full(N_GAMMA, K)
     else:
         rho = np.full(N_GAMMA, mat.reflectance)
         norm = mat.reflectance / S
-    return replace(mat, rho_table=rho, norm_table=norm)
+    return replace(mat, rho_table=rho, norm_table=norm,
+                   warnings=mat.warnings + (f"material '{mat.name}': {PAPER_WARNING}",))
+
+
+def _check_energy_K(mat: Material, rho: np.ndarray) -> None:
+    worst = int(np.argmax(rho))
+    if rho[worst] > 1.0 + 1e-9:
+        raise IrreflectError(
+            f"material '{mat.name}': with reflectance \"K\" the total reflectance K x "
+            f"(integral of the lobes) reaches {rho[worst]:.4g} at gamma = "
+            f"{np.degrees(GAMMA_NODES[worst]):.1f} deg, more than the incident power; give "
+            "reflectance = RHO <= 1 instead (the power was not BRDF x cos(theta) in 1/sr?)")
+
+
+def _gamma_range(mat: Material) -> tuple[float, float]:
+    grange = mat.metadata.get("gamma_range_deg")
+    hi = float(mat.gamma_max_rad)
+    lo = 0.0
+    if isinstance(grange, list | tuple) and len(grange) == 2:
+        try:
+            lo = min(np.radians(abs(float(grange[0]))), hi)
+        except (TypeError, ValueError):
+            lo = 0.0
+    return lo, hi
+
+
+def _peaks(mat: Material):
+    """Receiver angles of the paper form's lobe axes at incidence g (the mirror at least)."""
+    if mat.kind != KIND_LOBES:
+        return lambda g: [g]
+    tilts = sorted({float(t) for t in mat.lobes[:, 0]} | {1.0})
+    return lambda g: [t * g for t in tilts]
+
+
+def _reciprocal(paper: Material, K: float) -> Material:
+    """The reciprocal form of ``paper`` (a paper-form material, any scale), see the module
+    docstring; ``K`` the fit's scale (used when ``paper.scale == "K"``)."""
+    lo, hi = _gamma_range(paper)
+    shape = replace(paper, norm_table=np.ones(N_GAMMA), rho_table=np.ones(N_GAMMA))
+    terms, coef, albedo0, r2 = _fit_reciprocal(shape, lo, hi)
+    fidelity = {"r2_curve": r2, "gamma_range_deg": [float(np.degrees(lo)), float(np.degrees(hi))],
+                "terms": int(len(terms))}
+    fidelity.update(_table_fidelity(paper, shape, terms, coef))
+    A0 = albedo0.sum(axis=0)  # per unit K, uncapped
+    if paper.scale == "K":
+        s, note = K, "with its fitted scale K"
+    else:
+        s = _scale_for(terms, coef, A0, paper.reflectance)
+        note = f"at diffuse reflectance {paper.reflectance:g}"
+    cap = None
+    warnings = ()
+    if s * A0.max() > 1.0:
+        cap = _cap(s, A0, terms, coef)
+        albedo = _recip.albedo_tables(terms, coef, GAMMA_NODES, cap)
+        cos_nodes = np.linspace(0, 1, N_COS)
+        gfac = np.interp(np.cos(GAMMA_NODES), cos_nodes, cap)
+        total = s * gfac * albedo.sum(axis=0)
+        for _ in range(4):  # the raised cap overshot between its nodes: lower it there
+            if total.max() <= 1.0:
+                break
+            # g(gamma) x min(1, 1 / albedo(gamma)) brings every node to <= 1 (the outgoing
+            # side's g only falls elsewhere)
+            over = np.minimum(1.0, (1.0 - 1e-9) / np.maximum(total, 1e-300))
+            cap = cap * np.interp(np.arccos(cos_nodes), GAMMA_NODES, over)
+            albedo = _recip.albedo_tables(terms, coef, GAMMA_NODES, cap)
+            gfac = np.interp(np.cos(GAMMA_NODES), cos_nodes, cap)
+            total = s * gfac * albedo.sum(axis=0)
+        if total.max() > 1.0:
+            cap = cap / np.sqrt(total.max())
+            albedo = _recip.albedo_tables(terms, coef, GAMMA_NODES, cap)
+        above = float(np.degrees(GAMMA_NODES[np.argmax(s * A0 > 1.0)]))
+        warnings = (f"material '{paper.name}': its reciprocal form {note} would reflect up to "
+                    f"{s * A0.max():.3g} of the incident power (above gamma = {above:.1f} deg; "
+                    f"measured to {np.degrees(hi):.0f} deg): capped at 1 there by a reciprocal "
+                    "factor g(theta_i) g(theta_o)",)
+    else:
+        albedo = albedo0
+    gfac = 1.0 if cap is None else np.interp(np.cos(GAMMA_NODES), np.linspace(0, 1, N_COS), cap)
+    rho_table = s * gfac * albedo.sum(axis=0)
+    if rho_table.max() > 1.0 + 1e-6:  # cannot happen: g <= 1 / (s A0); a failed cap is a bug
+        raise IrreflectError(f"material '{paper.name}': albedo {rho_table.max():.4g} > 1 after "
+                             "the energy cap (internal error)")
+    rho_table = np.minimum(rho_table, 1.0)  # the cap leaves 1 + 2e-16 by rounding
+    rho = None
+    if paper.scale != "K":
+        rho = float(np.trapezoid(rho_table * np.sin(2 * GAMMA_NODES), GAMMA_NODES))
+        if rho < paper.reflectance * (1 - 2e-3):
+            warnings = warnings + (
+                f"material '{paper.name}': its reciprocal form reaches a diffuse reflectance of "
+                f"{rho:.3g} at most (albedo 1 towards grazing incidence), not "
+                f"{paper.reflectance:g}",)
+    amp = _recip.amplitude(terms, coef) * s
+    table = np.column_stack([terms.astype(float), amp])
+    return replace(paper, kind=KIND_RECIPROCAL, brdf="reciprocal", reflectance=rho,
+                   terms=table, term_albedo=albedo * s, rho_table=rho_table,
+                   norm_table=np.ones(N_GAMMA), fidelity=fidelity, warnings=warnings,
+                   lobes=np.zeros((0, 5)), share=(0.0, 0.0), table=None, energy_cap=cap)
+
+
+_CAP_NODES = np.linspace(0.0, np.pi / 2, 17)
+
+
+def _cap(s: float, A0: np.ndarray, terms, coef, rounds: int = 5) -> np.ndarray:
+    """The energy cap ``g(cos theta)`` at N_COS nodes for scale ``s``: it starts from
+    ``min(1, 1 / (s A0))``, with which the albedo ``s g(gamma) int f g(o)`` is at most 1 (the
+    outgoing side's g only lowers it), then is raised, never above 1, where that leaves the
+    albedo below 1 (the outgoing g darkens grazing exits twice), towards albedo 1 where the
+    fit exceeds it."""
+    cos_nodes = np.linspace(0.0, 1.0, N_COS)
+    angle = np.arccos(cos_nodes)
+    g = np.minimum(1.0, 1.0 / np.maximum(s * np.interp(angle, GAMMA_NODES, A0), 1e-300))
+    if g.min() >= 1.0:
+        return g
+    for _ in range(rounds):
+        gi = np.interp(np.cos(_CAP_NODES), cos_nodes, g)
+        A = s * gi * _recip.albedo_tables(terms, coef, _CAP_NODES, g).sum(axis=0)
+        factor = np.interp(angle, _CAP_NODES, (np.maximum(A, 1e-12) / 0.995) ** -0.7)
+        g = np.minimum(1.0, g * factor)
+    return g
+
+
+def _scale_for(terms, coef, A0: np.ndarray, rho: float) -> float:
+    """The scale ``s`` at which the capped reciprocal form's diffuse reflectance is ``rho``
+    (fixed-point iteration ``s <- s rho / D(s)``; the largest reachable when ``rho`` is not:
+    capping more darkens grazing exits)."""
+    w = np.sin(2 * GAMMA_NODES)
+    D0 = float(np.trapezoid(A0 * w, GAMMA_NODES))
+    if D0 <= 0:
+        return 0.0
+    s0 = rho / D0
+    if s0 * A0.max() <= 1.0:
+        return s0
+    cos_nodes = np.linspace(0.0, 1.0, N_COS)
+
+    def diffuse(s):
+        cap = _cap(s, A0, terms, coef)
+        Ag = _recip.albedo_tables(terms, coef, _CAP_NODES, cap).sum(axis=0)
+        g = np.interp(np.cos(_CAP_NODES), cos_nodes, cap)
+        return float(np.trapezoid(s * g * Ag * np.sin(2 * _CAP_NODES), _CAP_NODES))
+
+    best_s, best_d = s0, diffuse(s0)
+    s_ = s0
+    d = best_d
+    for _ in range(8):
+        if abs(d - rho) < 1e-3 * rho:
+            break
+        s_ = s_ * rho / max(d, 1e-12)
+        d = diffuse(s_)
+        if d <= best_d and d < rho:  # past the largest reachable
+            break
+        if d > best_d or abs(d - rho) < abs(best_d - rho):
+            best_s, best_d = s_, d
+    return best_s
+
+
+def _plane_shape(shape: Material, g, t) -> np.ndarray:
+    """The paper form's in-plane intensity per unit K (its fitted curve) at (g, t) radians."""
+    return np.maximum(shape.intensity(np.degrees(g), np.degrees(t)), 0.0)
+
+
+def _fit_reciprocal(shape: Material, lo: float, hi: float):
+    key = (shape.model, tuple(sorted((shape.params or {}).items())), round(lo, 12),
+           round(hi, 12), shape.kind)
+    if shape.kind == KIND_TABLE:
+        key = key + (hash(shape.table.tobytes()),)
+    return _fit_cached(key, shape, lo, hi)
+
+
+_FIT_CACHE: dict = {}
+
+
+def _fit_cached(key, shape, lo, hi):
+    hit = _FIT_CACHE.get(key)
+    if hit is None:
+        g, t, w = _recip.plane_grid(lo, hi, _peaks(shape))
+        target = _plane_shape(shape, g, t)
+        if not np.any(target > 0):
+            raise IrreflectError(f"material '{shape.name}': its fitted curve is zero over the "
+                                 "measured angles of incidence; check the coefficients")
+        terms, coef, r2 = _recip.fit_terms(g, t, w, target)
+        albedo = _recip.albedo_tables(terms, coef, GAMMA_NODES)
+        hit = (terms, coef, albedo, r2)
+        if len(_FIT_CACHE) > 64:
+            _FIT_CACHE.clear()
+        _FIT_CACHE[key] = hit
+    return hit
+
+
+def _table_fidelity(paper: Material, shape: Material, terms, coef) -> dict:
+    """R^2 of both forms' in-plane curves on the material's own measurement table, when
+    ``metadata["data_file"]`` names a table that can be read (in the fit's units)."""
+    path = _find_table(paper.metadata.get("data_file"))
+    if path is None or not paper.params or "K" not in paper.params:
+        return {}
+    try:
+        meas = _read_table(str(path))
+    except Exception:  # noqa: BLE001 - an unreadable table only loses this diagnostic
+        return {}
+    K = paper.params["K"]
+    g = np.radians(np.abs(meas.gamma_deg))
+    t = np.radians(meas.theta_deg)
+    y = meas.power
+    paper_curve = K * _plane_shape(shape, g, t)
+    recip_curve = K * (_recip.plane_columns(terms, g, t) @ coef)
+    from ..metrics import r2 as r2_of
+
+    return {"r2_table_paper": float(r2_of(y, paper_curve)),
+            "r2_table_reciprocal": float(r2_of(y, recip_curve)), "table": str(path)}
+
+
+@functools.lru_cache(maxsize=32)
+def _read_table(path: str):
+    """The material's own table, read for the fidelity diagnostic only: what the reader
+    notes about it (slightly negative powers kept, ...) was said when it was fitted."""
+    import warnings
+
+    from ..data import read_measurements
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        return read_measurements(path)
+
+
+def _find_table(data_file) -> Path | None:
+    if not isinstance(data_file, str) or not data_file:
+        return None
+    candidates = [Path(data_file)]
+    if not Path(data_file).is_absolute():
+        from ..data import bundled_dir
+
+        candidates.append(bundled_dir().parent / data_file)
+    for c in candidates:
+        if c.is_file():
+            return c
+    return None
 
 
 def _lobes_for(name: str, p: dict):
@@ -380,6 +700,16 @@ def _lobes_for(name: str, p: dict):
         lobes = [[p[f"t_{i}"], p[f"a_{i}"], 0.0, p[f"n_{i}"], 0.0] for i in range(1, count + 1)]
         return np.array(lobes), (0.0, 0.0)
     return None, None
+
+
+def with_brdf(mat: Material, brdf: str) -> Material:
+    """The same fitted material in the other surface model (Lambertian ones unchanged)."""
+    check_brdf(brdf)
+    if mat.kind == KIND_LAMBERTIAN or mat.brdf == brdf or mat.model is None:
+        return mat
+    gmax = float(np.degrees(mat.gamma_max_rad))
+    return from_model(mat.model, mat.params, mat.requested, name=mat.name, source=mat.source,
+                      stderr=mat.stderr, gamma_max_deg=gmax, metadata=mat.metadata, brdf=brdf)
 
 
 # ----------------------------------------------------------------------------- normalisation
@@ -419,7 +749,7 @@ def lobe_law_values(lobes, share, gamma_max, gamma):
     g = np.minimum(np.abs(np.asarray(gamma, float)), gamma_max)
     cg = np.cos(g)[:, None]
     u_a, v_a = share
-    a = np.clip(u_a * cg ** v_a, 0.0, 1.0)
+    a = cap_share(np.maximum(u_a * cg ** v_a, 0.0))  # the one share rule of irreflect
     w = np.maximum(lobes[:, 1] + lobes[:, 2] * a, 0.0)
     n = np.clip(lobes[:, 3] * cg ** lobes[:, 4], 0.0, 1e6)
     return w, n
@@ -631,7 +961,8 @@ def parse_lambertian(text: str):
         raise IrreflectError(f"'{text}': expected lambertian(RHO) with RHO a number in [0, 1]") from exc
 
 
-__all__ = ["Material", "lambertian", "from_model", "load_material", "save_material",
-           "check_params", "MATERIAL_FILE_SCHEMA", "REFLECTANCE", "fit_notes", "negative_power",
+__all__ = ["Material", "lambertian", "from_model", "with_brdf", "load_material", "save_material",
+           "BRDFS", "PAPER_WARNING", "check_brdf", "check_params", "MATERIAL_FILE_SCHEMA",
+           "REFLECTANCE", "fit_notes", "negative_power",
            "lobe_fraction_above", "lobe_hemisphere_integral", "parse_lambertian",
            "MATERIAL_FORMAT", "MATERIAL_FORMAT_VERSION"]

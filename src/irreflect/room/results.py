@@ -85,8 +85,10 @@ def bounces_table(result) -> pd.DataFrame:
     import pandas as pd  # deferred: a room run without tables need not load it
 
     rows = []
+    est = result.error_estimate or {}
     for (e, r), link in sorted(result.links.items()):
         P = result.scene.emitters[e].power_w
+        err = est.get((e, r))
         for k in range(len(link.power_w)):
             p = float(link.power_w[k])
             rows.append({
@@ -96,13 +98,16 @@ def bounces_table(result) -> pd.DataFrame:
                 "mean_delay_ns": float(link.m1[k] / p * 1e9) if p > 0 else np.nan,
                 "reflected_power_fraction": (float(link.reflected_w[k - 1]) / P
                                              if k >= 1 else np.nan),
+                "estimated_error": (float(err[k]) if err is not None and k >= 1
+                                    else np.nan),
             })
     return pd.DataFrame(rows)
 
 
 def impulse_table(result, receivers=None) -> pd.DataFrame:
-    """h(t) in long form, non-zero bins only: emitter, receiver, order, t_ns (bin start),
-    power_w (power in the bin)."""
+    """h(t) in long form, non-zero bins only: emitter, receiver, order, ``t_ns`` (the *start*
+    of the bin: the bin holds the power arriving in [t_ns, t_ns + dt)), power_w (power in the
+    bin)."""
     import pandas as pd  # deferred: a room run without tables need not load it
 
     parts = []
@@ -135,11 +140,33 @@ def run_info(result) -> dict:
         "rays_per_link": result.rays, "seed": result.seed,
         "time_resolution_ns": result.dt_s * 1e9, "seconds": round(result.seconds, 3),
         "ray_bounces_per_s": result.ray_bounces_per_s,
+        "brdf": result.brdf,
         "materials": {k: {"source": m.source, "model": m.model, "reflectance": m.reflectance,
-                          "scale": m.scale} for k, m in scene.materials.items()},
+                          "scale": m.scale, "surface_model": m.brdf,
+                          "albedo_range": [float(m.rho_table.min()), float(m.rho_table.max())],
+                          "fidelity": m.fidelity, "warnings": list(m.warnings)}
+                      for k, m in scene.materials.items()},
+        "error_estimate": (None if result.error_estimate is None else
+                           {f"{scene.emitters[e].name} -> {scene.receivers[r].name}": v.tolist()
+                            for (e, r), v in result.error_estimate.items()}),
         "emitters": [e.name for e in scene.emitters],
         "receivers": len(scene.receivers), "notes": list(result.notes),
     }
+
+
+#: what the files' columns mean (written into run.json and the Parquet files' metadata)
+FILES = {
+    "summary": "one row per emitter-receiver pair: DC gains (total, LoS, per reflection, "
+               "Monte Carlo standard errors), mean delay and RMS delay spread (ns), phase error "
+               "(deg) and range error (m) of phase-based ranging at the emitter's modulation",
+    "bounces": "one row per pair and order (0 = line of sight): DC gain, standard error (Monte "
+               "Carlo), mean delay (ns), power left after that many reflections per watt "
+               "emitted, and the recursive method's estimated relative error of the order "
+               "(from a run at twice the cell size; NaN for Monte Carlo)",
+    "impulse_response": "h(t), non-zero bins only: t_ns is the START of each delay bin; the "
+                        "bin holds the power (W) arriving in [t_ns, t_ns + dt) with dt = "
+                        "time_resolution_ns of run.json",
+}
 
 
 def write_results(result, out_dir, figures=None) -> list[str]:
@@ -155,9 +182,12 @@ def write_results(result, out_dir, figures=None) -> list[str]:
     with atomic_directory(out_dir, "--out", command="room") as tmp:
         for name, df in (("summary", summary), ("bounces", bounces), ("impulse_response", impulse)):
             df.to_csv(tmp / f"{name}.csv", index=False)
+            df.attrs["description"] = FILES[name]
             df.to_parquet(tmp / f"{name}.parquet", index=False)
             written += [f"{name}.csv", f"{name}.parquet"]
-        (tmp / "run.json").write_text(json.dumps(run_info(result), indent=2, default=str) + "\n")
+        info = run_info(result)
+        info["files"] = FILES
+        (tmp / "run.json").write_text(json.dumps(info, indent=2, default=str) + "\n")
         written.append("run.json")
         if figures is not None:
             written += figures(result, summary, singles, tmp)

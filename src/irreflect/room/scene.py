@@ -35,6 +35,7 @@ from .._inputs import parse_toml, read_text
 from ..errors import IrreflectError, SceneError
 from ..validation import budget
 from .materials import (
+    BRDFS,
     REFLECTANCE,
     Material,
     check_params,
@@ -42,6 +43,7 @@ from .materials import (
     lambertian,
     load_material,
     parse_lambertian,
+    with_brdf,
 )
 
 ROOM_FACES = ("wall_x0", "wall_x1", "wall_y0", "wall_y1", "floor", "ceiling")
@@ -138,6 +140,13 @@ class Scene:
             {k: lambertian(m.reflectance if m.reflectance is not None else m.diffuse_reflectance)
              for k, m in self.materials.items()}, name=f"{self.name} (Lambertian)")
 
+    def with_brdf(self, brdf: str) -> Scene:
+        """The same scene with every fitted material in surface model ``brdf``
+        ("reciprocal" or "paper", see :mod:`.materials`)."""
+        mats = {k: with_brdf(m, brdf) for k, m in self.materials.items()}
+        settings = {k: v for k, v in self.settings.items() if k != "brdf"}
+        return replace(self, materials=mats, settings=settings)
+
     def with_receivers(self, receivers, grids=()) -> Scene:
         return replace(self, receivers=tuple(receivers), grids=tuple(grids))
 
@@ -224,6 +233,7 @@ _SIMULATION = sc.Table({
     "cell_m": sc.Number(lo=0.0, hi=ROOM_SIDE_M[1], lo_open=True, unit="m"),
     "rays": sc.Integer(lo=1, hi=10**12), "seed": sc.Integer(lo=0, hi=2**63 - 1),
     "time_resolution_ns": sc.Number(lo=0.0, hi=1e6, lo_open=True, unit="ns"),
+    "brdf": sc.Choice(options=BRDFS),
 })
 
 

@@ -88,3 +88,48 @@ def one_bounce_reference(scene: Scene) -> float:
     value, _ = dblquad(integrand, 0.0, float(scene.size[0]), 0.0, float(scene.size[1]),
                        epsabs=1e-16, epsrel=1e-9)
     return value * em.power_w
+
+
+#: a medium-gloss two-lobe material of our own (not fitted to any table): specular share
+#: 6 % at normal incidence growing towards grazing, specular index about 60, a flattish
+#: diffuse lobe; "measured" over 10-70 deg
+GLOSSY_PARAMS = {"u_as": 0.06, "v_as": -2.7, "u_nd": 0.75, "v_nd": 3.0, "u_ns": 60.0,
+                 "v_ns": -0.35, "K": 1.0}
+
+
+def glossy_material(rho: float, name: str = "glossy", brdf: str = "reciprocal"):
+    """:data:`GLOSSY_PARAMS` as a room material of diffuse reflectance ``rho``."""
+    from .materials import from_model
+
+    return from_model("two-lobe", GLOSSY_PARAMS, rho, name=name, gamma_max_deg=70.0,
+                      metadata={"gamma_range_deg": [10.0, 70.0]}, brdf=brdf,
+                      source="validation.GLOSSY_PARAMS (two-lobe)")
+
+
+def glossy_room(floor=None, walls=None, *, receiver_facing=(0.0, 0.0, 1.0), fov_deg=85.0,
+                receiver_pos=(3.0, 1.2, 0.8), emitter_pos=(1.5, 2.0, 2.6)) -> Scene:
+    """A 4 x 4 x 3 m room with a glossy floor (default :func:`glossy_material` at 0.5) and
+    walls (default Lambertian 0.6; pass a material for glossy walls), ceiling Lambertian 0.7,
+    an order-1 emitter below the ceiling facing down and one 1 cm^2 receiver."""
+    floor = floor if floor is not None else glossy_material(0.5, "floor")
+    walls = walls if walls is not None else lambertian(0.6, "walls")
+    mats = {"floor": floor.renamed("floor"), "walls": walls.renamed("walls"),
+            "ceiling": lambertian(0.7, "ceiling")}
+    facing = np.asarray(receiver_facing, float)
+    return Scene(
+        name="glossy room", size=np.array([4.0, 4.0, 3.0]),
+        room_materials=("walls", "walls", "walls", "walls", "floor", "ceiling"), materials=mats,
+        emitters=(Emitter("source", np.array(emitter_pos, float), np.array([0.0, 0.0, -1.0]), 1.0),),
+        receivers=(Receiver("receiver", np.array(receiver_pos, float),
+                            facing / np.linalg.norm(facing), 1e-4, fov_deg),),
+    )
+
+
+def swap_ready(scene: Scene) -> Scene:
+    """``scene`` with its receiver given a 90 deg field of view and its emitter order 1, so
+    that :meth:`Scene.swapped` is the same link backwards (the receiver's response
+    ``A cos(psi)`` is an order-1 emitter's pattern up to ``A / pi``)."""
+    from dataclasses import replace
+
+    e, r = scene.emitters[0], scene.receivers[0]
+    return replace(scene, emitters=(replace(e, order=1.0),), receivers=(replace(r, fov_deg=90.0),))
