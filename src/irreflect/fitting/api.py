@@ -25,7 +25,7 @@ from .options import (
     FitOptions,
 )
 from .results import FitResult, _check_sigma, _radians_and_weights, check_fit_data, judge
-from .search import search_and_finish
+from .search import fit_plain_table, search_and_finish
 
 #: :func:`retry_reasons`: an R^2 below this, or (weighted by 1/sigma^2) a reduced chi^2
 #: above the other, looks like a local optimum rather than the model's best.
@@ -133,8 +133,12 @@ def _options(options: FitOptions | None, settings: dict) -> FitOptions:
     if unknown:
         raise TypeError(f"fit() got an unexpected keyword argument '{unknown[0]}' (its "
                         f"settings: {', '.join(FIT_SETTINGS)})")
-    opts = options if options is not None else FitOptions()
-    return dataclasses.replace(opts, **settings) if settings else opts
+    if options is None:
+        return FitOptions(**settings) if settings else _DEFAULT_OPTIONS
+    return dataclasses.replace(options, **settings) if settings else options
+
+
+_DEFAULT_OPTIONS = FitOptions()
 
 
 def _checked(opts: FitOptions, model) -> FitOptions:
@@ -219,22 +223,31 @@ def _fit_search(meas, model, t0, opts: FitOptions) -> FitResult:
     check_fit_data(meas.power, model_obj, source)
     if sigma is not None:
         _check_sigma(sigma, source)
-    gamma, theta, weights = _radians_and_weights(meas, sigma)
     codes = _kernel_codes(model_obj, opts.engine)
-    # the plain two-lobe model's fit computes its geometry in the kernel (fit_plain)
-    kgeo = _kernel_geometry(gamma, theta) if codes is not None and codes.size else None
-    table = (gamma, theta, meas.power, weights)
-    out, fin, exact = search_and_finish(model_obj, table, opts, kgeo, sigma is not None)
+    table = kgeo = None
+    if codes is not None and codes.size == 0:  # the plain two-lobe model: one compiled call
+        out, fin, exact = fit_plain_table(model_obj, meas, sigma, opts)
+    else:
+        gamma, theta, weights = _radians_and_weights(meas, sigma)
+        kgeo = _kernel_geometry(gamma, theta) if codes is not None else None
+        table = (gamma, theta, meas.power, weights)
+        out, fin, exact = search_and_finish(model_obj, table, opts, kgeo)
     if out is None:
         raise FitError(
             f"fit of '{model_obj.name}' to {source} failed: no start reached a finite cost; "
             "check the data for extreme values"
         )
     zb, ab, cb, converged, message, n_starts, n_evals = out
-    fin = (finished_by_kernel(model_obj, fin, meas.power, source) if fin is not None else
-           finish(model_obj, zb, ab, cb, table, sigma is not None, opts.engine, kgeo, source))
+    if fin is not None:
+        fin = finished_by_kernel(model_obj, fin[0], meas.power, source, *fin[1:])
+    else:
+        if table is None:
+            gamma, theta, weights = _radians_and_weights(meas, sigma)
+            table = (gamma, theta, meas.power, weights)
+        fin = finish(model_obj, zb, ab, cb, table, sigma is not None, opts.engine, kgeo,
+                     source)
     # the distinct angles of incidence stand for all (judge's checks look at each once)
-    angles = gamma if exact is None else exact
+    angles = table[0] if exact is None else exact
     at_bound, ill, warnings = judge(model_obj, fin.values, fin.stderr, fin.singular, angles,
                                     converged, message)
     dof = meas.n_points - model_obj.n_params

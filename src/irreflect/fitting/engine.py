@@ -65,8 +65,8 @@ def _w(a, dtype=float) -> np.ndarray:
     writeable and the cache that ``make`` warms is the one every caller uses."""
     if type(a) is np.ndarray and a.dtype == dtype:
         flags = a.flags
-        if flags.c_contiguous and flags.writeable:
-            return a
+        if flags.c_contiguous:  # a read-only column: a copy (what np.require makes, faster)
+            return a if flags.writeable else a.copy()
     return np.require(a, dtype, ("C", "W"))
 
 

@@ -168,18 +168,22 @@ def finish(model, z, alpha, cost, table, absolute_sigma, engine, kgeo, source) -
                     power - fitted)
 
 
-def finished_by_kernel(model, fin, power, source) -> Finished:
+def finished_by_kernel(model, fin, power, source, stderr=None, residuals=None) -> Finished:
     """The kernel's finish (:class:`~.kernel_types.Finish` of
-    :func:`~.finish_kernel.tl_finish`) as :func:`finish` returns it, checked."""
+    :func:`~.finish_kernel.tl_finish`) as :func:`finish` returns it, checked; ``stderr``
+    and ``residuals`` when the kernel computed them too."""
     _check_values(model, fin.values, fin.round_trip, source)
     r2 = _check_r2(model, fin.r2, source)
-    stderr = np.sqrt(np.clip(np.diag(fin.covariance), 0, None))
+    if stderr is None:
+        stderr = np.sqrt(np.clip(np.diag(fin.covariance), 0, None))
+    if residuals is None:
+        residuals = power - fin.fitted
     return Finished(fin.values, stderr, fin.covariance, fin.singular, r2, float(fin.rmse),
-                    float(fin.mse), power - fin.fitted)
+                    float(fin.mse), residuals)
 
 
 def _check_values(model, values, round_trip, source) -> None:
-    if not np.all(np.isfinite(values)):
+    if not np.isfinite(values).all():
         raise FitError(
             f"fit of '{model.name}' to {source} ended at non-finite parameters "
             f"{np.array2string(values, precision=4)}: check the data for extreme values"

@@ -4,6 +4,7 @@
 from __future__ import annotations
 
 import dataclasses
+import functools
 from dataclasses import dataclass
 
 import numpy as np
@@ -81,12 +82,10 @@ class FitOptions:
         """These options with the search sizes left to fit() filled in: the caller's,
         else :data:`SMALL_TABLE_SEARCH` on a small table (and a model of 4 or more shape
         coordinates), else the model's defaults (None) and 3 rounds."""
-        sizes = {}
-        if n_points <= SMALL_TABLE_POINTS and model.n_nonlinear >= 4:
-            sizes = {k: v for k, v in SMALL_TABLE_SEARCH.items() if getattr(self, k) is None}
-        if self.max_rounds is None and "max_rounds" not in sizes:
-            sizes["max_rounds"] = 3
-        return dataclasses.replace(self, **sizes) if sizes else self
+        small = n_points <= SMALL_TABLE_POINTS and model.n_nonlinear >= 4
+        if self.extra_starts is None:  # hashable: the same options give the same object
+            return _sized(self, small)
+        return _sized.__wrapped__(self, small)
 
     def widened(self, n_points: int, z_first=None, n_nonlinear: int = 0) -> FitOptions:
         """The second search's options (:data:`RETRY_SEARCH`, on small tables
@@ -100,6 +99,17 @@ class FitOptions:
             sizes["extra_starts"] = (z_first if extra is None else np.vstack(
                 [z_first, np.asarray(extra, float).reshape(-1, n_nonlinear)]))
         return dataclasses.replace(self, **sizes)
+
+
+@functools.lru_cache(maxsize=64)
+def _sized(opts: FitOptions, small: bool) -> FitOptions:
+    """:meth:`FitOptions.sized_for` on a small table (``small``) or a large one."""
+    sizes = {}
+    if small:
+        sizes = {k: v for k, v in SMALL_TABLE_SEARCH.items() if getattr(opts, k) is None}
+    if opts.max_rounds is None and "max_rounds" not in sizes:
+        sizes["max_rounds"] = 3
+    return dataclasses.replace(opts, **sizes) if sizes else opts
 
 
 #: The keyword settings :func:`~irreflect.fitting.fit` accepts (FitOptions' fields).

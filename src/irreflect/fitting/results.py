@@ -19,6 +19,7 @@ from ..models import (
 )
 from ..models.paper import specular_share
 from ..validation import check_angles_deg
+from .cache import per_model
 
 
 # ----------------------------------------------------------------------------- results
@@ -100,9 +101,12 @@ class FitResult:
         model = self.model_object or get_model(self.model)
         if not model.share_cap:
             return np.empty(0)
-        g = np.unique(np.abs(self.gamma_deg))
+        g = np.abs(self.gamma_deg)
         share = specular_share(self.values[0], self.values[1], np.cos(np.radians(g)))
-        return g[share >= 1.0]
+        saturated = share >= 1.0
+        # the share at every point (elementwise, so the same as at each distinct angle);
+        # the distinct angles only when one saturates (np.unique costs more than the rest)
+        return np.unique(g[saturated]) if saturated.any() else np.empty(0)
 
     def verdict(self):
         """What R^2 cannot say: per angle of incidence whether the specular lobe is resolved
@@ -195,20 +199,31 @@ def _fmt_bound(b):
     return f"{b:g}"
 
 
+def _bound_checks(model) -> tuple:
+    """Per parameter of ``model``: (name, ((side, bound, tolerance) per finite bound))."""
+    def make():
+        out = []
+        for p in model.params:
+            checks = tuple((side, b, 1e-6 * abs(b) if b != 0 else 1e-12)
+                           for side, b in (("lower", p.lower), ("upper", p.upper))
+                           if math.isfinite(b))
+            out.append((p.name, checks))
+        return tuple(out)
+
+    return per_model(model, "bound checks", make)
+
+
 def judge(model, values, stderr, singular, gamma_rad, converged, message,
           validity: bool = True) -> tuple:
     """(at_bound, ill_determined, warnings) of a fit: the checks every command prints
     (``validity``: run the model's own check, :meth:`~irreflect.models.ReflectionModel.validity_warnings`, too)."""
     at_bound, detail = [], []
     values_f = np.asarray(values, float).tolist()  # Python floats: scalar tests in µs, not 10s
-    for p, v in zip(model.params, values_f, strict=True):
-        for side, b in (("lower", p.lower), ("upper", p.upper)):
-            if not math.isfinite(b):
-                continue
-            tol = 1e-6 * abs(b) if b != 0 else 1e-12
+    for (name, checks), v in zip(_bound_checks(model), values_f, strict=True):
+        for side, b, tol in checks:
             if (side == "lower" and v <= b + tol) or (side == "upper" and v >= b - tol):
-                at_bound.append(p.name)
-                detail.append(f"{p.name} = {v:.4g} ({side} bound {_fmt_bound(b)})")
+                at_bound.append(name)
+                detail.append(f"{name} = {v:.4g} ({side} bound {_fmt_bound(b)})")
     ill, ill_detail = [], []
     for p, v, s, sing in zip(model.params, values_f, np.asarray(stderr, float).tolist(),
                              np.asarray(singular, bool).tolist(), strict=True):
@@ -239,7 +254,7 @@ def _radians_and_weights(meas, sigma) -> tuple:
 
 
 def _check_sigma(sigma, source) -> None:
-    if np.any(sigma <= 0):
+    if (sigma <= 0).any():
         raise IrreflectError(
             f"{source}: sigma must be > 0 to weight a fit by 1/sigma^2, found "
             f"{int(np.sum(sigma <= 0))} zero or negative value(s): fix them or drop the "

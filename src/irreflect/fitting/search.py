@@ -18,8 +18,9 @@ from .driver import bind
 from .engine import _kernel_codes, _kernel_geometry, _kernel_static, _w
 from .finish import _conclude
 from .kernel_types import Solution
-from .local import _levenberg_marquardt
+from .local import _STOP_MESSAGES, STOP_FTOL, STOP_XTOL, _levenberg_marquardt
 from .options import FitOptions
+from .results import _radians_and_weights
 from .screening import (
     _block_candidates,
     _default_hops,
@@ -145,13 +146,10 @@ def global_search(model_obj, table, opts: FitOptions, kgeo=None):
     return search_and_finish(model_obj, table, opts, kgeo)[0]
 
 
-def search_and_finish(model_obj, table, opts: FitOptions, kgeo=None, absolute_sigma=None):
-    """:func:`global_search`, and with ``absolute_sigma`` (True or False: how fit() takes
-    sigma) on the plain two-lobe model in the compiled kernel the whole fit in one call
-    (:func:`~.search_kernel.fit_plain`: geometry, search and, when the search met its
-    tolerance, the finish). Returns (the search's end as global_search returns it, the
-    kernel's :class:`~.kernel_types.Finish` or None (fit() finishes it), the exact angles
-    of incidence or None (the numpy engine))."""
+def search_and_finish(model_obj, table, opts: FitOptions, kgeo=None):
+    """:func:`global_search`. Returns (the search's end as global_search returns it,
+    None, the exact angles of incidence or None (the numpy engine)); the plain two-lobe
+    model's fit in one compiled call is :func:`fit_plain_table`."""
     gamma, theta, power, weights = table
     power = np.asarray(power, float)
     scale = float(np.sqrt(np.mean(weights * power * power)))
@@ -162,19 +160,11 @@ def search_and_finish(model_obj, table, opts: FitOptions, kgeo=None, absolute_si
                                                        opts.n_data_starts)
     n_hops = _default_hops(model_obj, n_keep) if opts.n_hops is None else int(opts.n_hops)
     codes = _kernel_codes(model_obj, opts.engine)
-    fin = exact = None
+    exact = None
     sizes = (int(n_data_starts), int(n_keep), int(opts.max_rounds))
     if codes is None:
         backend = NumpyBackend(model_obj, unit, opts, n_screen, n_hops)
         best, n_starts, n_evals = run_search_numpy(backend, *sizes)
-    elif absolute_sigma is not None and codes.size == 0:
-        from .search_kernel import fit_plain
-
-        model, draws, stop = _kernel_inputs(model_obj, opts, n_screen, n_hops)
-        best, (n_starts, n_evals), (done, fin), exact = fit_plain(
-            model, (_w(gamma), _w(theta), _w(unit[2]), _w(weights), _w(power)), draws,
-            (sizes, stop, (bool(absolute_sigma), scale, model_obj.n_params)))
-        fin = fin if done else None
     else:
         from .search_kernel import search
 
@@ -187,4 +177,59 @@ def search_and_finish(model_obj, table, opts: FitOptions, kgeo=None, absolute_si
     found = (best.z, best.alpha, float(best.cost), int(best.reason), int(n_starts),
              int(n_evals))
     z, alpha, cost, *rest = _conclude(model_obj, *unit, found, opts.polish, opts.max_iter)
-    return (z, alpha * scale, cost * scale * scale, *rest), fin, exact
+    return (z, alpha * scale, cost * scale * scale, *rest), None, exact
+
+
+_NO_SIGMA = np.zeros(0)
+
+
+def _plain_inputs(model_obj, opts: FitOptions):
+    """The compiled fit's model, draws and configuration (:func:`fit_plain_table`); the
+    same for every fit with these options, kept per model unless there are extra starts."""
+    def make():
+        n_screen, n_keep, n_data_starts = _search_defaults(
+            model_obj, opts.n_screen, opts.n_keep, opts.n_data_starts)
+        n_hops = _default_hops(model_obj, n_keep) if opts.n_hops is None else int(opts.n_hops)
+        model, draws, stop = _kernel_inputs(model_obj, opts, n_screen, n_hops)
+        sizes = (int(n_data_starts), int(n_keep), int(opts.max_rounds))
+        return model, draws, (sizes, stop, model_obj.n_params)
+
+    if opts.extra_starts is not None:
+        return make()
+    key = ("plain inputs", opts.seed, opts.n_random_starts, opts.n_screen, opts.n_keep,
+           opts.n_data_starts, opts.max_iter, opts.max_rounds, opts.n_hops)
+    return per_model(model_obj, key, make)
+
+
+@functools.lru_cache(maxsize=32)
+def _message(reason: int, max_iter: int) -> str:
+    return _STOP_MESSAGES[reason].format(ftol=1e-10, xtol=1e-9, max_iter=max_iter)
+
+
+def fit_plain_table(model_obj, meas, sigma, opts: FitOptions):
+    """:func:`search_and_finish` of the plain two-lobe model in one compiled call
+    (:func:`~.search_kernel.fit_plain`: radians, weights, the power's scale, the geometry,
+    the search and, when the search met its tolerance, the finish) from the table ``meas``
+    as it is stored (``sigma``: the table's, None: unweighted; ``opts`` sized). Returns
+    (the search's end as :func:`global_search` returns it, or None; ``(Finish, standard
+    errors, residuals)`` of the kernel or None (fit() finishes a polished search); the exact
+    angles of incidence)."""
+    from .search_kernel import fit_plain
+
+    model, draws, config = _plain_inputs(model_obj, opts)
+    best, (n_starts, n_evals, scale), (done, fin, stderr, resid), exact = fit_plain(
+        model, (_w(meas.gamma_deg), _w(meas.theta_deg), _w(meas.power),
+                _NO_SIGMA if sigma is None else _w(sigma)), draws, config)
+    if not math.isfinite(best.cost):
+        return None, None, exact
+    cost = float(best.cost)
+    if done:  # _conclude's verdict on a search that met its tolerance
+        reason = int(best.reason)
+        return ((best.z, best.alpha * scale, cost * scale * scale,
+                 reason in (STOP_FTOL, STOP_XTOL), _message(reason, opts.max_iter),
+                 int(n_starts), int(n_evals)), (fin, stderr, resid), exact)
+    gamma, theta, weights = _radians_and_weights(meas, sigma)
+    found = (best.z, best.alpha, cost, int(best.reason), int(n_starts), int(n_evals))
+    z, alpha, cost, *rest = _conclude(model_obj, gamma, theta, meas.power / scale, weights,
+                                      found, opts.polish, opts.max_iter)
+    return (z, alpha * scale, cost * scale * scale, *rest), None, exact

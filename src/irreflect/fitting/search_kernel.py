@@ -29,7 +29,7 @@ from .fast_kernel import (
     tl_work,
 )
 from .finish_kernel import tl_finish
-from .kernel_math import STOP_MAXITER, STOP_NONFINITE, STOP_STUCK
+from .kernel_math import DEG, STOP_MAXITER, STOP_NONFINITE, STOP_STUCK, pairwise_sum
 from .kernel_types import Finish, KModel, KTable, Solution, Work
 from .local_kernel import _costs, _lm, _scan_candidates
 from .model_kernel import _sizes, kernel_geometry
@@ -182,25 +182,45 @@ def _plain_work(kt, power, weights):
 
 
 @njit(cache=True)
-def fit_plain(model, columns, draws, config):
-    """A fit of the plain two-lobe model in one call, as main's tl_fit was: the table's
-    kernel geometry (:func:`~.model_kernel.kernel_geometry`), the search's scratch
-    (:func:`work_for`), :func:`search`, and, when the search met a tolerance (nothing for
-    :func:`~.finish._conclude` to polish), the finish (:func:`~.finish_kernel.tl_finish`)
-    of its end point. ``model``: the model's :class:`~.kernel_types.KModel` as a tuple;
-    ``columns``: (gamma, theta (radians), power / scale, weights, power); ``draws`` as in
-    the context; ``config``: ((n_data_starts, n_keep, max_rounds), (max_iter, ftol, xtol),
-    (absolute_sigma, scale, n_params)). Returns (Solution, (n_starts, n_evals), (finished,
-    Finish; a placeholder when not finished), the exact angles of incidence)."""
-    gamma, theta, unit_power, weights, power = columns
-    sizes, stop, fin_in = config
-    kg = kernel_geometry(gamma, theta)
+def fit_plain(model, table, draws, config):
+    """A fit of the plain two-lobe model in one call from the table as it is stored, as
+    main's tl_fit was: angles to radians, weights ``1 / sigma^2`` (1 without sigma), the
+    power's scale (its weighted root mean square, numpy's ``sqrt(mean(w p p))`` to the
+    bit), the table's kernel geometry (:func:`~.model_kernel.kernel_geometry`), the
+    search's scratch (:func:`work_for`), :func:`search` on the power divided by its scale,
+    and, when the search met a tolerance (nothing for :func:`~.finish._conclude` to
+    polish), the finish (:func:`~.finish_kernel.tl_finish`) of its end point with the
+    standard errors and residuals fit() reports. ``model``: the model's
+    :class:`~.kernel_types.KModel` as a tuple; ``table``: (gamma_deg, theta_deg, power,
+    sigma; an empty sigma: unweighted); ``draws`` as in the context; ``config``:
+    ((n_data_starts, n_keep, max_rounds), (max_iter, ftol, xtol), n_params). The table's
+    checks are fit()'s (:func:`~.results.check_fit_data`), before this call. Returns
+    (Solution in the scaled units, (n_starts, n_evals, scale), (finished, Finish, standard
+    errors, residuals; placeholders when not finished), the exact angles of incidence)."""
+    gamma_deg, theta_deg, power, sigma = table
+    sizes, stop, n_params = config
+    n = power.size
+    weights = np.ones(n)
+    if sigma.size:
+        for j in range(n):
+            weights[j] = 1.0 / sigma[j] ** 2
+    scale = math.sqrt(pairwise_sum(weights * power * power, 0, n) / n)
+    if not (math.isfinite(scale) and scale > 0.0):
+        scale = 1.0
+    kg = kernel_geometry(gamma_deg * DEG, theta_deg * DEG)
     g = kg.geo
     kt = ((g.gamma, g.theta, g.lcg, g.lct, g.pt, g.lcp, g.pp, g.group), kg.glcg, kg.levels,
           kg.group, kg.exact)
-    ctx = (model, kt, _plain_work(kt, unit_power, weights), draws, stop)
-    best, counts, done, fin = search_finish(ctx, sizes, (weights, power) + fin_in)
-    return best, counts, (done, fin), kg.exact
+    ctx = (model, kt, _plain_work(kt, power / scale, weights), draws, stop)
+    best, counts, done, fin = search_finish(
+        ctx, sizes, (weights, power, sigma.size > 0, scale, n_params))
+    k = fin.values.size
+    stderr = np.empty(k)
+    for q in range(k):  # numpy.sqrt(numpy.clip(numpy.diag(cov), 0, None)), NaN kept
+        v = fin.covariance[q, q]
+        stderr[q] = math.sqrt(v) if v > 0.0 else (0.0 if v <= 0.0 else v)
+    return best, (counts[0], counts[1], scale), (done, fin, stderr, power - fin.fitted), \
+        kg.exact
 
 
 @njit(cache=True)
