@@ -33,18 +33,14 @@ MAX_KERNEL_RETURNS = 4
 
 #: "module:function" -> why it is over a limit today (the list only shrinks)
 KNOWN = {
-    "cli/protocol.py:register": "issue 26: the CLI's argument declarations",
-    "data.py:validate_table": "issue 26: table validation as a schema (reliability work)",
     "diagnose/workflow.py:diagnose": "issue 26: the diagnosis workflow",
     "protocol/core.py:paper_protocol": "issue 26: the protocols",
     "protocol/core.py:glossy_protocol": "issue 26: the protocols",
-    "protocol/robustness.py:protocol_robustness": "issue 26: the protocols",
     "report/compare.py:_section_markdown": "issue 26: report sections as result objects",
     "report/diagnose.py:section": "issue 26: report sections as result objects",
     "report/fits.py:section": "issue 26: report sections as result objects",
     "report/room.py:section": "issue 26: report sections as result objects",
     "report/selection.py:section": "issue 26: report sections as result objects",
-    "selection/run.py:run_selection": "issue 26: the selection's run",
 }
 
 MODULES = sorted(PACKAGE.rglob("*.py"))
