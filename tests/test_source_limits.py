@@ -33,7 +33,6 @@ MAX_KERNEL_RETURNS = 4
 
 #: "module:function" -> why it is over a limit today (the list only shrinks)
 KNOWN = {
-    "diagnose/workflow.py:diagnose": "issue 26: the diagnosis workflow",
     "report/compare.py:_section_markdown": "issue 26: report sections as result objects",
     "report/diagnose.py:section": "issue 26: report sections as result objects",
     "report/fits.py:section": "issue 26: report sections as result objects",
