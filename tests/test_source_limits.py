@@ -34,8 +34,6 @@ MAX_KERNEL_RETURNS = 4
 #: "module:function" -> why it is over a limit today (the list only shrinks)
 KNOWN = {
     "report/compare.py:_section_markdown": "issue 26: report sections as result objects",
-    "report/fits.py:section": "issue 26: report sections as result objects",
-    "report/room.py:section": "issue 26: report sections as result objects",
     "report/selection.py:section": "issue 26: report sections as result objects",
 }
 
