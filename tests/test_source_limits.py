@@ -10,9 +10,10 @@ read, every compiled kernel's signature short enough to read without counting po
   a few named structures instead);
 * no module imports a private name (``_name``) of another package of irreflect.
 
-:data:`KNOWN` lists the functions over a limit today that belong to work in progress
-elsewhere (each with the issue that shrinks it). The list may only shrink: an entry that
-no longer exceeds its limit fails the test until it is removed.
+:data:`KNOWN` lists the functions over a limit that belong to work in progress elsewhere
+(each with the issue that shrinks it; empty since issue 26's last ones were split). The list
+may only shrink: an entry that no longer exceeds its limit fails the test until it is
+removed.
 """
 
 from __future__ import annotations
@@ -32,10 +33,7 @@ MAX_KERNEL_ARGS = 10
 MAX_KERNEL_RETURNS = 4
 
 #: "module:function" -> why it is over a limit today (the list only shrinks)
-KNOWN = {
-    "report/compare.py:_section_markdown": "issue 26: report sections as result objects",
-    "report/selection.py:section": "issue 26: report sections as result objects",
-}
+KNOWN: dict[str, str] = {}
 
 MODULES = sorted(PACKAGE.rglob("*.py"))
 

@@ -63,7 +63,7 @@ def compute(ctx: ReportContext) -> DiagnoseRun:
 def section(ctx: ReportContext) -> Section:
     """Diagnose every dataset of the report (and, in a full run, a blind test on tables with
     hidden effects): verdict, effects added, the gap before and after, residual maps."""
-    return render(compute(ctx), ctx)
+    return render(ctx, compute(ctx))
 
 
 def _summary_tables(run: DiagnoseRun) -> dict:
@@ -119,7 +119,7 @@ def _where(run: DiagnoseRun, ctx: ReportContext):
     return where_md, findings
 
 
-def render(run: DiagnoseRun, ctx: ReportContext) -> Section:
+def render(ctx: ReportContext, run: DiagnoseRun) -> Section:
     """The section of :func:`compute`'s results: tables, residual maps, markdown."""
     results = run.results
     tables = _summary_tables(run)
