@@ -275,19 +275,27 @@ def _mirror_in_range(g, lo, hi) -> float:
     return mirror
 
 
-def _paper_arguments(gammas_deg, theta_min, theta_max, offsets, min_separation):
-    """:func:`paper_protocol`'s arguments checked: (the three angles of incidence by
-    magnitude, the receiver range, the coincidence distance)."""
-    mirror_offset, wide_offset, central_offset = offsets
+def _three_gammas(gammas_deg, limits, needs: str, listed):
+    """Three distinct angles of incidence (by magnitude) and the receiver range, checked;
+    ``needs``: the refusal's first words, ``listed``: how it lists what was given."""
     gammas = normalise_gammas(gammas_deg)
     mags = np.abs(gammas)
     if gammas.size != 3 or np.unique(mags).size != 3:
         raise IrreflectError(
-            "the paper's protocol needs exactly three distinct angles of incidence (Eq. 23); "
-            f"found {short_list(np.asarray(gammas_deg, float).ravel(), fmt=lambda g: f'{g:g}')}: "
+            f"{needs}; found {listed(np.asarray(gammas_deg, float).ravel())}: "
             "give three, e.g. --gammas -20 -40 -60"
         )
-    lo, hi = check_limits(theta_min, theta_max)
+    return tuple(gammas[np.argsort(mags)]), check_limits(*limits)
+
+
+def _paper_arguments(gammas_deg, theta_min, theta_max, offsets, min_separation):
+    """:func:`paper_protocol`'s arguments checked: (the three angles of incidence by
+    magnitude, the receiver range, the coincidence distance)."""
+    mirror_offset, wide_offset, central_offset = offsets
+    gammas, (lo, hi) = _three_gammas(
+        gammas_deg, (theta_min, theta_max),
+        "the paper's protocol needs exactly three distinct angles of incidence (Eq. 23)",
+        lambda values: short_list(values, fmt=lambda g: f"{g:g}"))
     named = {"mirror_offset": mirror_offset, "wide_offset": wide_offset,
              "central_offset": central_offset}
     for key, value in named.items():
@@ -304,7 +312,7 @@ def _paper_arguments(gammas_deg, theta_min, theta_max, offsets, min_separation):
             f"min_separation must be between 0 and mirror_offset ({mirror_offset:g}); "
             f"found {min_sep:g}"
         )
-    return tuple(gammas[np.argsort(mags)]), (lo, hi), min_sep
+    return gammas, (lo, hi), min_sep
 
 
 def paper_protocol(gammas_deg, theta_min: float = -70.0, theta_max: float = 70.0, *,
@@ -503,22 +511,17 @@ def _glossy_arguments(gammas_deg, theta_min, theta_max, specular_index, limits, 
     magnitude, the receiver range, the lobe-width offset of each). ``limits``:
     (min_lobe_offset, max_lobe_offset, wide_offset)."""
     min_lobe_offset, max_lobe_offset, wide_offset = limits
-    gammas = normalise_gammas(gammas_deg)
-    mags = np.abs(gammas)
-    if gammas.size != 3 or np.unique(mags).size != 3:
-        raise IrreflectError(
-            "the glossy protocol needs exactly three distinct angles of incidence; found "
-            f"{', '.join(f'{g:g}' for g in np.asarray(gammas_deg, float).ravel())}: "
-            "give three, e.g. --gammas -20 -40 -60"
-        )
-    lo, hi = check_limits(theta_min, theta_max)
+    gammas, (lo, hi) = _three_gammas(
+        gammas_deg, (theta_min, theta_max),
+        "the glossy protocol needs exactly three distinct angles of incidence",
+        lambda values: ", ".join(f"{g:g}" for g in values))
     if not (0 < min_lobe_offset <= max_lobe_offset < wide_offset):
         raise IrreflectError(
             "lobe offsets must satisfy 0 < min_lobe_offset <= max_lobe_offset < wide_offset; "
             f"found {min_lobe_offset:g}, {max_lobe_offset:g}, {wide_offset:g}"
         )
     index_of = specular_index if callable(specular_index) else (lambda g: specular_index)
-    g1, g2, g3 = gammas[np.argsort(mags)]
+    g1, g2, g3 = gammas
     offsets = {}
     for g in (g1, g2, g3):
         n = float(index_of(float(g)))
