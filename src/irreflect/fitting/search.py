@@ -185,7 +185,9 @@ _NO_SIGMA = np.zeros(0)
 
 def _plain_inputs(model_obj, opts: FitOptions):
     """The compiled fit's model, draws and configuration (:func:`fit_plain_table`); the
-    same for every fit with these options, kept per model unless there are extra starts."""
+    same for every fit with these options, kept per model unless there are extra starts
+    (writeable arrays, as numba's cached signatures want them: the kernel only reads them,
+    and repeated fits of one seed give the same numbers)."""
     def make():
         n_screen, n_keep, n_data_starts = _search_defaults(
             model_obj, opts.n_screen, opts.n_keep, opts.n_data_starts)
