@@ -10,7 +10,7 @@ $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
 	$(BIN)/pip install --quiet --upgrade pip
 	$(BIN)/pip install --quiet -e '.[dev,docs]'
-	$(BIN)/python -c "import irreflect._kernel as k; k.warm()"  # compile the fitting kernel once
+	$(BIN)/python -c "from irreflect.fitting import warm; warm()"  # compile the fitting kernel once
 	touch $(STAMP)
 
 venv: $(STAMP)

@@ -103,6 +103,6 @@ def test_the_kernel_cache_is_inspected_and_a_warm_one_not_rebuilt():
         assert "compiling the fitting kernel" in first.getvalue()
     folder, cold = kernel_cache()
     assert folder is not None and folder.is_dir() and cold is False
-    assert any(folder.glob("_kernel.tl_fit-*.nbi"))  # numba's index of the entry point
+    assert any(folder.glob("finish_kernel.tl_finish-*.nbi"))  # numba's index of the entry point
     again = io.StringIO()
     assert ensure_compiled(again) is None and again.getvalue() == ""

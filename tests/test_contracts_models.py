@@ -179,8 +179,8 @@ def test_extension_derivatives_match_central_differences(name):
 @pytest.mark.parametrize("name", EXTENDED)
 def test_extension_contains_its_model_and_every_new_coordinate_acts(name):
     model = get_model(name)
-    base = model.options["wrapped"]
-    ext: Extension = model.options["extension"]
+    base = model.wrapped
+    ext: Extension = model.extension
     g, t = _geometry(seed=6)
     geom = Geometry.of(g[None], t[None])
     zb = _interior(base, rows=1, seed=3)

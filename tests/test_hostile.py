@@ -519,7 +519,7 @@ def test_room_figures_take_any_name_as_plain_text(tmp_path):
 ])
 def test_every_budget_is_checked_before_the_work(office, data, tmp_path, monkeypatch, argv,
                                                  option, bound):
-    monkeypatch.setattr("irreflect.fitting._fit_search", _must_not_run)
+    monkeypatch.setattr("irreflect.fitting.api._fit_search", _must_not_run)
     monkeypatch.setattr("irreflect.room.engine._run", _must_not_run)
     monkeypatch.setattr("irreflect.room.recursive.prepare", _must_not_run)  # cells first
     argv = [a.format(scene=office, data=data, tmp=tmp_path) for a in argv]

@@ -10,9 +10,10 @@ import pytest
 from irreflect import fit, fit_subsets
 from irreflect.data import load_bundled
 from irreflect.errors import UnknownNameError
-from irreflect.fitting import _extension_start_rows, _kernel_codes
-from irreflect.models import get_model
-from irreflect.models.extensions import CATALOGUE, extend
+from irreflect.fitting.engine import _kernel_codes
+from irreflect.fitting.starts import _extension_start_rows
+from irreflect.models import extend, get_model
+from irreflect.models.extensions import CATALOGUE
 from irreflect.synthetic import synthetic_material
 
 pytest.importorskip("numba")
@@ -104,7 +105,7 @@ def test_engine_names_and_replaced_starts():
 def test_the_kernels_exp_is_within_one_ulp_of_the_library():
     from numba import njit
 
-    from irreflect._kernel import fexp
+    from irreflect.fitting.kernel_math import fexp
 
     @njit
     def run(x):
@@ -130,8 +131,10 @@ def test_compiled_finish_equals_the_numpy_covariance(kind):
     """fit()'s compiled finish of the two-lobe model (natural parameters, fitted curve, R^2,
     covariance, near-singular directions) against the numpy functions it replaces, also
     where the specular share saturates (the saturated rows' Jacobian)."""
-    from irreflect import _kernel, metrics
-    from irreflect.fitting import _covariance, _fitted_and_jacobian, _kernel_geometry
+    from irreflect import metrics
+    from irreflect.fitting import finish_kernel as _kernel
+    from irreflect.fitting.engine import _kernel_geometry
+    from irreflect.fitting.finish import _covariance, _fitted_and_jacobian
     from irreflect.synthetic import saturating_material
 
     model = get_model("two-lobe")
@@ -165,7 +168,8 @@ def test_compiled_finish_equals_the_numpy_covariance(kind):
 def test_kernel_draws_are_the_numpy_draws(seed):
     """The counter-based generator: the kernel draws inside tl_fit exactly what the numpy
     reference draws (uniforms and the Latin hypercube to the bit, normals to an ulp)."""
-    from irreflect import _draws, _kernel
+    from irreflect.fitting import draws as _draws
+    from irreflect.fitting import draws_kernel as _kernel
 
     key = _draws.seed_key(seed)
     assert 0 <= key < 2**63
@@ -185,7 +189,7 @@ def test_kernel_draws_are_the_numpy_draws(seed):
 
 
 def test_draws_are_uniform_normal_and_differ_between_seeds():
-    from irreflect import _draws
+    from irreflect.fitting import draws as _draws
 
     u = _draws.uniforms(_draws.seed_key(3), 0, 200_000)
     assert 0.0 < u.min() and u.max() < 1.0
@@ -203,7 +207,7 @@ def test_draws_are_uniform_normal_and_differ_between_seeds():
 def test_kernel_pairwise_sum_is_numpys_to_the_bit():
     """The kernel's scale of the power (np.sqrt(np.mean(w p p))) must be the numpy path's
     to the bit, or the two searches part in the last digits."""
-    from irreflect import _kernel
+    from irreflect.fitting import kernel_math as _kernel
 
     rng = np.random.default_rng(5)
     for n in [1, 7, 8, 9, 15, 16, 127, 128, 129, 255, 256, 257, 1000, 1261, 20_003]:

@@ -24,7 +24,7 @@ LAYERS = [
     ("data and models", ["errors", "validation", "schema", "_atomic", "_inputs", "_progress",
                          "_jsonio", "paper",
                          "data", "metrics", "models"]),
-    ("fitting", ["fitting", "_kernel", "_compiled", "_draws", "synthetic", "verdict"]),
+    ("fitting", ["fitting", "_compiled", "synthetic", "verdict"]),
     ("capabilities", ["diagnose", "protocol", "compare", "selection", "campaign", "room"]),
     ("plots", ["plots"]),
     ("report", ["report"]),
@@ -104,3 +104,79 @@ def test_imports_go_downward(path):
             wrong.append(f"line {line}: {target} ({LAYERS[theirs][0]})")
     assert not wrong, (f"{path.relative_to(PACKAGE)} ({LAYERS[_layer(importer)][0]}) imports "
                        f"upward: {wrong}")
+
+
+# ----------------------------------------------------------------------------- no circles
+def _module_file(name: str) -> str | None:
+    """The module (``irreflect.a.b``) an imported name belongs to: the longest prefix
+    that is a module or package of irreflect."""
+    known = {_module_name(p) for p in MODULES}
+    while name and name not in known:
+        name = name.rpartition(".")[0]
+    return name or None
+
+
+def _import_graph() -> dict[str, set[str]]:
+    """Module -> the irreflect modules it imports (at module level or inside functions)."""
+    graph = {}
+    for path in MODULES:
+        module = _module_name(path)
+        targets = {_module_file(t) for _, t in _imports(path)}
+        graph[module] = {t for t in targets if t and t != module and t != "irreflect"}
+    return graph
+
+
+def _circles(graph: dict[str, set[str]]) -> list[list[str]]:
+    """Strongly connected components of more than one module (Tarjan, iteratively)."""
+    index, low, on_stack, stack, out = {}, {}, set(), [], []
+    counter = 0
+    for root in sorted(graph):
+        if root in index:
+            continue
+        work = [(root, iter(sorted(graph[root])))]
+        index[root] = low[root] = counter
+        counter += 1
+        stack.append(root)
+        on_stack.add(root)
+        while work:
+            v, children = work[-1]
+            child = next(children, None)
+            if child is not None:
+                if child not in graph:
+                    continue
+                if child not in index:
+                    index[child] = low[child] = counter
+                    counter += 1
+                    stack.append(child)
+                    on_stack.add(child)
+                    work.append((child, iter(sorted(graph[child]))))
+                elif child in on_stack:
+                    low[v] = min(low[v], index[child])
+                continue
+            work.pop()
+            if work:
+                low[work[-1][0]] = min(low[work[-1][0]], low[v])
+            if low[v] == index[v]:
+                comp = []
+                while True:
+                    w = stack.pop()
+                    on_stack.discard(w)
+                    comp.append(w)
+                    if w == v:
+                        break
+                if len(comp) > 1:
+                    out.append(sorted(comp))
+    return out
+
+
+def test_no_import_circles():
+    """No two modules import each other, directly or through others (a function-level
+    import counts: it is a circle all the same, only deferred)."""
+    circles = _circles(_import_graph())
+    assert not circles, f"import circles: {circles}"
+
+
+def test_circle_finder_finds_circles():
+    graph = {"a": {"b"}, "b": {"c"}, "c": {"a"}, "d": {"a"}, "e": {"e2"}, "e2": set()}
+    assert _circles(graph) == [["a", "b", "c"]]
+    assert _circles({"a": {"b"}, "b": set()}) == []

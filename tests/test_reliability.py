@@ -175,7 +175,7 @@ def test_tables_over_a_command_budget_are_refused_up_front(table_10_001, tmp_pat
                                                            monkeypatch):
     # the computation must not start: any fit would raise here (the search itself is
     # patched: a module imported meanwhile that binds `fit` would keep a patched `fit`)
-    monkeypatch.setattr("irreflect.fitting._fit_search", _must_not_run)
+    monkeypatch.setattr("irreflect.fitting.api._fit_search", _must_not_run)
     argv = {
         "diagnose": ["diagnose", str(table_10_001)],
         "reproduce": ["reproduce", "--data-dir", str(table_10_001.parent), "--out",
@@ -492,7 +492,7 @@ def test_numpy_screening_is_scored_in_pieces_with_the_same_costs(monkeypatch):
     """The numpy path scores screening candidates in pieces of at most
     SCREEN_PIECE_VALUES basis values (a 200,000-point table with hundreds of candidates
     would otherwise hold gigabytes); the costs equal those of one batch."""
-    from irreflect import fitting
+    from irreflect.fitting import screening as fitting
     from irreflect.models import Geometry, get_model
 
     meas = synthetic(noise=0.004, seed=8)

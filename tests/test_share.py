@@ -10,10 +10,10 @@ import pytest
 
 from irreflect import fit, fit_subsets
 from irreflect.errors import FitWarning
-from irreflect.fitting import _evaluate, _kaufman_jacobian, retry_reasons
-from irreflect.models import Geometry, get_model, two_lobe_power
+from irreflect.fitting import retry_reasons
+from irreflect.fitting.linear import _evaluate, _kaufman_jacobian
+from irreflect.models import Geometry, extend, get_model, two_lobe_power
 from irreflect.models.base import generalized_lambertian
-from irreflect.models.extensions import extend
 from irreflect.models.paper import specular_share
 from irreflect.synthetic import saturating_material
 

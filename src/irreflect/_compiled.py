@@ -1,16 +1,16 @@
 """The compiled fitting kernel's on-disk cache: where it lies, whether it is warm, and the
 announced first build.
 
-numba compiles :mod:`irreflect._kernel` on first use and keeps the machine code on disk
-(``cache=True``): in ``$NUMBA_CACHE_DIR`` when that is set, else beside the source
-(``irreflect/__pycache__``) when the installed package's folder is writable, else in the
+numba compiles the fitter's kernels (the ``*_kernel`` modules of :mod:`irreflect.fitting`)
+on first use and keeps the machine code on disk (``cache=True``): in ``$NUMBA_CACHE_DIR``
+when that is set, else beside the source (``irreflect/fitting/__pycache__``) when the installed package's folder is writable, else in the
 user's cache folder (numba's user-wide cache, ``~/.cache/numba/`` or under
 ``$XDG_CACHE_HOME``), so a read-only ``site-packages`` still gets a cache. The first build
 takes one to three minutes; every later process loads it in about a second. The cache is
 tied to the kernel's source file and numba's version: a new install builds it once more.
 
 :func:`ensure_compiled` is what the commands that fit call before any work: when the cache
-is cold it says so on stderr, builds every entry point (:func:`irreflect._kernel.warm`) and
+is cold it says so on stderr, builds every entry point (:func:`irreflect.fitting.warm`) and
 says how long that took, instead of a first run that is silently two minutes slower.
 """
 
@@ -21,19 +21,22 @@ import time
 from pathlib import Path
 
 #: The kernel's entry points whose cache decides whether a build is due (what ``warm()``
-#: compiles: the two-lobe fit, the generic global search, the batched subset fits).
-ENTRY_POINTS = ("tl_fit", "global_search", "subset_search")
+#: compiles: the global search, the two-lobe finish, the batched subset fits), as
+#: (module of :mod:`irreflect.fitting`, name).
+ENTRY_POINTS = (("search_kernel", "search"), ("finish_kernel", "tl_finish"),
+                ("subsets_kernel", "subset_search"))
 
 
 def kernel_cache() -> tuple[Path | None, bool | None]:
     """(the folder numba caches the kernel in, whether a build is due): ``True`` when an
     entry point has no cached code for this source and numba version, ``None`` when numba's
     cache cannot be inspected (then nothing is announced)."""
-    from . import _kernel
+    import importlib
 
     folder, cold = None, False
-    for name in ENTRY_POINTS:
-        cache = getattr(getattr(_kernel, name, None), "_cache", None)
+    for module, name in ENTRY_POINTS:
+        kernel = importlib.import_module(f"irreflect.fitting.{module}")
+        cache = getattr(getattr(kernel, name, None), "_cache", None)
         try:
             folder = Path(cache.cache_path)
             index = cache._cache_file._load_index()  # {} when absent or stale
@@ -53,9 +56,9 @@ def ensure_compiled(stream=None) -> float | None:
     print(f"irreflect: first use of this install: compiling the fitting kernel (once, about "
           f"1-3 min; cached in {folder}) ...", file=stream, flush=True)
     t0 = time.perf_counter()
-    from . import _kernel
+    from .fitting import warm
 
-    _kernel.warm()
+    warm()
     seconds = time.perf_counter() - t0
     print(f"irreflect: fitting kernel compiled in {seconds:.0f} s; later runs load it from "
           "the cache", file=stream, flush=True)

@@ -249,6 +249,60 @@ def _numeric(df: pd.DataFrame, col: str, source: str, rows: _Rows) -> np.ndarray
     return arr
 
 
+def _merge_duplicates(gamma, theta, power, sigma, source, rows, average):
+    """Duplicated (gamma, theta) rows refused, or with ``average`` merged (power averaged,
+    sigma combined): returns (gamma, theta, power, sigma, rows merged)."""
+    key = pd.DataFrame({"g": gamma, "t": theta})
+    dup = key.duplicated(keep=False).to_numpy()
+    if dup.any():
+        if not average:
+            i = int(np.nonzero(dup)[0][0])
+            _fail(
+                f"{source}: {int(key.duplicated().sum())} duplicated (gamma_deg, theta_deg) rows, "
+                f"first ({gamma[i]:g}, {theta[i]:g}) at {rows(i)}: remove them or pass "
+                "--average-duplicates to average their power"
+            )
+        frame = pd.DataFrame({"g": gamma, "t": theta, "p": power})
+        if sigma is not None:
+            frame["s2"] = sigma**2
+        grouped = frame.groupby(["g", "t"], sort=False)
+        agg = grouped.agg(p=("p", "mean"), k=("p", "size"))
+        if sigma is not None:
+            agg["s"] = np.sqrt(grouped["s2"].sum()) / agg["k"]
+        n_merged = int(len(frame) - len(agg))
+        gamma = agg.index.get_level_values(0).to_numpy(float)
+        theta = agg.index.get_level_values(1).to_numpy(float)
+        power = agg["p"].to_numpy(float)
+        sigma = agg["s"].to_numpy(float) if sigma is not None else None
+        return gamma, theta, power, sigma, n_merged
+    return gamma, theta, power, sigma, 0
+
+
+def _check_negative_power(power, sigma, source, rows):
+    """Negative powers: only small noise around zero (else one line); returns the note on
+    those kept, or None."""
+    neg = power < 0
+    if neg.any():
+        limit = NEGATIVE_POWER_TOLERANCE * max(np.max(np.abs(power)), 1e-300)
+        if sigma is not None:
+            limit = np.maximum(limit, 4 * sigma)
+        too_neg = power < -np.broadcast_to(limit, power.shape)
+        if too_neg.any():
+            i = int(np.nonzero(too_neg)[0][0])
+            _fail(
+                f"{source}: power must be >= 0 up to noise; found {power[i]:g} at {rows(i)}, "
+                f"below the noise allowance {-np.broadcast_to(limit, power.shape)[i]:g}: check the "
+                "detector offset or the sign of the column"
+                + ("" if sigma is not None else
+                   f", or give the noise as a sigma column (negative power down to -4 sigma "
+                   f"is kept; without it, down to -{NEGATIVE_POWER_TOLERANCE:.0%} of the "
+                   "largest power)")
+            )
+        return (f"{source}: {int(neg.sum())} slightly negative power value(s) kept as noise "
+                "around zero")
+    return None
+
+
 def validate_table(df: pd.DataFrame, source: str = "table", *,
                    average_duplicates: bool = False, name: str | None = None,
                    _row_lines=None) -> Measurements:
@@ -312,51 +366,14 @@ def validate_table(df: pd.DataFrame, source: str = "table", *,
     if "material" in df.columns:
         mats = df["material"].dropna().astype(str).unique()
         material = mats[0] if len(mats) == 1 else (", ".join(mats) if len(mats) else None)
-    # duplicated (gamma, theta)
-    key = pd.DataFrame({"g": gamma, "t": theta})
-    dup = key.duplicated(keep=False).to_numpy()
-    if dup.any():
-        if not average_duplicates:
-            i = int(np.nonzero(dup)[0][0])
-            _fail(
-                f"{source}: {int(key.duplicated().sum())} duplicated (gamma_deg, theta_deg) rows, "
-                f"first ({gamma[i]:g}, {theta[i]:g}) at {rows(i)}: remove them or pass "
-                "--average-duplicates to average their power"
-            )
-        frame = pd.DataFrame({"g": gamma, "t": theta, "p": power})
-        if sigma is not None:
-            frame["s2"] = sigma**2
-        grouped = frame.groupby(["g", "t"], sort=False)
-        agg = grouped.agg(p=("p", "mean"), k=("p", "size"))
-        if sigma is not None:
-            agg["s"] = np.sqrt(grouped["s2"].sum()) / agg["k"]
-        n_merged = int(len(frame) - len(agg))
-        gamma = agg.index.get_level_values(0).to_numpy(float)
-        theta = agg.index.get_level_values(1).to_numpy(float)
-        power = agg["p"].to_numpy(float)
-        sigma = agg["s"].to_numpy(float) if sigma is not None else None
-        notes.append(f"{source}: averaged {n_merged} duplicated (gamma, theta) row(s)")
+    gamma, theta, power, sigma, merged = _merge_duplicates(gamma, theta, power, sigma, source,
+                                                           rows, average_duplicates)
+    if merged:
+        notes.append(f"{source}: averaged {merged} duplicated (gamma, theta) row(s)")
         rows = _Rows()  # row numbers no longer match the file
-    # negative powers: only small noise around zero
-    neg = power < 0
-    if neg.any():
-        limit = NEGATIVE_POWER_TOLERANCE * max(np.max(np.abs(power)), 1e-300)
-        if sigma is not None:
-            limit = np.maximum(limit, 4 * sigma)
-        too_neg = power < -np.broadcast_to(limit, power.shape)
-        if too_neg.any():
-            i = int(np.nonzero(too_neg)[0][0])
-            _fail(
-                f"{source}: power must be >= 0 up to noise; found {power[i]:g} at {rows(i)}, "
-                f"below the noise allowance {-np.broadcast_to(limit, power.shape)[i]:g}: check the "
-                "detector offset or the sign of the column"
-                + ("" if sigma is not None else
-                   f", or give the noise as a sigma column (negative power down to -4 sigma "
-                   f"is kept; without it, down to -{NEGATIVE_POWER_TOLERANCE:.0%} of the "
-                   "largest power)")
-            )
-        notes.append(f"{source}: {int(neg.sum())} slightly negative power value(s) kept as noise "
-                     "around zero")
+    note = _check_negative_power(power, sigma, source, rows)
+    if note:
+        notes.append(note)
     for note in notes:  # said once per table; the CLI prints them as "irreflect: note: ..."
         warnings.warn(note, DataNotice, stacklevel=3)
     return Measurements(
@@ -735,3 +752,26 @@ def real_datasets() -> dict[str, Path]:
     if root is None:
         return {}
     return {p.stem: p for p in sorted(root.rglob("*.csv"))}
+
+
+def header_only(path: Path) -> bool:
+    """True when the table at ``path`` has column names and no rows (the names are checked):
+    a campaign's first table (`irreflect next`)."""
+    if path.suffix.lower() in (".parquet", ".pq"):  # read within the table's limit
+        df = _read_parquet(path, read_bytes(path, str(path), "a CSV or Parquet measurement "
+                                            "table", MAX_FILE_BYTES))
+        if len(df):
+            return False
+        _check_columns(df, str(path))
+        return True
+    if path.stat().st_size > 65536:
+        return False
+    text = _decode(read_bytes(path, str(path), "a CSV or Parquet measurement table", 65536),
+                   path)
+    lines = [line.split("#", 1)[0] for line in text.splitlines()]
+    lines = [line for line in lines if line.strip()]
+    if len(lines) != 1:
+        return False
+    header = [h.strip() for h in next(csv.reader(lines, skipinitialspace=True))]
+    _check_columns(pd.DataFrame(columns=header), str(path))
+    return True

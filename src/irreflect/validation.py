@@ -36,7 +36,7 @@ def short_list(items, limit: int = 8, fmt=str) -> str:
 # ----------------------------------------------------------------------------- scalars
 def check_seed(seed, name: str = "seed") -> int:
     """A seed (for ``numpy.random.default_rng`` or the fitter's generator,
-    :mod:`irreflect._draws`): an integer >= 0."""
+    :mod:`irreflect.fitting.draws`): an integer >= 0."""
     if isinstance(seed, bool) or not isinstance(seed, numbers.Integral):
         raise IrreflectError(f"{name} must be an integer >= 0; found {seed!r} "
                              f"({type(seed).__name__}): pass e.g. {name}=0")

@@ -31,7 +31,7 @@ import pandas as pd
 from .. import metrics
 from ..data import Measurements, read_measurements, validate_table
 from ..errors import DataError, FitError, FitWarning, IrreflectError
-from ..fitting import FitResult, fit, judge
+from ..fitting import FitOptions, FitResult, fit, judge
 from ..models import get_model
 from ..validation import check_int, check_seed, short_list
 from .design import (
@@ -68,7 +68,7 @@ STOP_HOLD = 2
 #: started from the previous readings' fit. No scipy polish of a crawling local search: on
 #: the benchmark's real sets it changed no campaign's R^2 by more than 1e-4 and took three
 #: quarters of a Cornell campaign's time (experiments/bench_campaign.py).
-FIT_OPTIONS: dict = {"polish": False}
+FIT_OPTIONS = FitOptions(polish=False)
 #: The range's settings that weigh the readings (see :func:`range_weights`) are thinned to
 #: at most this many.
 MAX_RANGE_POINTS = 20_000
@@ -316,8 +316,8 @@ class Campaign:
                                 power=meas.power, sigma=sigma, name=meas.name)
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", FitWarning)
-            res = fit(weighted, self.model, seed=self.seed, extra_starts=extra_starts,
-                      **FIT_OPTIONS)
+            res = fit(weighted, self.model, FIT_OPTIONS, seed=self.seed,
+                      extra_starts=extra_starts)
         return _relative(res, self.model, meas), weighted
 
     @property

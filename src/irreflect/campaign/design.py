@@ -316,6 +316,18 @@ def build_prior(model, result: FitResult, meas, gamma_deg, theta_deg,
             alts.append(np.sqrt(weight) * (fa - f))
         parts.append(np.array(alts).T)
     features = np.concatenate(parts, axis=1) if parts else np.zeros((len(g), 0))
+    width = specular_half_width(model, values, g)
+    lobe = np.arcsinh((-g - t) / width)
+    law = _law_terms(model, rule, values, g, t, f, width)
+    return Prior(gamma=g, theta=t, features=features, law=law,
+                 law_scale=rule.law_gamma_scale, amplitude=misfit * scale, scale=scale,
+                 lobe_coord=lobe, rule=rule)
+
+
+def _law_terms(model, rule: DesignRule, values, g, t, f, width) -> list:
+    """The prior's law terms ``(feature, sd)``: the coefficients' laws of gamma
+    (``rule.law_sd``), the lobe shifted along theta and heavier specular tails."""
+    names = model.param_names
     law = []
     if rule.law_sd:
         jn = natural_jacobian(model, values, g, t)
@@ -326,8 +338,6 @@ def build_prior(model, result: FitResult, meas, gamma_deg, theta_deg,
                 i = names.index(name)
                 v = values[i] if values[i] > 0 else 1e-3
                 law.append((jn[:, i] * v, sd))
-    width = specular_half_width(model, values, g)
-    lobe = np.arcsinh((-g - t) / width)
     if rule.shift_sd:
         # the lobe shifted along theta by a share of its half width (an angle offset, a
         # tilted lobe): d f / d theta times the half width
@@ -348,9 +358,7 @@ def build_prior(model, result: FitResult, meas, gamma_deg, theta_deg,
         cos_lobe = np.clip(f - diffuse, 0.0, None)
         tail = np.clip(peak, 0.0, None) / (1.0 + ratio) - cos_lobe
         law.append((tail, rule.tail_sd))
-    return Prior(gamma=g, theta=t, features=features, law=law,
-                 law_scale=rule.law_gamma_scale, amplitude=misfit * scale, scale=scale,
-                 lobe_coord=lobe, rule=rule)
+    return law
 
 
 # ----------------------------------------------------------------------------- scoring

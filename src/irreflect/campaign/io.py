@@ -10,17 +10,7 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
-import pandas as pd
-
-from .._inputs import read_bytes
-from ..data import (
-    MAX_FILE_BYTES,
-    Measurements,
-    _check_columns,
-    _decode,
-    _read_parquet,
-    read_measurements,
-)
+from ..data import Measurements, header_only, read_measurements
 from ..errors import DataError
 
 
@@ -31,7 +21,7 @@ def read_readings(path, *, average_duplicates: bool = False,
     if not isinstance(path, str | os.PathLike):
         raise DataError(f"expected a path to a CSV or Parquet table, found {type(path).__name__}")
     p = Path(path)
-    if p.is_file() and _header_only(p):
+    if p.is_file() and header_only(p):
         return None
     meas = read_measurements(p, average_duplicates=average_duplicates)
     if max_rows is not None and meas.n_points > max_rows:
@@ -39,27 +29,3 @@ def read_readings(path, *, average_duplicates: bool = False,
                         f"({max_rows}): this is a dense scan; replay campaigns on it with "
                         "'irreflect campaign' instead")
     return meas
-
-
-def _header_only(path: Path) -> bool:
-    """True when the table has column names and no rows (the names are checked)."""
-    if path.suffix.lower() in (".parquet", ".pq"):  # read within the table's limit
-        df = _read_parquet(path, read_bytes(path, str(path), "a CSV or Parquet measurement "
-                                            "table", MAX_FILE_BYTES))
-        if len(df):
-            return False
-        _check_columns(df, str(path))
-        return True
-    if path.stat().st_size > 65536:
-        return False
-    text = _decode(read_bytes(path, str(path), "a CSV or Parquet measurement table", 65536),
-                   path)
-    lines = [line.split("#", 1)[0] for line in text.splitlines()]
-    lines = [line for line in lines if line.strip()]
-    if len(lines) != 1:
-        return False
-    import csv
-
-    header = [h.strip() for h in next(csv.reader(lines, skipinitialspace=True))]
-    _check_columns(pd.DataFrame(columns=header), str(path))
-    return True

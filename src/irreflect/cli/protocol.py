@@ -219,7 +219,10 @@ def register(sub) -> None:
     p.add_argument("--out", metavar="FILE",
                    help="write here (atomically) instead of stdout (default: stdout)")
     p.set_defaults(handler=_cmd_protocol)
+    _register_evaluate(sub)
 
+
+def _register_evaluate(sub) -> None:
     p = sub.add_parser(
         "evaluate-protocol", help="fit on a protocol's points of a dense scan, judge on all",
         description="Fit the model on the protocol's points of a dense dataset and print R^2, "

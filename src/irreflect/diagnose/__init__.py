@@ -35,11 +35,11 @@ from ..models.extensions import (
     CATALOGUE,
     EXTENSIONS,
     Extension,
-    extend,
     extension_names,
     get_extension,
     register_extension,
 )
+from ..models.registry import extend
 from .workflow import (
     AMBIGUOUS,
     EFFECTS_FOUND,

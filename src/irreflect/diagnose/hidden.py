@@ -28,7 +28,8 @@ from ..data import Measurements
 from ..errors import IrreflectError, unknown_name
 from ..fitting import fit
 from ..models import get_model
-from ..models.extensions import CATALOGUE, extend
+from ..models.extensions import CATALOGUE
+from ..models.registry import extend
 from ..paper import TABLE3
 
 #: effects outside the catalogue

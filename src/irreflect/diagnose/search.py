@@ -24,7 +24,8 @@ from __future__ import annotations
 import numpy as np
 
 from ..models.base import Geometry, ReflectionModel
-from ..models.extensions import Extension, extend, get_extension
+from ..models.extensions import Extension, get_extension
+from ..models.registry import extend
 
 #: the physical nesting of the catalogue (innermost first); see the module docstring
 CANONICAL = ("offspecular_peak", "retroreflection", "specular_halo", "incidence_reflectance",

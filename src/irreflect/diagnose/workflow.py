@@ -735,6 +735,81 @@ def _iterable(obj):
         return [None]
 
 
+def _base_fit_and_noise(meas, base_model, seed, alpha):
+    """The base model's fit and the table's noise (estimated from its residuals when the
+    table has no sigma; a proportional part found: the base fit weighted by it, and the
+    noise judged again): (base fit, noise, the table with the noise as its sigma)."""
+    base_fit = fit(meas, base_model, seed=seed)
+    noise = estimate_noise(meas, residuals=base_fit.residuals, fitted=base_fit.fitted,
+                           seed=seed, alpha=alpha)
+    work = meas
+    if noise.source == "estimated":
+        work = dataclasses.replace(meas, sigma=noise.sigma)
+        if noise.relative > 0:  # weight the base fit by the noise found, then look again
+            z0, _ = base_model.from_natural(base_fit.values[None])
+            try:
+                with warnings.catch_warnings():
+                    warnings.simplefilter("ignore", FitWarning)
+                    weighted = fit(work, base_model, seed=seed, extra_starts=z0)
+            except FitError as exc:
+                # weighted by a noise proportional to the power, the model cannot follow
+                # the table at all (a sub-degree lobe that the weights make invisible):
+                # the proportional part is not usable; the noise is taken as additive
+                warnings.warn(
+                    f"{meas.name}: a noise proportional to the power was found, but the "
+                    f"model weighted by it fails ({str(exc).split(': check')[0]}); the diagnosis takes the noise as "
+                    "constant: give a sigma column to settle it", FitWarning, stacklevel=3)
+                noise = estimate_noise(meas, residuals=base_fit.residuals, seed=seed,
+                                       alpha=alpha)
+            else:
+                base_fit = weighted
+                noise = estimate_noise(meas, residuals=base_fit.residuals,
+                                       fitted=base_fit.fitted, seed=seed, alpha=alpha)
+            work = dataclasses.replace(meas, sigma=noise.sigma)
+    return base_fit, noise, work
+
+
+def _separation(search, final, alternatives, meas, target, separate):
+    """When the diagnosis is ambiguous, the alternatives' fits and the readings that
+    would separate them: (fits by explanation, settings); else ({}, [])."""
+    if not alternatives:
+        return {}, []
+    alt_fits = {set_name(s): search.get(s) for s in final}
+    separating = separating_settings({k: a.fit for k, a in alt_fits.items()},
+                                     search.noise, meas.gamma_deg, meas.theta_deg,
+                                     target=target, max_readings=max(int(separate), 0))
+    return alt_fits, separating
+
+
+def _chain(search, chosen) -> list:
+    """The steps from the base model to ``chosen``, each time through the best-fitting
+    explanation one effect smaller that was fitted."""
+    chain = [chosen]
+    while chain[-1]:
+        subs = [tuple(n for n in chain[-1] if n != x) for x in chain[-1]]
+        subs = [s for s in subs if search.get(s) is not None]
+        chain.append(min(subs, key=search.dev))
+    chain.reverse()
+    return chain
+
+
+def _ranked(rounds, chain, final, min_share) -> list:
+    """The candidates of every round, marked accepted (on the chain) with their reason,
+    by deviance."""
+    ranked = []
+    for row in rounds:
+        out = []
+        for c in row:
+            named = any(set_name(s) == c.name for s in chain)
+            in_final = any(set_name(s) == c.name for s in final)
+            out.append(dataclasses.replace(c, accepted=named, reason=_reason(c, named,
+                                                                             in_final, min_share)))
+        ranked.append(tuple(sorted(out, key=lambda c: (c.assessment is None,
+                                                       c.assessment.deviance if c.assessment
+                                                       else 0.0))))
+    return ranked
+
+
 def diagnose(measurements, model="two-lobe", *, extensions: Sequence[str] | None = None,
              max_effects: int = 3, seed: int = 0, min_share: float = 0.5,
              alpha: float = 0.01, separate: int = 12,
@@ -787,33 +862,7 @@ def diagnose(measurements, model="two-lobe", *, extensions: Sequence[str] | None
     names = [n for n in names if n not in used]
     say = progress or (lambda message: None)
     say(f"fitting {base_model.name}")
-    base_fit = fit(meas, base_model, seed=seed)
-    noise = estimate_noise(meas, residuals=base_fit.residuals, fitted=base_fit.fitted,
-                           seed=seed, alpha=alpha)
-    work = meas
-    if noise.source == "estimated":
-        work = dataclasses.replace(meas, sigma=noise.sigma)
-        if noise.relative > 0:  # weight the base fit by the noise found, then look again
-            z0, _ = base_model.from_natural(base_fit.values[None])
-            try:
-                with warnings.catch_warnings():
-                    warnings.simplefilter("ignore", FitWarning)
-                    weighted = fit(work, base_model, seed=seed, extra_starts=z0)
-            except FitError as exc:
-                # weighted by a noise proportional to the power, the model cannot follow
-                # the table at all (a sub-degree lobe that the weights make invisible):
-                # the proportional part is not usable; the noise is taken as additive
-                warnings.warn(
-                    f"{meas.name}: a noise proportional to the power was found, but the "
-                    f"model weighted by it fails ({str(exc).split(': check')[0]}); the diagnosis takes the noise as "
-                    "constant: give a sigma column to settle it", FitWarning, stacklevel=2)
-                noise = estimate_noise(meas, residuals=base_fit.residuals, seed=seed,
-                                       alpha=alpha)
-            else:
-                base_fit = weighted
-                noise = estimate_noise(meas, residuals=base_fit.residuals,
-                                       fitted=base_fit.fitted, seed=seed, alpha=alpha)
-            work = dataclasses.replace(meas, sigma=noise.sigma)
+    base_fit, noise, work = _base_fit_and_noise(meas, base_model, seed, alpha)
     search = _Search(meas, work, base_model, names, noise, seed, say)
     search.add("", base_fit, ())
     rounds, final = _select(search, names, max_effects, alpha, min_share)
@@ -842,12 +891,7 @@ def diagnose(measurements, model="two-lobe", *, extensions: Sequence[str] | None
     chosen = final[0]
     # the steps: from the base model to the chosen explanation, each time through the
     # best-fitting explanation one effect smaller that was fitted
-    chain = [chosen]
-    while chain[-1]:
-        subs = [tuple(n for n in chain[-1] if n != x) for x in chain[-1]]
-        subs = [s for s in subs if search.get(s) is not None]
-        chain.append(min(subs, key=search.dev))
-    chain.reverse()
+    chain = _chain(search, chosen)
     steps = [dataclasses.replace(search.get(s), polar_errors=search.get(s).fit.polar_errors())
              for s in chain]
     final_fit = steps[-1].fit
@@ -858,25 +902,9 @@ def diagnose(measurements, model="two-lobe", *, extensions: Sequence[str] | None
         added = next(n for n in cur if n not in prev)
         if added in common:
             effects.append(_effect(added, marks.get(set_name(cur)), final_fit, search.sets))
-    ranked = []
-    for row in rounds:
-        out = []
-        for c in row:
-            named = any(set_name(s) == c.name for s in chain)
-            in_final = any(set_name(s) == c.name for s in final)
-            out.append(dataclasses.replace(c, accepted=named, reason=_reason(c, named,
-                                                                             in_final, min_share)))
-        ranked.append(tuple(sorted(out, key=lambda c: (c.assessment is None,
-                                                       c.assessment.deviance if c.assessment
-                                                       else 0.0))))
-    alt_fits = {}
-    separating = []
+    ranked = _ranked(rounds, chain, final, min_share)
     target = _separation_target(alpha, len(names), noise)
-    if alternatives:
-        alt_fits = {set_name(s): search.get(s) for s in final}
-        separating = separating_settings({k: a.fit for k, a in alt_fits.items()},
-                                         noise, meas.gamma_deg, meas.theta_deg,
-                                         target=target, max_readings=max(int(separate), 0))
+    alt_fits, separating = _separation(search, final, alternatives, meas, target, separate)
     verdict, summary, where = _verdict(steps, effects, alternatives, common, separating,
                                        alpha, base, target, meas)
     if len(steps) > 1:  # the extended model is a result too: say what is doubtful about it

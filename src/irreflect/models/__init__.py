@@ -24,7 +24,6 @@ from .extensions import (
     Extension,
     applied_extensions,
     base_of,
-    extend,
     extension_names,
     get_extension,
     register_extension,
@@ -39,7 +38,15 @@ from .guesses import (
     peak_directions,
 )
 from .paper import n_lobe_power, phong_power, single_lobe_power, two_lobe_power
-from .registry import MODELS, ModelSpec, get_model, model_names, parse_spec, register_model
+from .registry import (
+    MODELS,
+    ModelSpec,
+    extend,
+    get_model,
+    model_names,
+    parse_spec,
+    register_model,
+)
 
 __all__ = [
     "CATALOGUE", "EXTENSIONS", "Extension", "Geometry", "LobeProfile", "MAX_LOBE_INDEX",

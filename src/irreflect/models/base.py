@@ -22,7 +22,7 @@ paper's terms. The basis is evaluated on a :class:`Geometry`.
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from functools import cached_property
 
 import numpy as np
@@ -43,6 +43,44 @@ class Parameter:
 
 
 BasisFn = Callable[[np.ndarray, np.ndarray, np.ndarray, bool], tuple]
+
+
+@dataclass(frozen=True)
+class FitHints:
+    """What a model tells the fitter besides its basis (every field optional).
+
+    Attributes
+    ----------
+    residual_column : int or None
+        The linear coefficient that is ``K (1 - sum of shares)`` in natural terms: the
+        linear step drops it when it would be all but invisible in the data.
+    n_screen, n_keep, n_hops : int or None
+        The model's own screening size, screened starts kept and basin hops per round
+        (None: the fitter's defaults by number of nonlinear coordinates).
+    n_data_starts : int
+        How many of the best data-driven starts start Levenberg-Marquardt.
+    groups : tuple of tuples of int
+        Nonlinear coordinates scanned together in the refinement rounds (a lobe's axis
+        and index); empty: every coordinate alone.
+    batch_starts : callable or None
+        ``batch_starts(gamma, theta, power, weights (B, n)) -> (B, S, P)``: the data-driven
+        starts of a batch of subsets in one call.
+    kernel : str or None
+        The compiled kernel that implements this model (``"two-lobe"``), None: numpy.
+    kernel_starts : callable or None
+        The ``starts`` function the kernel reproduces: a model whose ``starts`` a caller
+        replaced is fitted in numpy.
+    """
+
+    residual_column: int | None = None
+    n_screen: int | None = None
+    n_keep: int | None = None
+    n_hops: int | None = None
+    n_data_starts: int = 2
+    groups: tuple[tuple[int, ...], ...] = ()
+    batch_starts: Callable | None = None
+    kernel: str | None = None
+    kernel_starts: Callable | None = None
 
 
 @dataclass(frozen=True)
@@ -91,10 +129,16 @@ class ReflectionModel:
     alpha_nonneg: tuple[bool, ...]
     formula: str = ""
     reference: str = ""
-    options: dict = field(default_factory=dict)
-    #: ``options`` the fitter reads: ``residual_column`` (the linear coefficient that is
-    #: ``K (1 - shares)`` in natural terms), ``batch_starts``, ``validity``, ``groups``,
-    #: ``n_screen``, ``n_keep``, ``n_data_starts`` (see :mod:`irreflect.fitting`).
+    #: What the fitter should know besides the basis (:class:`FitHints`).
+    hints: FitHints = FitHints()
+    #: The model's own check of fitted values: ``validity(values, gamma_rad)`` -> warnings
+    #: (one line each), run by :meth:`validity_warnings`; None: no check.
+    validity: Callable | None = None
+    #: An extended model (:mod:`irreflect.models.extensions`): the model it wraps, the
+    #: extension that wrapped it and the names of every extension applied, innermost first.
+    wrapped: ReflectionModel | None = None
+    extension: object = None
+    extensions: tuple[str, ...] = ()
     #: Box of plausible ``z`` sampled by the fitter's global screening (default: the
     #: bounds, clipped to [-15, 15] on each coordinate).
     screen_lower: np.ndarray | None = None
@@ -105,6 +149,13 @@ class ReflectionModel:
     #: columns of the basis become the specular lobe alone (:func:`saturate_rows`). The
     #: fitter then solves the linear step over the share's saturation patterns.
     share_cap: bool = False
+
+    def validity_warnings(self, values, gamma_rad) -> tuple[str, ...]:
+        """The model's own check of fitted natural ``values`` on the measured angles of
+        incidence ``gamma_rad``: one line per problem (empty: none, or no check)."""
+        if self.validity is None:
+            return ()
+        return tuple(self.validity(values, gamma_rad))
 
     def screen_box(self) -> tuple[np.ndarray, np.ndarray]:
         lo = self.screen_lower if self.screen_lower is not None else np.maximum(self.z_lower, -15.0)
@@ -154,13 +205,6 @@ class ReflectionModel:
     def predict_deg(self, params, gamma_deg, theta_deg) -> np.ndarray:
         """Same as :meth:`predict` with angles in degrees."""
         return self.predict(params, np.radians(gamma_deg), np.radians(theta_deg))
-
-    def __reduce__(self):
-        # a model pickles as its registry spec (closures and bound data do not): loading
-        # it rebuilds the same model from the registry (models.registry.get_model)
-        from .registry import get_model
-
-        return (get_model, (self.name,))
 
     def describe(self) -> str:
         rows = [f"{self.name}: {self.formula}"]
@@ -215,6 +259,18 @@ def saturate_rows(basis, s, alpha, strict: bool = False):
     basis[..., 0] = np.where(sat, col, basis[..., 0])
     basis[..., 1] = np.where(sat, col, basis[..., 1])
     return basis
+
+
+def _lobes_to_natural(z, alpha, n_lobes: int, first: int):
+    """Natural parameters of ``n_lobes`` lobes of coordinates ``(axis, ln index)`` each and
+    shares ``alpha[:, first + i] / K`` (``K`` the sum of all linear coefficients):
+    ``(axis_1, index_1, share_1, ..., K)``."""
+    K = alpha.sum(axis=1)
+    safe = np.where(K > 0, K, 1.0)
+    out = []
+    for i in range(n_lobes):
+        out += [z[:, 2 * i], np.exp(z[:, 2 * i + 1]), alpha[:, first + i] / safe]
+    return np.column_stack(out + [K])
 
 
 def _col(z, k):

@@ -50,13 +50,13 @@ builds one from the pieces (new parameters, bounds, starts and the basis functio
 
 from __future__ import annotations
 
-from collections.abc import Callable, Sequence
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
 
 from ..errors import IrreflectError, unknown_name
-from .base import Parameter, ReflectionModel, _lobe_from_log
+from .base import FitHints, Parameter, ReflectionModel, _lobe_from_log
 
 GEOMETRY_STEP = 1e-7  # rad, central-difference step along geometric shifts
 
@@ -115,10 +115,18 @@ class Extension:
     formula: str = ""
     reference: str = ""
 
-    def __call__(self, base) -> ReflectionModel:
-        from .registry import get_model
+    def start_rows(self) -> np.ndarray:
+        """The starting values of the new coordinates, one row per start ``(S, P_new)``."""
+        return _start_rows(self.z_starts, len(self.nonlinear_names))
 
-        return apply_extension(get_model(base), self)
+    def __call__(self, base: ReflectionModel) -> ReflectionModel:
+        """The extended model ``self(base)`` (by name: :func:`irreflect.models.extend`)."""
+        if not isinstance(base, ReflectionModel):
+            raise IrreflectError(
+                f"extension '{self.name}' extends a ReflectionModel, found "
+                f"{type(base).__name__} {base!r}: pass get_model({base!r}), or use "
+                f"extend({base!r}, ['{self.name}'])")
+        return apply_extension(base, self)
 
 
 def _k_scale(base: ReflectionModel, base_natural: np.ndarray) -> np.ndarray:
@@ -131,13 +139,13 @@ def _k_scale(base: ReflectionModel, base_natural: np.ndarray) -> np.ndarray:
 
 def applied_extensions(model: ReflectionModel) -> tuple[str, ...]:
     """Names of the extensions a model was built with, innermost first."""
-    return tuple(model.options.get("extensions", ()))
+    return tuple(model.extensions)
 
 
 def base_of(model: ReflectionModel) -> ReflectionModel:
     """The innermost model an extended model wraps (the model itself if not extended)."""
-    while "wrapped" in model.options:
-        model = model.options["wrapped"]
+    while model.wrapped is not None:
+        model = model.wrapped
     return model
 
 
@@ -184,25 +192,6 @@ def apply_extension(base: ReflectionModel, ext: Extension) -> ReflectionModel:
         rows += [np.concatenate([sb[0], e]) for e in ext_starts[1:]]
         return np.array(rows).reshape(len(rows), pb + pe)
 
-    options = {
-        "wrapped": base,
-        "extensions": applied_extensions(base) + (ext.name,),
-        "extension": ext,
-    }
-    if base.options.get("canonical_starts") is base.starts:  # the compiled kernel's mark
-        options["canonical_starts"] = starts
-    for key in ("validity", "residual_column"):  # about the wrapped model's leading part
-        if key in base.options:
-            options[key] = base.options[key]
-    if "batch_starts" in base.options:  # the wrapped model's starts, new coordinates neutral
-        base_batch = base.options["batch_starts"]
-
-        def batch_starts(gamma, theta, power, weights):
-            sb = np.asarray(base_batch(gamma, theta, power, weights), float)
-            tail = np.broadcast_to(ext_starts[0], sb.shape[:2] + (pe,))
-            return np.concatenate([sb, tail], axis=2)
-
-        options["batch_starts"] = batch_starts
     return ReflectionModel(
         name=f"{base.name}+{ext.name}",
         params=tuple(base.params) + tuple(ext.params),
@@ -217,7 +206,11 @@ def apply_extension(base: ReflectionModel, ext: Extension) -> ReflectionModel:
         alpha_nonneg=tuple(base.alpha_nonneg) + tuple(ext.alpha_nonneg),
         formula=f"{base.formula}; {ext.name}: {ext.formula}",
         reference=ext.reference or base.reference,
-        options=options,
+        hints=_extended_hints(base, ext_starts[0], starts),
+        validity=base.validity,  # about the wrapped model's leading part
+        wrapped=base,
+        extension=ext,
+        extensions=applied_extensions(base) + (ext.name,),
         # the wrapped model's screening box (chosen for its physics), and the new
         # coordinates' bounds
         screen_lower=np.concatenate([base.screen_box()[0],
@@ -226,6 +219,26 @@ def apply_extension(base: ReflectionModel, ext: Extension) -> ReflectionModel:
                                      np.minimum(np.asarray(ext.z_upper, float), 15.0)]),
         share_cap=base.share_cap,
     )
+
+
+def _extended_hints(base: ReflectionModel, tail, starts) -> FitHints:
+    """The fitter's hints of ``base`` extended by new coordinates starting at ``tail``:
+    the residual column and the compiled kernel's (about the wrapped model's leading
+    part; the kernel reproduces ``starts`` when it reproduced the base's), the base's
+    batched starts with the new coordinates neutral; the search sizes are the defaults."""
+    kernel_starts = starts if base.hints.kernel_starts is base.starts else None
+    batch_starts = None
+    if base.hints.batch_starts is not None:
+        base_batch = base.hints.batch_starts
+
+        def batch_starts(gamma, theta, power, weights):
+            sb = np.asarray(base_batch(gamma, theta, power, weights), float)
+            return np.concatenate([sb, np.broadcast_to(tail, sb.shape[:2] + tail.shape)],
+                                  axis=2)
+
+    return FitHints(residual_column=base.hints.residual_column, batch_starts=batch_starts,
+                    kernel=base.hints.kernel if kernel_starts is not None else None,
+                    kernel_starts=kernel_starts)
 
 
 def _start_rows(z_starts, pe: int) -> np.ndarray:
@@ -450,7 +463,7 @@ def register_extension(name: str, extension: Callable[[ReflectionModel], Reflect
     ``extension(base)`` must return a :class:`ReflectionModel` that contains ``base`` as a
     special case, whose ``nonlinear_names``, ``params`` and linear columns start with those
     of ``base`` (then the diagnosis can start it from the base optimum), and whose
-    ``options["extensions"]`` lists ``name`` (an :class:`Extension` does all of this).
+    ``extensions`` lists ``name`` (an :class:`Extension` does all of this).
     """
     if not isinstance(name, str) or not name or "+" in name:
         raise IrreflectError(f"extension name must be a non-empty string without '+', got {name!r}")
@@ -473,25 +486,6 @@ def get_extension(name: str) -> Callable[[ReflectionModel], ReflectionModel]:
     return EXTENSIONS[name]
 
 
-def extend(base, names: str | Sequence[str]) -> ReflectionModel:
-    from .registry import get_model
-
-    """Apply extensions in order: ``extend("two-lobe", ["background", "angle_offset"])``.
-
-    ``names`` may also be one string joined with ``+`` (``"background+angle_offset"``).
-    """
-    model = get_model(base)
-    if isinstance(names, str):
-        names = [n for n in names.split("+") if n]
-    for name in names:
-        model = get_extension(name)(model)
-        if not isinstance(model, ReflectionModel):
-            raise IrreflectError(
-                f"extension '{name}' returned {type(model).__name__}, expected a ReflectionModel"
-            )
-    return model
-
-
 def warm_starts(model: ReflectionModel, base_z, gamma=None, theta=None, power=None):
     """Starts of ``model`` (an extension of a model whose optimum is ``base_z``) that begin at
     that optimum, one per starting value of the new coordinates; None if ``model`` does not
@@ -500,8 +494,8 @@ def warm_starts(model: ReflectionModel, base_z, gamma=None, theta=None, power=No
     ``model.starts(gamma, theta, power)`` (radians) when the data are given."""
     base_z = np.asarray(base_z, float).ravel()
     pb = base_z.size
-    ext = model.options.get("extension")
-    wrapped = model.options.get("wrapped")
+    ext = model.extension
+    wrapped = model.wrapped
     if wrapped is None or wrapped.n_nonlinear != pb or model.n_nonlinear < pb:
         return None
     pe = model.n_nonlinear - pb
@@ -519,6 +513,6 @@ def warm_starts(model: ReflectionModel, base_z, gamma=None, theta=None, power=No
 
 __all__ = [
     "CATALOGUE", "EXTENSIONS", "Extension", "applied_extensions", "apply_extension", "base_of",
-    "extend", "extension_names", "get_extension", "register_extension",
+    "extension_names", "get_extension", "register_extension",
     "warm_starts",
 ]

@@ -36,10 +36,12 @@ specular axis tilts them too); the diffuse parts and the receiver's ``cos(theta)
 
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 
 from ..errors import IrreflectError, unknown_name
-from .base import Parameter, ReflectionModel, _col
+from .base import FitHints, Parameter, ReflectionModel, _col, _lobes_to_natural
 from .guesses import MAX_LOBE_INDEX, estimate_specular_index, peak_directions
 
 INV_PI = 1.0 / np.pi
@@ -447,7 +449,7 @@ def make_blinn_phong() -> ReflectionModel:
         from_natural=_ks_from_natural(lambda q: np.log(q[:, [0]])),
         starts=starts,
         alpha_nonneg=(True, True),
-        options={"residual_column": 0},
+        hints=FitHints(residual_column=0),
         formula="K cos(theta) [(1-k_s)/pi + k_s (n+8)/8pi cos^n(theta_h)], theta_h=(gamma+theta)/2",
         reference="Blinn 1977 (the paper's ref. 19)",
         **_screen([np.log(1.0)], [np.log(4.0 * MAX_LOBE_INDEX)]),
@@ -473,7 +475,7 @@ def make_ward() -> ReflectionModel:
         from_natural=_ks_from_natural(lambda q: np.log(q[:, [0]])),
         starts=starts,
         alpha_nonneg=(True, True),
-        options={"residual_column": 0},
+        hints=FitHints(residual_column=0),
         formula="K cos(theta) [(1-k_s)/pi + k_s exp(-tan^2(theta_h)/alpha^2) / "
         "(4 pi alpha^2 sqrt(cos(gamma) cos(theta)))]",
         reference="Ward 1992 (Gaussian-lobe family, the paper's refs. 21, 26)",
@@ -511,7 +513,7 @@ def make_torrance_sparrow(distribution: str = "beckmann") -> ReflectionModel:
         formula=f"K cos(theta) [(1-k_s)/pi + k_s F(beta,eta)/F(0,eta) D_{distribution}"
         "(theta_h; m) G / (4 cos(gamma) cos(theta))]",
         reference="Torrance and Sparrow 1967 (ref. 26); Cook and Torrance 1981 (ref. 25)",
-        options={"distribution": distribution, "residual_column": 0},
+        hints=FitHints(residual_column=0),
         **_screen([np.log(MIN_SLOPE), 1.1], [np.log(1.0), 5.0]),
     )
 
@@ -537,12 +539,90 @@ def make_oren_nayar() -> ReflectionModel:
         from_natural=_ks_from_natural(lambda q: np.column_stack([q[:, 0], np.log(q[:, 1])])),
         starts=starts,
         alpha_nonneg=(True, True),
-        options={"residual_column": 0},
+        hints=FitHints(residual_column=0),
         formula="K cos(theta) [(1-k_s)(A + B max(0,cos dphi) sin a tan b)/pi "
         "+ k_s (n+2)/2pi cos^n(phi)]",
         reference="Oren and Nayar 1994 (the paper's ref. 23) + Phong 1975 (ref. 18)",
         **_screen([0.0, np.log(1.0)], [1.0, np.log(MAX_LOBE_INDEX)]),
     )
+
+
+#: Lafortune's bounds: C_x / C_z of a lobe, a lobe's exponent.
+_LAFORTUNE_CX = (-1.3, 1.3)
+_LAFORTUNE_N = (0.1, MAX_LOBE_INDEX)
+
+
+def _lafortune_basis_fn(n_lobes, geom, z, derivatives=True):
+    cos_t = geom.receiver_cos
+    cols, dcols = [cos_t * INV_PI], []
+    for i in range(n_lobes):
+        c = _col(z, 2 * i)
+        n = np.exp(_col(z, 2 * i + 1))
+        s = c * geom.sin_sin + geom.cos_cos
+        pos = s > 0
+        with np.errstate(under="ignore", over="ignore", divide="ignore", invalid="ignore"):
+            log_s = np.log(np.where(pos, s, 1.0))
+            pw = np.exp(n * log_s) * pos * cos_t
+            norm = (n + 2.0) / (2.0 * np.pi)
+            lobe = norm * pw
+            cols.append(lobe)
+            if derivatives:
+                d_c = np.where(pos, lobe * n / np.where(pos, s, 1.0), 0.0) * geom.sin_sin
+                d_ln_n = n * (pw / (2.0 * np.pi) + lobe * log_s)
+                dcols.append((d_c, d_ln_n))
+    basis = np.stack(np.broadcast_arrays(*cols), axis=-1)
+    if not derivatives:
+        return basis, None
+    dbasis = np.zeros(basis.shape + (2 * n_lobes,))
+    for i, (d_c, d_n) in enumerate(dcols):
+        dbasis[..., i + 1, 2 * i] = d_c
+        dbasis[..., i + 1, 2 * i + 1] = d_n
+    return basis, dbasis
+
+
+def _lafortune_to_natural(n_lobes, z, alpha):
+    return _lobes_to_natural(z, alpha, n_lobes, first=1)
+
+
+def _lafortune_from_natural(n_lobes, p):
+    p = np.atleast_2d(np.asarray(p, float))
+    z = np.column_stack([p[:, 3 * i] if k == 0 else np.log(p[:, 3 * i + 1])
+                         for i in range(n_lobes) for k in (0, 1)])
+    K = p[:, -1]
+    shares = np.column_stack([p[:, 3 * i + 2] for i in range(n_lobes)])
+    alpha = np.column_stack([K * (1.0 - shares.sum(axis=1)), K[:, None] * shares])
+    return z, alpha
+
+
+def _lafortune_starts(n_lobes, gamma, theta, power):
+    n = _n_guess(gamma, theta, power)
+    # first lobe: the specular peak; further lobes broad and tilted toward the normal
+    others = [(-0.5, 2.0), (0.0, 5.0), (0.5, 2.0)]
+    out = []
+    for first in ((-1.0, n), (-1.0, n / 4.0), (-0.8, n * 2.0)):
+        for shift in range(2):
+            row = [first[0], np.log(first[1])]
+            for i in range(n_lobes - 1):
+                c, v = others[(i + shift) % len(others)]
+                row += [c, np.log(v)]
+            out.append(row)
+    # ... or narrow lobes aimed at the brightest receivers, one per lobe: s^n peaks
+    # where tan(theta) = Cx tan(gamma), so Cx = tan(theta) / tan(gamma)
+    (c_lo, c_hi), (n_lo, n_hi) = _LAFORTUNE_CX, _LAFORTUNE_N
+    peaks = [float(np.clip(np.tan(tp) / np.tan(g), c_lo, c_hi))
+             for g, tp in peak_directions(gamma, theta, power, k=6)
+             if abs(np.tan(g)) > 1e-6]
+    for width in (n, 1e3, 1e4, 1e5):
+        ln_n = np.log(min(max(width, n_lo), n_hi))
+        for first in range(len(peaks)):
+            aimed = (peaks[first:] + peaks[:first])[:n_lobes]
+            row = []
+            for cx in aimed:
+                row += [cx, ln_n]
+            while len(row) < 2 * n_lobes:
+                row += [0.0, np.log(5.0)]
+            out.append(row)
+    return np.array(out)
 
 
 def make_lafortune(n_lobes: int = 2) -> ReflectionModel:
@@ -553,8 +633,7 @@ def make_lafortune(n_lobes: int = 2) -> ReflectionModel:
         raise IrreflectError(
             f"lafortune needs between 1 and 4 lobes, got {n_lobes}: use e.g. 'lafortune:2'"
         )
-    c_lo, c_hi = -1.3, 1.3
-    n_lo, n_hi = 0.1, MAX_LOBE_INDEX
+    (c_lo, c_hi), (n_lo, n_hi) = _LAFORTUNE_CX, _LAFORTUNE_N
     params = []
     for i in range(1, n_lobes + 1):
         params += [
@@ -564,79 +643,6 @@ def make_lafortune(n_lobes: int = 2) -> ReflectionModel:
         ]
     params.append(_K)
 
-    def basis_fn(geom, z, derivatives=True):
-        cos_t = geom.receiver_cos
-        cols, dcols = [cos_t * INV_PI], []
-        for i in range(n_lobes):
-            c = _col(z, 2 * i)
-            n = np.exp(_col(z, 2 * i + 1))
-            s = c * geom.sin_sin + geom.cos_cos
-            pos = s > 0
-            with np.errstate(under="ignore", over="ignore", divide="ignore", invalid="ignore"):
-                log_s = np.log(np.where(pos, s, 1.0))
-                pw = np.exp(n * log_s) * pos * cos_t
-                norm = (n + 2.0) / (2.0 * np.pi)
-                lobe = norm * pw
-                cols.append(lobe)
-                if derivatives:
-                    d_c = np.where(pos, lobe * n / np.where(pos, s, 1.0), 0.0) * geom.sin_sin
-                    d_ln_n = n * (pw / (2.0 * np.pi) + lobe * log_s)
-                    dcols.append((d_c, d_ln_n))
-        basis = np.stack(np.broadcast_arrays(*cols), axis=-1)
-        if not derivatives:
-            return basis, None
-        dbasis = np.zeros(basis.shape + (2 * n_lobes,))
-        for i, (d_c, d_n) in enumerate(dcols):
-            dbasis[..., i + 1, 2 * i] = d_c
-            dbasis[..., i + 1, 2 * i + 1] = d_n
-        return basis, dbasis
-
-    def to_natural(z, alpha):
-        K = alpha.sum(axis=1)
-        safe = np.where(K > 0, K, 1.0)
-        out = []
-        for i in range(n_lobes):
-            out += [z[:, 2 * i], np.exp(z[:, 2 * i + 1]), alpha[:, i + 1] / safe]
-        return np.column_stack(out + [K])
-
-    def from_natural(p):
-        p = np.atleast_2d(np.asarray(p, float))
-        z = np.column_stack([p[:, 3 * i] if k == 0 else np.log(p[:, 3 * i + 1])
-                             for i in range(n_lobes) for k in (0, 1)])
-        K = p[:, -1]
-        shares = np.column_stack([p[:, 3 * i + 2] for i in range(n_lobes)])
-        alpha = np.column_stack([K * (1.0 - shares.sum(axis=1)), K[:, None] * shares])
-        return z, alpha
-
-    def starts(gamma, theta, power):
-        n = _n_guess(gamma, theta, power)
-        # first lobe: the specular peak; further lobes broad and tilted toward the normal
-        others = [(-0.5, 2.0), (0.0, 5.0), (0.5, 2.0)]
-        out = []
-        for first in ((-1.0, n), (-1.0, n / 4.0), (-0.8, n * 2.0)):
-            for shift in range(2):
-                row = [first[0], np.log(first[1])]
-                for i in range(n_lobes - 1):
-                    c, v = others[(i + shift) % len(others)]
-                    row += [c, np.log(v)]
-                out.append(row)
-        # ... or narrow lobes aimed at the brightest receivers, one per lobe: s^n peaks
-        # where tan(theta) = Cx tan(gamma), so Cx = tan(theta) / tan(gamma)
-        peaks = [float(np.clip(np.tan(tp) / np.tan(g), c_lo, c_hi))
-                 for g, tp in peak_directions(gamma, theta, power, k=6)
-                 if abs(np.tan(g)) > 1e-6]
-        for width in (n, 1e3, 1e4, 1e5):
-            ln_n = np.log(min(max(width, n_lo), n_hi))
-            for first in range(len(peaks)):
-                aimed = (peaks[first:] + peaks[:first])[:n_lobes]
-                row = []
-                for cx in aimed:
-                    row += [cx, ln_n]
-                while len(row) < 2 * n_lobes:
-                    row += [0.0, np.log(5.0)]
-                out.append(row)
-        return np.array(out)
-
     return ReflectionModel(
         name="lafortune" if n_lobes == 2 else f"lafortune:{n_lobes}",
         params=tuple(params),
@@ -644,16 +650,16 @@ def make_lafortune(n_lobes: int = 2) -> ReflectionModel:
         z_lower=np.tile([c_lo, np.log(n_lo)], n_lobes),
         z_upper=np.tile([c_hi, np.log(n_hi)], n_lobes),
         n_linear=n_lobes + 1,
-        basis=basis_fn,
-        to_natural=to_natural,
-        from_natural=from_natural,
-        starts=starts,
+        basis=functools.partial(_lafortune_basis_fn, n_lobes),
+        to_natural=functools.partial(_lafortune_to_natural, n_lobes),
+        from_natural=functools.partial(_lafortune_from_natural, n_lobes),
+        starts=functools.partial(_lafortune_starts, n_lobes),
         alpha_nonneg=(True,) * (n_lobes + 1),
         formula="K cos(theta) [(1-sum a_i)/pi + sum_i a_i (n_i+2)/2pi "
         "(Cx_i sin(gamma) sin(theta) + cos(gamma) cos(theta))^n_i]",
         reference="Lafortune, Foo, Torrance and Greenberg 1997 (the paper's ref. 20)",
-        options={"n_lobes": n_lobes, "n_data_starts": 6, "residual_column": 0,
-                 "groups": tuple((2 * i, 2 * i + 1) for i in range(n_lobes))},
+        hints=FitHints(n_data_starts=6, residual_column=0,
+                       groups=tuple((2 * i, 2 * i + 1) for i in range(n_lobes))),
         **_screen(np.tile([-1.2, np.log(1.0)], n_lobes), np.tile([0.5, np.log(1.0e5)], n_lobes)),
     )
 

@@ -6,15 +6,19 @@ Angles in radians (see :mod:`irreflect.models.base` for the conventions).
 
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 
 from ..errors import IrreflectError
 from .base import (
+    FitHints,
     Parameter,
     ReflectionModel,
     _col,
     _lobe_and_derivative,
     _lobe_from_log,
+    _lobes_to_natural,
     cap_share,
     generalized_lambertian,
     mirror_angle,
@@ -251,9 +255,9 @@ def make_two_lobe() -> ReflectionModel:
         # its data-driven starts carry the search on glossy tables: a lighter screening,
         # no basin hops and one-coordinate scans suffice (300 of 300 generated materials,
         # tests/test_global_fit.py; the same with 64 candidates: 96 keeps a margin)
-        options={"batch_starts": _two_lobe_batch_starts,
-                 "residual_column": 0, "canonical_starts": _two_lobe_starts,
-                 "n_screen": 96, "n_keep": 3, "n_hops": 0},
+        hints=FitHints(batch_starts=_two_lobe_batch_starts, residual_column=0,
+                       kernel="two-lobe", kernel_starts=_two_lobe_starts,
+                       n_screen=96, n_keep=3, n_hops=0),
         screen_lower=np.array([-6.0, np.log(0.3), -3.0, np.log(1.0), -3.0]),
         screen_upper=np.array([2.0, np.log(20.0), 6.0, np.log(1.0e5), 3.0]),
         share_cap=True,
@@ -295,6 +299,74 @@ def make_single_lobe() -> ReflectionModel:
 
 
 # --------------------------------------------------------------------------- n-lobe
+def _n_lobe_basis_fn(n_lobes, geom, z, derivatives=True):
+    gamma, theta = geom.gamma, geom.theta_spec
+    cols, dcols = [], []
+    for i in range(n_lobes):
+        t_i = _col(z, 2 * i)
+        n_i = np.exp(_col(z, 2 * i + 1))
+        angle = theta + t_i * gamma
+        cos_a = np.cos(angle)
+        lobe, dlobe = _lobe_and_derivative(cos_a, n_i)
+        cols.append(lobe)
+        if derivatives:
+            with np.errstate(divide="ignore", invalid="ignore"):
+                # d/dt of (n+1)/2pi cos^n(theta + t gamma) = -lobe n tan(angle) gamma
+                dt = np.where(cos_a > 1e-12, -lobe * n_i * np.tan(angle) * gamma, 0.0)
+            dcols.append((dt, dlobe * n_i))
+    basis = np.stack(np.broadcast_arrays(*cols), axis=-1)
+    if not derivatives:
+        return basis, None
+    shape = basis.shape[:-1]
+    dbasis = np.zeros(shape + (n_lobes, 2 * n_lobes))
+    for i, (dt, dn) in enumerate(dcols):
+        dbasis[..., i, 2 * i] = dt
+        dbasis[..., i, 2 * i + 1] = dn
+    return basis, dbasis
+
+
+def _n_lobe_to_natural(n_lobes, z, alpha):
+    return _lobes_to_natural(z, alpha, n_lobes, first=0)
+
+
+def _n_lobe_from_natural(n_lobes, p):
+    p = np.atleast_2d(np.asarray(p, float))
+    z = np.column_stack(
+        [p[:, 3 * i + k] if k == 0 else np.log(p[:, 3 * i + 1]) for i in range(n_lobes) for k in (0, 1)]
+    )
+    K = p[:, -1]
+    alpha = np.column_stack([K * p[:, 3 * i + 2] for i in range(n_lobes)])
+    return z, alpha
+
+
+def _n_lobe_starts(n_lobes, gamma, theta, power):
+    n_est = estimate_specular_index(gamma, theta, power)
+    axes = [0.0, 1.0, -1.0, 0.5, 1.2, -0.5][:n_lobes]
+    out = []
+    for scale in (1.0, 0.25, 4.0):
+        row = []
+        for i, t in enumerate(axes):
+            n = 1.0 if t == 0.0 else n_est * scale / (1 + i)
+            row += [t, np.log(max(n, 0.1))]
+        out.append(row)
+    # narrow lobes aimed at the brightest receivers (axis theta = -t gamma through the
+    # receiver: a goniometer's receivers seldom sit exactly on the mirror), one per lobe
+    # but the last, which stays broad about the normal
+    peaks = [float(np.clip(-tp / g, -1.5, 1.5))
+             for g, tp in peak_directions(gamma, theta, power, k=6) if abs(g) > 1e-6]
+    for n in (n_est, 1e3, 1e4, 1e5):
+        ln_n = np.log(min(max(n, 1.0), MAX_LOBE_INDEX))
+        for first in range(len(peaks)):
+            aimed = (peaks[first:] + peaks[:first])[: max(n_lobes - 1, 1)]
+            row = []
+            for axis in aimed:
+                row += [axis, ln_n]
+            while len(row) < 2 * n_lobes:
+                row += [0.0, np.log(2.0)]
+            out.append(row[: 2 * n_lobes])
+    return np.array(out)
+
+
 def make_n_lobe(n_lobes: int = 3) -> ReflectionModel:
     """Eq. 7 with ``n_lobes`` lobes; lobe ``i`` points at ``theta = -t_i gamma``."""
     n_lobes = int(n_lobes)
@@ -311,75 +383,6 @@ def make_n_lobe(n_lobes: int = 3) -> ReflectionModel:
         ]
     params.append(Parameter("K", "power", 0.0, np.inf, "grouped constant factor (Eq. 7)"))
 
-    def basis_fn(geom, z, derivatives=True):
-        gamma, theta = geom.gamma, geom.theta_spec
-        cols, dcols = [], []
-        for i in range(n_lobes):
-            t_i = _col(z, 2 * i)
-            n_i = np.exp(_col(z, 2 * i + 1))
-            angle = theta + t_i * gamma
-            cos_a = np.cos(angle)
-            lobe, dlobe = _lobe_and_derivative(cos_a, n_i)
-            cols.append(lobe)
-            if derivatives:
-                with np.errstate(divide="ignore", invalid="ignore"):
-                    # d/dt of (n+1)/2pi cos^n(theta + t gamma) = -lobe n tan(angle) gamma
-                    dt = np.where(cos_a > 1e-12, -lobe * n_i * np.tan(angle) * gamma, 0.0)
-                dcols.append((dt, dlobe * n_i))
-        basis = np.stack(np.broadcast_arrays(*cols), axis=-1)
-        if not derivatives:
-            return basis, None
-        shape = basis.shape[:-1]
-        dbasis = np.zeros(shape + (n_lobes, 2 * n_lobes))
-        for i, (dt, dn) in enumerate(dcols):
-            dbasis[..., i, 2 * i] = dt
-            dbasis[..., i, 2 * i + 1] = dn
-        return basis, dbasis
-
-    def to_natural(z, alpha):
-        K = alpha.sum(axis=1)
-        safe = np.where(K > 0, K, 1.0)
-        out = []
-        for i in range(n_lobes):
-            out += [z[:, 2 * i], np.exp(z[:, 2 * i + 1]), alpha[:, i] / safe]
-        return np.column_stack(out + [K])
-
-    def from_natural(p):
-        p = np.atleast_2d(np.asarray(p, float))
-        z = np.column_stack(
-            [p[:, 3 * i + k] if k == 0 else np.log(p[:, 3 * i + 1]) for i in range(n_lobes) for k in (0, 1)]
-        )
-        K = p[:, -1]
-        alpha = np.column_stack([K * p[:, 3 * i + 2] for i in range(n_lobes)])
-        return z, alpha
-
-    def starts(gamma, theta, power):
-        n_est = estimate_specular_index(gamma, theta, power)
-        axes = [0.0, 1.0, -1.0, 0.5, 1.2, -0.5][:n_lobes]
-        out = []
-        for scale in (1.0, 0.25, 4.0):
-            row = []
-            for i, t in enumerate(axes):
-                n = 1.0 if t == 0.0 else n_est * scale / (1 + i)
-                row += [t, np.log(max(n, 0.1))]
-            out.append(row)
-        # narrow lobes aimed at the brightest receivers (axis theta = -t gamma through the
-        # receiver: a goniometer's receivers seldom sit exactly on the mirror), one per lobe
-        # but the last, which stays broad about the normal
-        peaks = [float(np.clip(-tp / g, -1.5, 1.5))
-                 for g, tp in peak_directions(gamma, theta, power, k=6) if abs(g) > 1e-6]
-        for n in (n_est, 1e3, 1e4, 1e5):
-            ln_n = np.log(min(max(n, 1.0), MAX_LOBE_INDEX))
-            for first in range(len(peaks)):
-                aimed = (peaks[first:] + peaks[:first])[: max(n_lobes - 1, 1)]
-                row = []
-                for axis in aimed:
-                    row += [axis, ln_n]
-                while len(row) < 2 * n_lobes:
-                    row += [0.0, np.log(2.0)]
-                out.append(row[: 2 * n_lobes])
-        return np.array(out)
-
     lo = np.tile([-1.5, np.log(0.05)], n_lobes)
     hi = np.tile([1.5, np.log(MAX_LOBE_INDEX)], n_lobes)
     return ReflectionModel(
@@ -389,15 +392,15 @@ def make_n_lobe(n_lobes: int = 3) -> ReflectionModel:
         z_lower=lo,
         z_upper=hi,
         n_linear=n_lobes,
-        basis=basis_fn,
-        to_natural=to_natural,
-        from_natural=from_natural,
-        starts=starts,
+        basis=functools.partial(_n_lobe_basis_fn, n_lobes),
+        to_natural=functools.partial(_n_lobe_to_natural, n_lobes),
+        from_natural=functools.partial(_n_lobe_from_natural, n_lobes),
+        starts=functools.partial(_n_lobe_starts, n_lobes),
         alpha_nonneg=(True,) * n_lobes,
         formula="K sum_i a_i (n_i+1)/2pi cos^n_i(theta + t_i gamma)",
         reference="the paper, Eqs. 7-8",
-        options={"n_lobes": n_lobes, "n_data_starts": 6,
-                 "groups": tuple((2 * i, 2 * i + 1) for i in range(n_lobes))},
+        hints=FitHints(n_data_starts=6,
+                       groups=tuple((2 * i, 2 * i + 1) for i in range(n_lobes))),
     )
 
 
@@ -446,7 +449,7 @@ def make_phong() -> ReflectionModel:
         alpha_nonneg=(True, True),
         formula="K ((1-k_s) cos(theta) + k_s cos^n(phi))",
         reference="Phong 1975 (the paper's ref. 18)",
-        options={"residual_column": 0},
+        hints=FitHints(residual_column=0),
     )
 
 

@@ -17,18 +17,20 @@ A model specification is ``name[:N][+extension...][@G]``:
 
 Adding a model is one module with a ``make_<name>()`` factory plus one line in
 :data:`MODELS`; the contract tests (``tests/test_contracts_models.py``) then cover it.
-Models pickle as their specification (:meth:`ReflectionModel.__reduce__`).
+Models pickle as their specification (:func:`_reduce_model`, registered with copyreg).
 """
 
 from __future__ import annotations
 
+import copyreg
 import re
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 from ..errors import IrreflectError, unknown_name
 from . import literature, paper
 from .base import ReflectionModel
+from .extensions import get_extension
 
 #: name -> factory; the factory takes the ``:N`` size when the model has one.
 MODELS: dict[str, Callable[..., ReflectionModel]] = {
@@ -104,8 +106,6 @@ def parse_spec(spec) -> ModelSpec:
     if m["ext"] and any(not e for e in m["ext"].split("+")[1:]):
         raise IrreflectError(f"model '{text}': an empty extension name after '+'")
     if extensions:
-        from .extensions import get_extension
-
         for e in extensions:
             get_extension(e)  # one-line error listing the valid names
     at = None
@@ -162,8 +162,6 @@ def get_model(model) -> ReflectionModel:
                 raise IrreflectError(
                     f"model '{spec.name}' takes no ':{spec.count}' size") from None
         if spec.extensions:
-            from .extensions import extend
-
             built = extend(built, spec.extensions)
         _MODEL_CACHE[key] = built
     if isinstance(model, str):
@@ -171,6 +169,33 @@ def get_model(model) -> ReflectionModel:
     return _MODEL_CACHE[key]
 
 
+def extend(base, names: str | Sequence[str]) -> ReflectionModel:
+    """Apply extensions in order: ``extend("two-lobe", ["background", "angle_offset"])``.
+
+    ``base`` a model or a model specification (:func:`get_model`); ``names`` may also be
+    one string joined with ``+`` (``"background+angle_offset"``).
+    """
+    model = get_model(base)
+    if isinstance(names, str):
+        names = [n for n in names.split("+") if n]
+    for name in names:
+        model = get_extension(name)(model)
+        if not isinstance(model, ReflectionModel):
+            raise IrreflectError(
+                f"extension '{name}' returned {type(model).__name__}, expected a ReflectionModel"
+            )
+    return model
+
+
 def model_names() -> list[str]:
     """Every registered model name."""
     return sorted(MODELS)
+
+
+def _reduce_model(model: ReflectionModel):
+    """A model pickles as its registry specification (closures and bound data do not):
+    loading it rebuilds the same model from the registry (:func:`get_model`)."""
+    return (get_model, (model.name,))
+
+
+copyreg.pickle(ReflectionModel, _reduce_model)

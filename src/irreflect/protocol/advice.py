@@ -393,16 +393,51 @@ def _lobes(reference) -> dict[float, float]:
             and a.lobe_half_width_deg <= MAX_LOBE_HALF_WIDTH}
 
 
-def _causes(dense, fit_p, reference, pts, pred_p, pred_a, n_distinct, k, what, ill,
-            focus=None):
-    """The causes of a protocol's shortfall, the one carrying most of the extra error first.
+@dataclass
+class _ErrorSplit:
+    """Where a protocol's extra squared error lies on the dense table (:func:`_split`)."""
 
-    The extra squared error of the protocol's model over the all-points fit's, point by
-    point, is split by where it lies: at angles of incidence beyond the protocol's
-    (extrapolation), between them but not measured (interpolation), at the measured ones
-    near the mirror direction (the specular lobe) or elsewhere. ``focus``: only these |gamma|
-    (deg), when the verdict comes from one angle's polar-area error.
-    """
+    g: np.ndarray
+    t: np.ndarray
+    y: np.ndarray
+    mag: np.ndarray
+    extra: np.ndarray
+    pgam: np.ndarray
+    ptheta: np.ndarray
+    pmags: np.ndarray
+    lo: float
+    hi: float
+    outside: np.ndarray
+    between: np.ndarray
+    lobes: dict
+    share: dict
+
+    @property
+    def s_out(self) -> float:
+        return self.share[("outside", True)] + self.share[("outside", False)]
+
+    @property
+    def s_between(self) -> float:
+        return self.share[("between", True)] + self.share[("between", False)]
+
+    @property
+    def s_near(self) -> float:
+        return (self.share[("outside", True)] + self.share[("between", True)]
+                + self.share[("measured", True)])
+
+    @property
+    def s_lobe(self) -> float:
+        return self.share[("measured", True)]
+
+    @property
+    def s_rest(self) -> float:
+        return self.share[("measured", False)]
+
+
+def _split(dense, reference, pts, pred_p, pred_a, focus) -> _ErrorSplit:
+    """The extra squared error of the protocol's model over the all-points fit's, point by
+    point, and its shares: beyond the protocol's angles of incidence, between them, at the
+    measured ones; each near the mirror (where a narrow lobe matters) or away from it."""
     g, t, y = dense.gamma_deg, dense.theta_deg, dense.power
     mag = np.abs(g)
     extra = (y - pred_p) ** 2 - (y - pred_a) ** 2
@@ -431,12 +466,21 @@ def _causes(dense, fit_p, reference, pts, pred_p, pred_a, n_distinct, k, what, i
     parts = {key: max(float(extra[m].sum()), 0.0) for key, m in cells.items()}
     total = sum(parts.values())
     share = {key: (v / total if total > 0 else 0.0) for key, v in parts.items()}
-    s_out = share[("outside", True)] + share[("outside", False)]
-    s_between = share[("between", True)] + share[("between", False)]
-    s_near = share[("outside", True)] + share[("between", True)] + share[("measured", True)]
-    s_lobe, s_rest = share[("measured", True)], share[("measured", False)]
-    listed = ", ".join(f"{m:g}" for m in pmags)
+    return _ErrorSplit(g, t, y, mag, extra, pgam, ptheta, pmags, lo, hi, outside, between,
+                       lobes, share)
 
+
+def _causes(dense, fit_p, reference, pts, pred_p, pred_a, n_distinct, k, what, ill,
+            focus=None):
+    """The causes of a protocol's shortfall, the one carrying most of the extra error first.
+
+    The extra squared error of the protocol's model over the all-points fit's, point by
+    point, is split by where it lies: at angles of incidence beyond the protocol's
+    (extrapolation), between them but not measured (interpolation), at the measured ones
+    near the mirror direction (the specular lobe) or elsewhere. ``focus``: only these |gamma|
+    (deg), when the verdict comes from one angle's polar-area error.
+    """
+    sp = _split(dense, reference, pts, pred_p, pred_a, focus)
     causes: list[Cause] = []
     if n_distinct - k < MIN_DOF:
         dup = len(pts) - n_distinct
@@ -447,83 +491,111 @@ def _causes(dense, fit_p, reference, pts, pred_p, pred_a, n_distinct, k, what, i
             + (f" ({dup} point(s) fell on the same measured angle as another)" if dup else "")
             + ": the fit passes through its points and nothing checks it",
             float("nan"), f"measure at least {k + MIN_DOF} distinct settings"))
-
-    if outside.any() and s_out >= CAUSE_SHARE:
-        out_mags = sorted({float(m) for m in mag[outside]})
-        inside = ~outside
-        r2_in = (float(metrics.r2(y[inside], pred_p[inside])) if inside.sum() >= 2
-                 else float("nan"))
-        neg = outside & (pred_p < 0)
-        text = (f"extrapolation beyond the measured angles of incidence: {what} measures "
-                f"|gamma| {lo:g}-{hi:g} deg, the table is scored at |gamma| = "
-                f"{', '.join(f'{m:g}' for m in out_mags)} deg too; {s_out:.0%} of "
-                f"the extra squared error lies there (R^2 {r2_in:.4g} within {lo:g}-{hi:g} deg)")
-        if neg.any():
-            text += (f", where the model predicts negative power at {int(neg.sum())} "
-                     f"point(s) (down to {float(pred_p[neg].min()):.3g})")
-        if share[("outside", True)] >= 0.5 * s_out and share[("outside", True)] > 0:
-            text += ("; most of it near the mirror direction: the specular lobe's law over "
-                     "gamma is extrapolated")
-        want_hi, want_lo = max(out_mags) > hi, min(out_mags) < lo
-        if want_hi and want_lo:
-            fix = f"measure |gamma| from {min(out_mags):g} to {max(out_mags):g} deg"
-        elif want_hi:
-            fix = f"measure |gamma| up to {max(out_mags):g} deg"
-        else:
-            fix = f"measure |gamma| down to {min(out_mags):g} deg"
-        causes.append(Cause("extrapolation", text, s_out,
-                            fix + " (the angles the model is used at)"))
-
-    if between.any() and s_between >= CAUSE_SHARE:
-        per = {float(m): max(float(extra[between & (np.abs(mag - m) <= 1e-6)].sum()), 0.0)
-               for m in np.unique(mag[between])}
-        worst = max(per, key=per.get)
-        causes.append(Cause(
-            "interpolation",
-            f"interpolation between the measured angles of incidence: {what} measures "
-            f"|gamma| = {listed} deg and {s_between:.0%} of the extra squared error lies at "
-            f"the angles between them it does not measure, most at |gamma| = {worst:g} deg",
-            s_between, f"add an angle of incidence near |gamma| = {worst:g} deg"))
-
+    if sp.outside.any() and sp.s_out >= CAUSE_SHARE:
+        causes.append(_extrapolation(sp, pred_p, what))
+    if sp.between.any() and sp.s_between >= CAUSE_SHARE:
+        causes.append(_interpolation(sp, what))
     lobe_resolved = False
-    if s_near >= CAUSE_SHARE and lobes:
-        unresolved = []
-        for gval in sorted(set(pgam.tolist()), key=abs):
-            hw = next((w for gm, w in lobes.items() if abs(gm - abs(gval)) <= 1e-6), None)
-            if hw is None:
-                continue
-            sel = np.abs(pgam - gval) <= 1e-6
-            off = np.sort(np.abs(ptheta[sel] + gval))
-            n1, n2 = int(np.sum(off <= hw + 1e-9)), int(np.sum(off <= 2 * hw + 1e-9))
-            if not (n2 >= 2 and n1 >= 1):
-                unresolved.append((gval, hw, off))
-        lobe_resolved = not unresolved
-        if unresolved:
-            hws = [u[1] for u in unresolved]
-            near_txt = [f"{u[2][0]:.3g}" if u[2].size else "-" for u in unresolved]
-            nxt = [f"{u[2][1]:.3g}" if u[2].size > 1 else "-" for u in unresolved]
-            text = (f"the specular lobe is not resolved at gamma "
-                    f"{', '.join(f'{u[0]:g}' for u in unresolved)} deg: its half width is "
-                    f"{_span(hws, '{:.2g}')} deg (all-points fit) and {what}'s points nearest "
-                    f"the mirror stand {', '.join(near_txt)} deg from it, the next "
-                    f"{', '.join(nxt)} deg (resolving it takes two points within two half "
-                    f"widths, one within one); {s_near:.0%} of the extra squared error "
-                    "lies near the mirror direction"
-                    + (" (at the measured angles of incidence and beyond)"
-                       if s_near - s_lobe > 0.05 else ""))
-            gap = _evaluation_gap(pts, unresolved)
-            if gap:
-                text += "; " + gap
-            causes.append(Cause(
-                "unresolved-lobe", text, s_near,
-                f"resolve the lobe: a receiver step of at most {floor_sig(min(hws)):g} deg within "
-                f"+-{2 * max(hws):.2g} deg of the mirror"))
+    if sp.s_near >= CAUSE_SHARE and sp.lobes:
+        lobe, lobe_resolved = _unresolved_lobe(sp, pts, what)
+        if lobe is not None:
+            causes.append(lobe)
+    causes += _left_over(sp, fit_p, k, what, ill, lobe_resolved, causes)
+    order = {"degrees-of-freedom": -1.0}
+    causes.sort(key=lambda c: order.get(c.kind, -(c.share if np.isfinite(c.share) else 0.0)))
+    return causes
 
-    # what is left: the coefficients the points leave free, seen at the measured angles
+
+def _extrapolation(sp: _ErrorSplit, pred_p, what) -> Cause:
+    """The share of the extra error beyond the protocol's angles of incidence."""
+    y, mag, outside, lo, hi, s_out = sp.y, sp.mag, sp.outside, sp.lo, sp.hi, sp.s_out
+    out_mags = sorted({float(m) for m in mag[outside]})
+    inside = ~outside
+    r2_in = (float(metrics.r2(y[inside], pred_p[inside])) if inside.sum() >= 2
+             else float("nan"))
+    neg = outside & (pred_p < 0)
+    text = (f"extrapolation beyond the measured angles of incidence: {what} measures "
+            f"|gamma| {lo:g}-{hi:g} deg, the table is scored at |gamma| = "
+            f"{', '.join(f'{m:g}' for m in out_mags)} deg too; {s_out:.0%} of "
+            f"the extra squared error lies there (R^2 {r2_in:.4g} within {lo:g}-{hi:g} deg)")
+    if neg.any():
+        text += (f", where the model predicts negative power at {int(neg.sum())} "
+                 f"point(s) (down to {float(pred_p[neg].min()):.3g})")
+    if sp.share[("outside", True)] >= 0.5 * s_out and sp.share[("outside", True)] > 0:
+        text += ("; most of it near the mirror direction: the specular lobe's law over "
+                 "gamma is extrapolated")
+    want_hi, want_lo = max(out_mags) > hi, min(out_mags) < lo
+    if want_hi and want_lo:
+        fix = f"measure |gamma| from {min(out_mags):g} to {max(out_mags):g} deg"
+    elif want_hi:
+        fix = f"measure |gamma| up to {max(out_mags):g} deg"
+    else:
+        fix = f"measure |gamma| down to {min(out_mags):g} deg"
+    return Cause("extrapolation", text, s_out, fix + " (the angles the model is used at)")
+
+
+def _interpolation(sp: _ErrorSplit, what) -> Cause:
+    """The share of the extra error between the protocol's angles of incidence."""
+    mag, between, extra = sp.mag, sp.between, sp.extra
+    listed = ", ".join(f"{m:g}" for m in sp.pmags)
+    per = {float(m): max(float(extra[between & (np.abs(mag - m) <= 1e-6)].sum()), 0.0)
+           for m in np.unique(mag[between])}
+    worst = max(per, key=per.get)
+    return Cause(
+        "interpolation",
+        f"interpolation between the measured angles of incidence: {what} measures "
+        f"|gamma| = {listed} deg and {sp.s_between:.0%} of the extra squared error lies at "
+        f"the angles between them it does not measure, most at |gamma| = {worst:g} deg",
+        sp.s_between, f"add an angle of incidence near |gamma| = {worst:g} deg")
+
+
+def _unresolved_lobe(sp: _ErrorSplit, pts, what) -> tuple[Cause | None, bool]:
+    """(the cause when the protocol's points do not resolve a narrow specular lobe, whether
+    every lobe that matters is resolved)."""
+    pgam, ptheta, lobes, s_near, s_lobe = sp.pgam, sp.ptheta, sp.lobes, sp.s_near, sp.s_lobe
+    unresolved = []
+    for gval in sorted(set(pgam.tolist()), key=abs):
+        hw = next((w for gm, w in lobes.items() if abs(gm - abs(gval)) <= 1e-6), None)
+        if hw is None:
+            continue
+        sel = np.abs(pgam - gval) <= 1e-6
+        off = np.sort(np.abs(ptheta[sel] + gval))
+        n1, n2 = int(np.sum(off <= hw + 1e-9)), int(np.sum(off <= 2 * hw + 1e-9))
+        if not (n2 >= 2 and n1 >= 1):
+            unresolved.append((gval, hw, off))
+    if not unresolved:
+        return None, True
+    hws = [u[1] for u in unresolved]
+    near_txt = [f"{u[2][0]:.3g}" if u[2].size else "-" for u in unresolved]
+    nxt = [f"{u[2][1]:.3g}" if u[2].size > 1 else "-" for u in unresolved]
+    text = (f"the specular lobe is not resolved at gamma "
+            f"{', '.join(f'{u[0]:g}' for u in unresolved)} deg: its half width is "
+            f"{_span(hws, '{:.2g}')} deg (all-points fit) and {what}'s points nearest "
+            f"the mirror stand {', '.join(near_txt)} deg from it, the next "
+            f"{', '.join(nxt)} deg (resolving it takes two points within two half "
+            f"widths, one within one); {s_near:.0%} of the extra squared error "
+            "lies near the mirror direction"
+            + (" (at the measured angles of incidence and beyond)"
+               if s_near - s_lobe > 0.05 else ""))
+    gap = _evaluation_gap(pts, unresolved)
+    if gap:
+        text += "; " + gap
+    return Cause(
+        "unresolved-lobe", text, s_near,
+        f"resolve the lobe: a receiver step of at most {floor_sig(min(hws)):g} deg within "
+        f"+-{2 * max(hws):.2g} deg of the mirror"), False
+
+
+def _left_over(sp: _ErrorSplit, fit_p, k, what, ill, lobe_resolved, causes) -> list[Cause]:
+    """The causes of what no region above carries: coefficients the points leave free (seen
+    at the measured angles), a lobe reached but misfitted, else the protocol fit's own
+    verdict."""
+    s_rest, s_lobe = sp.s_rest, sp.s_lobe
+    found: list[Cause] = []
     uncertain = _uncertain(fit_p)
     lobe_left = s_lobe if lobe_resolved else 0.0
     left = s_rest + lobe_left
-    if lobes and lobe_left >= 0.05:
+    if sp.lobes and lobe_left >= 0.05:
         where_text = (f"{lobe_left:.0%} lies in the specular lobe at the measured angles of "
                       f"incidence (which {what}'s points reach), {s_rest:.0%} away from it")
     else:
@@ -538,36 +610,39 @@ def _causes(dense, fit_p, reference, pts, pred_p, pred_a, n_distinct, k, what, i
         corr = [r for r in (ill or []) if "correlation" in r]
         if corr:
             text += " (" + "; ".join(corr[:2]) + ")"
-        causes.append(Cause("ill-determined", text, left))
+        found.append(Cause("ill-determined", text, left))
     elif lobe_left >= CAUSE_SHARE:
-        causes.append(Cause(
+        found.append(Cause(
             "lobe-misfit",
             f"{lobe_left:.0%} of the extra squared error lies in the specular lobe, though "
             f"{what}'s points reach it: they give its height and width other values than "
             "all the points do", lobe_left))
-
-    covered = {"unresolved-lobe", "ill-determined", "lobe-misfit"} & {c.kind for c in causes}
-    if (not [c for c in causes if c.kind != "degrees-of-freedom"]
+    every = causes + found
+    covered = {"unresolved-lobe", "ill-determined", "lobe-misfit"} & {c.kind for c in every}
+    if (not [c for c in every if c.kind != "degrees-of-freedom"]
             or (not covered and s_rest + s_lobe >= 0.5)):
-        # no region carries it: the protocol's own fit's verdict says what it cannot see
-        try:
-            problems = fit_p.verdict().problems()
-        except Exception:  # noqa: BLE001 - a model without a verdict
-            problems = []
-        i = int(np.argmax(extra))
-        where = (f"the extra squared error is largest at gamma {g[i]:g}, theta {t[i]:g} deg "
-                 f"({s_rest + s_lobe:.0%} at the measured angles of incidence)")
-        if problems:
-            causes.append(Cause(
-                "own-verdict",
-                f"the model fitted on {what}'s points fails its own verdict: "
-                + "; ".join(problems) + f"; {where}", s_rest + s_lobe))
-        else:
-            causes.append(Cause("unidentified", f"no single cause found in the evidence; "
-                                f"{where}", float("nan")))
-    order = {"degrees-of-freedom": -1.0}
-    causes.sort(key=lambda c: order.get(c.kind, -(c.share if np.isfinite(c.share) else 0.0)))
-    return causes
+        found.append(_own_verdict(sp, fit_p, what))
+    return found
+
+
+def _own_verdict(sp: _ErrorSplit, fit_p, what) -> Cause:
+    """No region carries the extra error: the protocol's own fit's verdict says what it
+    cannot see."""
+    try:
+        problems = fit_p.verdict().problems()
+    except Exception:  # noqa: BLE001 - a model without a verdict
+        problems = []
+    i = int(np.argmax(sp.extra))
+    share = sp.s_rest + sp.s_lobe
+    where = (f"the extra squared error is largest at gamma {sp.g[i]:g}, theta {sp.t[i]:g} deg "
+             f"({share:.0%} at the measured angles of incidence)")
+    if problems:
+        return Cause(
+            "own-verdict",
+            f"the model fitted on {what}'s points fails its own verdict: "
+            + "; ".join(problems) + f"; {where}", share)
+    return Cause("unidentified", f"no single cause found in the evidence; {where}",
+                 float("nan"))
 
 
 def _evaluation_gap(pts: pd.DataFrame, unresolved) -> str:

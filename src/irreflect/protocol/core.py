@@ -263,6 +263,58 @@ def _replacement(mirror: float, requested: float, taken: list[float], lo: float,
     return _clean(min(feasible, key=key))
 
 
+def _mirror_in_range(g, lo, hi) -> float:
+    """The mirror direction of ``g``, refused when the tool's range ``[lo, hi]`` misses it."""
+    mirror = _clean(-g)
+    if not lo - _EPS <= mirror <= hi + _EPS:
+        raise IrreflectError(
+            f"gamma {g:g}: its mirror direction theta = {mirror:g} lies outside the tool's "
+            f"receiver range [{lo:g}, {hi:g}], so the specular peak cannot be measured: "
+            f"choose |gamma| within the range or widen it"
+        )
+    return mirror
+
+
+def _three_gammas(gammas_deg, limits, needs: str, listed):
+    """Three distinct angles of incidence (by magnitude) and the receiver range, checked;
+    ``needs``: the refusal's first words, ``listed``: how it lists what was given."""
+    gammas = normalise_gammas(gammas_deg)
+    mags = np.abs(gammas)
+    if gammas.size != 3 or np.unique(mags).size != 3:
+        raise IrreflectError(
+            f"{needs}; found {listed(np.asarray(gammas_deg, float).ravel())}: "
+            "give three, e.g. --gammas -20 -40 -60"
+        )
+    return tuple(gammas[np.argsort(mags)]), check_limits(*limits)
+
+
+def _paper_arguments(gammas_deg, theta_min, theta_max, offsets, min_separation):
+    """:func:`paper_protocol`'s arguments checked: (the three angles of incidence by
+    magnitude, the receiver range, the coincidence distance)."""
+    mirror_offset, wide_offset, central_offset = offsets
+    gammas, (lo, hi) = _three_gammas(
+        gammas_deg, (theta_min, theta_max),
+        "the paper's protocol needs exactly three distinct angles of incidence (Eq. 23)",
+        lambda values: short_list(values, fmt=lambda g: f"{g:g}"))
+    named = {"mirror_offset": mirror_offset, "wide_offset": wide_offset,
+             "central_offset": central_offset}
+    for key, value in named.items():
+        if not (np.isfinite(value) and 0 < value < 180):
+            raise IrreflectError(f"{key} must be between 0 and 180 degrees; found {value:g}")
+    if not mirror_offset < wide_offset:
+        raise IrreflectError(
+            f"mirror_offset ({mirror_offset:g}) must be smaller than wide_offset "
+            f"({wide_offset:g}): the lobe-width points lie inside the diffuse ones"
+        )
+    min_sep = mirror_offset / 2 if min_separation is None else float(min_separation)
+    if not 0 <= min_sep <= mirror_offset:
+        raise IrreflectError(
+            f"min_separation must be between 0 and mirror_offset ({mirror_offset:g}); "
+            f"found {min_sep:g}"
+        )
+    return gammas, (lo, hi), min_sep
+
+
 def paper_protocol(gammas_deg, theta_min: float = -70.0, theta_max: float = 70.0, *,
                    mirror_offset: float = 10.0, wide_offset: float = 60.0,
                    central_offset: float = 20.0, min_separation: float | None = None,
@@ -301,32 +353,9 @@ def paper_protocol(gammas_deg, theta_min: float = -70.0, theta_max: float = 70.0
         offsets, a mirror direction outside the range, or a range too narrow for the
         lobe-width points or for five separated points.
     """
-    gammas = normalise_gammas(gammas_deg)
-    mags = np.abs(gammas)
-    if gammas.size != 3 or np.unique(mags).size != 3:
-        raise IrreflectError(
-            "the paper's protocol needs exactly three distinct angles of incidence (Eq. 23); "
-            f"found {short_list(np.asarray(gammas_deg, float).ravel(), fmt=lambda g: f'{g:g}')}: "
-            "give three, e.g. --gammas -20 -40 -60"
-        )
-    lo, hi = check_limits(theta_min, theta_max)
-    offsets = {"mirror_offset": mirror_offset, "wide_offset": wide_offset,
-               "central_offset": central_offset}
-    for key, value in offsets.items():
-        if not (np.isfinite(value) and 0 < value < 180):
-            raise IrreflectError(f"{key} must be between 0 and 180 degrees; found {value:g}")
-    if not mirror_offset < wide_offset:
-        raise IrreflectError(
-            f"mirror_offset ({mirror_offset:g}) must be smaller than wide_offset "
-            f"({wide_offset:g}): the lobe-width points lie inside the diffuse ones"
-        )
-    min_sep = mirror_offset / 2 if min_separation is None else float(min_separation)
-    if not 0 <= min_sep <= mirror_offset:
-        raise IrreflectError(
-            f"min_separation must be between 0 and mirror_offset ({mirror_offset:g}); "
-            f"found {min_sep:g}"
-        )
-    g1, g2, g3 = gammas[np.argsort(mags)]
+    (g1, g2, g3), (lo, hi), min_sep = _paper_arguments(
+        gammas_deg, theta_min, theta_max, (mirror_offset, wide_offset, central_offset),
+        min_separation)
 
     gamma_out, theta_out, purpose, requested, adjustment, notes = [], [], [], [], [], []
 
@@ -371,13 +400,7 @@ def paper_protocol(gammas_deg, theta_min: float = -70.0, theta_max: float = 70.0
             place(g2, mirror, _clean(g2 + central_offset), "central", taken, True)
             place(g2, mirror, _clean(-g2 + central_offset), "central", taken, True)
             continue
-        mirror = _clean(-g)
-        if not lo - _EPS <= mirror <= hi + _EPS:
-            raise IrreflectError(
-                f"gamma {g:g}: its mirror direction theta = {mirror:g} lies outside the tool's "
-                f"receiver range [{lo:g}, {hi:g}], so the specular peak cannot be measured: "
-                f"choose |gamma| within the range or widen it"
-            )
+        mirror = _mirror_in_range(g, lo, hi)
         taken = []
         place(g, mirror, mirror, "mirror", taken, False)
         place(g, mirror, _clean(mirror - mirror_offset), "lobe_width", taken, False)
@@ -395,8 +418,9 @@ def paper_protocol(gammas_deg, theta_min: float = -70.0, theta_max: float = 70.0
         theta_max=hi,
         kind="paper",
         rule=PAPER_RULE,
-        settings={"gammas_deg": [float(g1), float(g2), float(g3)], **offsets,
-                  "min_separation": min_sep},
+        settings={"gammas_deg": [float(g1), float(g2), float(g3)],
+                  "mirror_offset": mirror_offset, "wide_offset": wide_offset,
+                  "central_offset": central_offset, "min_separation": min_sep},
         order="paper",
         notes=tuple(notes),
         name=name,
@@ -482,6 +506,76 @@ def lobe_half_width_deg(index) -> np.ndarray:
         return np.degrees(np.arccos(np.power(2.0, -1.0 / n)))
 
 
+def _glossy_arguments(gammas_deg, theta_min, theta_max, specular_index, limits, layout):
+    """:func:`glossy_protocol`'s arguments checked: (the three angles of incidence by
+    magnitude, the receiver range, the lobe-width offset of each). ``limits``:
+    (min_lobe_offset, max_lobe_offset, wide_offset)."""
+    min_lobe_offset, max_lobe_offset, wide_offset = limits
+    gammas, (lo, hi) = _three_gammas(
+        gammas_deg, (theta_min, theta_max),
+        "the glossy protocol needs exactly three distinct angles of incidence",
+        lambda values: ", ".join(f"{g:g}" for g in values))
+    if not (0 < min_lobe_offset <= max_lobe_offset < wide_offset):
+        raise IrreflectError(
+            "lobe offsets must satisfy 0 < min_lobe_offset <= max_lobe_offset < wide_offset; "
+            f"found {min_lobe_offset:g}, {max_lobe_offset:g}, {wide_offset:g}"
+        )
+    index_of = specular_index if callable(specular_index) else (lambda g: specular_index)
+    g1, g2, g3 = gammas
+    offsets = {}
+    for g in (g1, g2, g3):
+        n = float(index_of(float(g)))
+        if not (np.isfinite(n) and n > 0):
+            raise IrreflectError(
+                f"the specular index at gamma {g:g} must be a positive number; found {n:g}: "
+                "give --specular-index N or a pilot scan with a specular lobe"
+            )
+        offsets[g] = float(np.clip(lobe_half_width_deg(n), min_lobe_offset, max_lobe_offset))
+    if layout not in GLOSSY_LAYOUTS:
+        raise unknown_name("glossy protocol layout", str(layout), GLOSSY_LAYOUTS)
+    return (g1, g2, g3), (lo, hi), offsets
+
+
+def _replace_clamped(g, kind, wanted_value, taken, limits, separation):
+    """A glossy protocol's point clamped onto another of its gamma, replaced by the
+    reachable angle farthest from the mirror direction: (the angle, its note)."""
+    wanted, value = wanted_value
+    lo, hi = limits
+    mirror = _clean(-g)
+    other = _replacement(mirror, wanted, taken, lo, hi, separation)
+    if other is None:
+        raise IrreflectError(
+            f"gamma {g:g}: the receiver range [{lo:g}, {hi:g}] has no room for the "
+            f"{kind} point away from the others: widen the range")
+    return other, (f"gamma {g:g}: {kind} theta {wanted:g} clamped to {value:g} coincides "
+                   f"with another point of that gamma; replaced by {other:g}, the "
+                   f"reachable angle farthest from the mirror direction {mirror:g}")
+
+
+def _glossy_plan(gammas, offsets, limits, layout, wide_central):
+    """The glossy protocol's wanted points ``(gamma, theta, purpose)`` in the order of
+    ``gammas`` (by magnitude), before clamping."""
+    g1, g2, g3 = gammas
+    lo, hi = limits
+    wide_offset, central_offset = wide_central
+    plan = []
+    for g in (g1, g2, g3):
+        mirror = _mirror_in_range(g, lo, hi)
+        w = offsets[g]
+        if layout == "balanced":
+            plan += [(g, mirror, "mirror"), (g, mirror - w, "lobe_width")]
+            plan += [(g, t, "diffuse") for t in _diffuse_angles(g, w, lo, hi, wide_offset)]
+        elif g == g2:
+            plan += [(g, mirror, "mirror"), (g, g + central_offset, "central")]
+        else:
+            plan += [(g, mirror, "mirror"), (g, mirror - w, "lobe_width"),
+                     (g, mirror + w, "lobe_width"), (g, mirror - wide_offset, "diffuse"),
+                     (g, mirror + wide_offset, "diffuse")]
+    order = {g1: 0, g2: 1, g3: 2}
+    plan.sort(key=lambda p: order[p[0]])
+    return plan
+
+
 def glossy_protocol(gammas_deg, theta_min: float = -70.0, theta_max: float = 70.0, *,
                     specular_index, wide_offset: float = 60.0, central_offset: float = 20.0,
                     min_lobe_offset: float = 0.25, max_lobe_offset: float = 10.0,
@@ -518,55 +612,10 @@ def glossy_protocol(gammas_deg, theta_min: float = -70.0, theta_max: float = 70.
         ``gamma_deg -> measured theta_deg`` of a pilot scan: every point is moved to the
         nearest of these (the tool can only stand there), keeping points distinct.
     """
-    gammas = normalise_gammas(gammas_deg)
-    mags = np.abs(gammas)
-    if gammas.size != 3 or np.unique(mags).size != 3:
-        raise IrreflectError(
-            "the glossy protocol needs exactly three distinct angles of incidence; found "
-            f"{', '.join(f'{g:g}' for g in np.asarray(gammas_deg, float).ravel())}: "
-            "give three, e.g. --gammas -20 -40 -60"
-        )
-    lo, hi = check_limits(theta_min, theta_max)
-    if not (0 < min_lobe_offset <= max_lobe_offset < wide_offset):
-        raise IrreflectError(
-            "lobe offsets must satisfy 0 < min_lobe_offset <= max_lobe_offset < wide_offset; "
-            f"found {min_lobe_offset:g}, {max_lobe_offset:g}, {wide_offset:g}"
-        )
-    index_of = specular_index if callable(specular_index) else (lambda g: specular_index)
-    g1, g2, g3 = gammas[np.argsort(mags)]
-    offsets = {}
-    for g in (g1, g2, g3):
-        n = float(index_of(float(g)))
-        if not (np.isfinite(n) and n > 0):
-            raise IrreflectError(
-                f"the specular index at gamma {g:g} must be a positive number; found {n:g}: "
-                "give --specular-index N or a pilot scan with a specular lobe"
-            )
-        offsets[g] = float(np.clip(lobe_half_width_deg(n), min_lobe_offset, max_lobe_offset))
-    if layout not in GLOSSY_LAYOUTS:
-
-        raise unknown_name("glossy protocol layout", str(layout), GLOSSY_LAYOUTS)
-    plan = []
-    for g in (g1, g2, g3):
-        mirror = _clean(-g)
-        if not lo - _EPS <= mirror <= hi + _EPS:
-            raise IrreflectError(
-                f"gamma {g:g}: its mirror direction theta = {mirror:g} lies outside the tool's "
-                f"receiver range [{lo:g}, {hi:g}], so the specular peak cannot be measured: "
-                "choose |gamma| within the range or widen it"
-            )
-        w = offsets[g]
-        if layout == "balanced":
-            plan += [(g, mirror, "mirror"), (g, mirror - w, "lobe_width")]
-            plan += [(g, t, "diffuse") for t in _diffuse_angles(g, w, lo, hi, wide_offset)]
-        elif g == g2:
-            plan += [(g, mirror, "mirror"), (g, g + central_offset, "central")]
-        else:
-            plan += [(g, mirror, "mirror"), (g, mirror - w, "lobe_width"),
-                     (g, mirror + w, "lobe_width"), (g, mirror - wide_offset, "diffuse"),
-                     (g, mirror + wide_offset, "diffuse")]
-    order = {g1: 0, g2: 1, g3: 2}
-    plan.sort(key=lambda p: order[p[0]])
+    (g1, g2, g3), (lo, hi), offsets = _glossy_arguments(
+        gammas_deg, theta_min, theta_max, specular_index,
+        (min_lobe_offset, max_lobe_offset, wide_offset), layout)
+    plan = _glossy_plan((g1, g2, g3), offsets, (lo, hi), layout, (wide_offset, central_offset))
     gamma_out, theta_out, purpose, requested, adjustment, notes = [], [], [], [], [], []
     taken: dict[float, list[float]] = {}
     clamped = []
@@ -585,15 +634,9 @@ def glossy_protocol(gammas_deg, theta_min: float = -70.0, theta_max: float = 70.
         elif adj and _coincides(value, taken.get(g, []), 0.5 * offsets[g]):
             # a clamped point on top of another of its gamma: the paper's coincidence rule
             # with half the lobe offset as the separation (see PAPER_RULE)
-            mirror = _clean(-g)
-            other = _replacement(mirror, wanted, taken.get(g, []), lo, hi, 0.5 * offsets[g])
-            if other is None:
-                raise IrreflectError(
-                    f"gamma {g:g}: the receiver range [{lo:g}, {hi:g}] has no room for the "
-                    f"{kind} point away from the others: widen the range")
-            notes.append(f"gamma {g:g}: {kind} theta {wanted:g} clamped to {value:g} coincides "
-                         f"with another point of that gamma; replaced by {other:g}, the "
-                         f"reachable angle farthest from the mirror direction {mirror:g}")
+            other, note = _replace_clamped(g, kind, (wanted, value), taken.get(g, []),
+                                           (lo, hi), 0.5 * offsets[g])
+            notes.append(note)
             value, adj = other, "replaced"
         taken.setdefault(g, []).append(value)
         gamma_out.append(g)

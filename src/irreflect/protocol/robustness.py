@@ -182,6 +182,47 @@ def _structural_reasons(model_obj, g0, t0, power, seed, reasons) -> list[str]:
             for name in nominal.ill_determined if name not in named]
 
 
+def _reference(reference, model, dense, seed):
+    """(the reference fit, the model, the points R^2 is measured against) of
+    :func:`protocol_robustness`'s ``reference``, ``model`` and ``dense``."""
+    if isinstance(reference, FitResult):
+        ref_fit = reference
+        model_obj = get_model(model or reference.model_object or reference.model)
+        if model_obj.name != ref_fit.model:
+            raise IrreflectError(
+                f"the reference was fitted with '{ref_fit.model}' but model '{model_obj.name}' "
+                "was asked: pass the dense measurements instead of the fit"
+            )
+        if dense is None:
+            dense = Measurements(ref_fit.gamma_deg, ref_fit.theta_deg, ref_fit.power,
+                                 name="reference data")
+    else:
+        dense = as_measurements(reference) if dense is None else dense
+        model_obj = get_model(model or "two-lobe")
+        ref_fit = fit(as_measurements(reference), model_obj, seed=seed)
+    return ref_fit, model_obj, dense
+
+
+def _fit_rows(rows, g0, t0, model_obj, max_iter, progress):
+    """The fit of every row of power at the protocol's angles ``(g0, t0)`` in batches of
+    subset fits: (parameters (R, k), failed (R,))."""
+    n = g0.size
+    params = np.empty((rows.shape[0], model_obj.n_params))
+    failed = np.empty(rows.shape[0], bool)
+    chunks = range(0, rows.shape[0], _CHUNK)
+    if progress and on_terminal():  # a transient bar; nothing through a pipe
+        chunks = tqdm(chunks, desc="Monte Carlo", unit="batch", leave=False)
+    for start in chunks:
+        block = rows[start:start + _CHUNK]
+        b = block.shape[0]
+        masks = np.kron(np.eye(b, dtype=bool), np.ones((1, n), bool))
+        res = fit_subsets(np.tile(g0, b), np.tile(t0, b), block.ravel(), masks, model_obj,
+                          max_iter=max_iter)
+        params[start:start + b] = res.params
+        failed[start:start + b] = res.failed
+    return params, failed
+
+
 def protocol_robustness(protocol, reference, *, model=None, dense=None, n_trials: int = 200,
                         angle_error_deg: float = 1.0, power_noise: float = 0.01,
                         power_noise_abs: float = 0.0, seed: int = 0, max_iter: int = 100,
@@ -215,21 +256,7 @@ def protocol_robustness(protocol, reference, *, model=None, dense=None, n_trials
         check_number(value, name, low=0.0)
     seed = check_seed(seed)
     protocol = as_protocol(protocol)
-    if isinstance(reference, FitResult):
-        ref_fit = reference
-        model_obj = get_model(model or reference.model_object or reference.model)
-        if model_obj.name != ref_fit.model:
-            raise IrreflectError(
-                f"the reference was fitted with '{ref_fit.model}' but model '{model_obj.name}' "
-                "was asked: pass the dense measurements instead of the fit"
-            )
-        if dense is None:
-            dense = Measurements(ref_fit.gamma_deg, ref_fit.theta_deg, ref_fit.power,
-                                 name="reference data")
-    else:
-        dense = as_measurements(reference) if dense is None else dense
-        model_obj = get_model(model or "two-lobe")
-        ref_fit = fit(as_measurements(reference), model_obj, seed=seed)
+    ref_fit, model_obj, dense = _reference(reference, model, dense, seed)
     dense = as_measurements(dense)
     for name, value in (("angle error", angle_error_deg), ("power noise", power_noise),
                         ("absolute power noise", power_noise_abs)):
@@ -258,21 +285,7 @@ def protocol_robustness(protocol, reference, *, model=None, dense=None, n_trials
     nominal_power = model_obj.predict_deg(truth, g0, t0)[None]
     rows = np.vstack([nominal_power, measured])  # row 0: no error at all
 
-    params = np.empty((rows.shape[0], model_obj.n_params))
-    failed = np.empty(rows.shape[0], bool)
-    chunks = range(0, rows.shape[0], _CHUNK)
-
-    if progress and on_terminal():  # a transient bar; nothing through a pipe
-
-        chunks = tqdm(chunks, desc="Monte Carlo", unit="batch", leave=False)
-    for start in chunks:
-        block = rows[start:start + _CHUNK]
-        b = block.shape[0]
-        masks = np.kron(np.eye(b, dtype=bool), np.ones((1, n), bool))
-        res = fit_subsets(np.tile(g0, b), np.tile(t0, b), block.ravel(), masks, model_obj,
-                          max_iter=max_iter)
-        params[start:start + b] = res.params
-        failed[start:start + b] = res.failed
+    params, failed = _fit_rows(rows, g0, t0, model_obj, max_iter, progress)
     with np.errstate(over="ignore", under="ignore", invalid="ignore"):
         pred = model_obj.predict_deg(np.where(failed[:, None], truth, params),
                                      dense.gamma_deg, dense.theta_deg)

@@ -183,13 +183,10 @@ def _specular_trend(comp) -> tuple[float, float, float, float] | None:
     return lo, share(lo), hi, share(hi)
 
 
-def _section_markdown(comparisons, table6: pd.DataFrame, paper6, real_note: str,
-                      ctx=None) -> str:
-    """The section's text, with the measured numbers it quotes computed from the tables and
-    only the statements that hold for this run's data."""
-    def recon(name):
-        return ctx is None or ctx.is_reconstruction(name)
-
+def _per_dataset(comparisons, table6, recon):
+    """What :func:`_section_markdown` quotes of each dataset: (the Phong-at-one-incidence
+    trend per dataset, the two-lobe error beside the noise floor, the gap of the noise-free
+    Phong to the paper's, the plasterboard sentence). ``recon(name)``: a reconstruction."""
     trend, floor, gap, paint = [], [], [], ""
     for name, comp in comparisons.items():
         at = at_label(comp)
@@ -218,6 +215,37 @@ def _section_markdown(comparisons, table6: pd.DataFrame, paper6, real_note: str,
                      f"{ts.mean_error_pct:.1f}% (worst {ts.max_error_pct:.1f}%), against the "
                      "14.6% quoted for paint: different samples, so only the order of "
                      "magnitude compares.")
+    return trend, floor, gap, paint
+
+
+def _share_text(comparisons) -> str:
+    """Whether any two-lobe fit has a specular share that grows with the incidence."""
+    shares = []
+    for name, comp in comparisons.items():
+        t = _specular_trend(comp)
+        if t is not None and t[3] > t[1] * 1.05 and t[3] > 0.01:
+            shares.append(f"{name} {t[1]:.2g} at {t[0]:g} deg -> {t[3]:.2g} at {t[2]:g} deg")
+    share_text = (
+        "Those whose specular lobe keeps one shape and one share at every incidence (Phong, "
+        "Blinn-Phong, Ward, Oren-Nayar + Phong) cannot follow a specular share that grows with "
+        "the angle of incidence, as the two-lobe fits find it does on "
+        + "; ".join(shares) + " (a_s = u_as cos^v_as(gamma), Eq. 20); Torrance-Sparrow gets "
+        "part of it from its 1/cos(gamma) and Fresnel factors, Lafortune from lobes whose axis "
+        "and strength change with gamma." if shares else
+        "No two-lobe fit of this run has a specular share that grows markedly with the angle "
+        "of incidence, so the models with one fixed specular lobe (Phong, Blinn-Phong, Ward, "
+        "Oren-Nayar + Phong) lose less to it here.")
+    return share_text
+
+
+def _section_markdown(comparisons, table6: pd.DataFrame, paper6, real_note: str,
+                      ctx=None) -> str:
+    """The section's text, with the measured numbers it quotes computed from the tables and
+    only the statements that hold for this run's data."""
+    def recon(name):
+        return ctx is None or ctx.is_reconstruction(name)
+
+    trend, floor, gap, paint = _per_dataset(comparisons, table6, recon)
     grows = [t for _, up, t in trend if up]
     falls = [t for _, up, t in trend if not up]
     trend_text = ""
@@ -256,21 +284,7 @@ def _section_markdown(comparisons, table6: pd.DataFrame, paper6, real_note: str,
                       "generated the reconstructed data (the paper's Table 3 coefficients, no "
                       "noise); `noise floor`: the error of that generating curve against the "
                       "data." if recon_names else ""))
-    shares = []
-    for name, comp in comparisons.items():
-        t = _specular_trend(comp)
-        if t is not None and t[3] > t[1] * 1.05 and t[3] > 0.01:
-            shares.append(f"{name} {t[1]:.2g} at {t[0]:g} deg -> {t[3]:.2g} at {t[2]:g} deg")
-    share_text = (
-        "Those whose specular lobe keeps one shape and one share at every incidence (Phong, "
-        "Blinn-Phong, Ward, Oren-Nayar + Phong) cannot follow a specular share that grows with "
-        "the angle of incidence, as the two-lobe fits find it does on "
-        + "; ".join(shares) + " (a_s = u_as cos^v_as(gamma), Eq. 20); Torrance-Sparrow gets "
-        "part of it from its 1/cos(gamma) and Fresnel factors, Lafortune from lobes whose axis "
-        "and strength change with gamma." if shares else
-        "No two-lobe fit of this run has a specular share that grows markedly with the angle "
-        "of incidence, so the models with one fixed specular lobe (Phong, Blinn-Phong, Ward, "
-        "Oren-Nayar + Phong) lose less to it here.")
+    share_text = _share_text(comparisons)
     return f"""The paper compares its two-lobe model with Phong fitted at gamma = 10 deg (Table 6) and
 quotes other models' errors on other materials (Table 7). Here every model is fitted to the
 same tables by the same global fitter and scored with the same relative polar-area error of

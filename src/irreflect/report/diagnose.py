@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 import pandas as pd
 
@@ -28,18 +30,44 @@ def _effects_text(d) -> str:
     return text or "-"
 
 
-def section(ctx: ReportContext) -> Section:
-    """Diagnose every dataset of the report (and, in a full run, a blind test on tables with
-    hidden effects): verdict, effects added, the gap before and after, residual maps."""
+@dataclass
+class DiagnoseRun:
+    """What the section computes (:func:`compute`), before it is written (:func:`render`):
+    every dataset's :class:`~irreflect.diagnose.workflow.Diagnosis`, the summary rows of
+    the datasets that could not be diagnosed, the blind test's table (None in a quick
+    run)."""
+
+    results: dict
+    failed: list
+    blind: pd.DataFrame | None
+
+
+def compute(ctx: ReportContext) -> DiagnoseRun:
+    """Diagnose every dataset of the report and, in a full run, the blind test."""
     max_effects = 1 if ctx.quick else 3
-    results, rows, cand_rows = {}, [], []
+    results, failed = {}, []
     for name, meas in ctx.datasets.items():
         ctx.progress(f"diagnose {name}")
         try:
             results[name] = diagnose(meas, seed=ctx.seed, max_effects=max_effects)
         except IrreflectError as exc:  # e.g. no sigma and too few receiver angles per gamma
-            rows.append({"dataset": name, "points": meas.n_points,
-                         "verdict": f"not diagnosed: {exc}"})
+            failed.append({"dataset": name, "points": meas.n_points,
+                           "verdict": f"not diagnosed: {exc}"})
+    blind = None
+    if not ctx.quick:
+        ctx.progress("diagnose: blind test on hidden effects")
+        blind = _blind_table(seeds=4, first_seed=ctx.seed + 500)
+    return DiagnoseRun(results, failed, blind)
+
+
+def section(ctx: ReportContext) -> Section:
+    """Diagnose every dataset of the report (and, in a full run, a blind test on tables with
+    hidden effects): verdict, effects added, the gap before and after, residual maps."""
+    return render(ctx, compute(ctx))
+
+
+def _summary_tables(run: DiagnoseRun) -> dict:
+    results, rows, cand_rows = run.results, list(run.failed), []
     for name, d in results.items():
         b, a = d.before, d.after
         rows.append({
@@ -64,6 +92,12 @@ def section(ctx: ReportContext) -> Section:
                                   "decision": c.reason})
     tables = {"diagnose_summary": pd.DataFrame(rows),
               "diagnose_candidates": pd.DataFrame(cand_rows)}
+    return tables
+
+
+def _where(run: DiagnoseRun, ctx: ReportContext):
+    """The markdown list of what each diagnosis found, and the findings."""
+    results = run.results
     where_md, findings = [], []
     for name, d in results.items():
         kind = "reconstruction" if ctx.is_reconstruction(name) else "measured"
@@ -82,16 +116,21 @@ def section(ctx: ReportContext) -> Section:
                 "times the noise)" + (f": {d.where[0]}" if d.where else ""))))
         elif d.effects or d.alternatives:
             findings.append(Finding(2, name, "missing effect found: " + _effects_text(d)))
+    return where_md, findings
 
+
+def render(ctx: ReportContext, run: DiagnoseRun) -> Section:
+    """The section of :func:`compute`'s results: tables, residual maps, markdown."""
+    results = run.results
+    tables = _summary_tables(run)
+    where_md, findings = _where(run, ctx)
     figures = {}
     if results:
         figures["diagnose_residuals"] = save_figure(plot_diagnosis_residuals(results),
                                                     ctx.figure_path("diagnose_residuals"))
-
     blind = ""
-    if not ctx.quick:
-        ctx.progress("diagnose: blind test on hidden effects")
-        tables["diagnose_blind"] = _blind_table(seeds=4, first_seed=ctx.seed + 500)
+    if run.blind is not None:
+        tables["diagnose_blind"] = run.blind
         blind = (
             "\n\nBlind test: tables made by the two-lobe model with one hidden effect (random "
             "material, grid, noise and magnitude; `irreflect.diagnose.hidden`), 4 per kind. "

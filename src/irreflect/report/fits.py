@@ -53,7 +53,6 @@ def section(ctx: ReportContext) -> Section:
     rows2, rows3, rows4, figures, notes, findings = [], [], [], {}, [], []
     verdicts = {}  # material -> the paper protocol's verdict (protocol.advice.assess)
     repeats = 5 if ctx.quick else 50
-    md = []
     for name, meas in ctx.datasets.items():
         ctx.progress(f"fits: {name}")
         full = ctx.fits[name]
@@ -117,6 +116,22 @@ def section(ctx: ReportContext) -> Section:
                       "repeats": repeats})
         figures.update(_fit_figures(ctx, name, meas, full, mask if twelve is not None else None,
                                     twelve))
+    checks, unconverged = _fit_checks(ctx)
+    findings += unconverged
+    table2 = pd.DataFrame(rows2)
+    if len(table2) and table2["R^2 paper"].isna().all():
+        table2 = table2.drop(columns=["R^2 paper", "RMSE paper", "MSE paper"])
+    tables = {"table2_fit_quality": table2, "table3_coefficients": pd.DataFrame(rows3),
+              "table4_fit_time": pd.DataFrame(rows4), "fit_checks": pd.DataFrame(checks)}
+    markdown = _markdown(ctx, rows2, verdicts, notes, figures)
+    figures = {k: v for k, v in figures.items() if not k.startswith("_")}
+    return Section("fits", TITLE, markdown, tables, figures, findings=findings)
+
+
+def _fit_checks(ctx: ReportContext):
+    """Every all-points fit's verdict and checks (rows), and a finding per fit that did
+    not converge."""
+    findings = []
     checks = []
     for name in ctx.datasets:
         res = ctx.fits[name]
@@ -131,11 +146,12 @@ def section(ctx: ReportContext) -> Section:
         if not res.converged:
             findings.append(Finding(1, name, f"the two-lobe fit on all points did not "
                                              f"converge ({res.message})"))
-    table2 = pd.DataFrame(rows2)
-    if len(table2) and table2["R^2 paper"].isna().all():
-        table2 = table2.drop(columns=["R^2 paper", "RMSE paper", "MSE paper"])
-    tables = {"table2_fit_quality": table2, "table3_coefficients": pd.DataFrame(rows3),
-              "table4_fit_time": pd.DataFrame(rows4), "fit_checks": pd.DataFrame(checks)}
+    return checks, findings
+
+
+def _markdown(ctx: ReportContext, rows2, verdicts, notes, figures) -> str:
+    """The section's text around its tables and figures."""
+    md = []
     md.append(FITTER_GUARANTEES + "\n\n{table:fit_checks}\n\n")
     md.append("### Table 2: quality of the 12-point fit against all points\n\n"
               "The model is fitted on the 12 points of the paper's protocol (Table 1 where the "
@@ -181,8 +197,7 @@ def section(ctx: ReportContext) -> Section:
                   f"{{figure:histogram_{name}}}\n")
         if figures.get(f"_outliers_{name}"):
             md.append(f"\n{figures[f'_outliers_{name}']}\n")
-    figures = {k: v for k, v in figures.items() if not k.startswith("_")}
-    return Section("fits", TITLE, "".join(md), tables, figures, findings=findings)
+    return "".join(md)
 
 
 def _table2_note(df: pd.DataFrame, ctx: ReportContext, verdicts: dict) -> str:

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from dataclasses import dataclass, field
+
 import numpy as np
 import pandas as pd
 
@@ -85,15 +87,39 @@ def _snapped_r2(meas, seed: int) -> float | None:
     return float(metrics.r2(meas.power, res.predict(meas.gamma_deg, meas.theta_deg)))
 
 
+@dataclass
+class ProtocolResults:
+    """What the protocol section found (computed by :func:`compute`, written out by
+    :func:`render`): the rows of its tables, the failures and findings, the dataset the
+    paper's protocol suits least (for the figures)."""
+
+    n_trials: int
+    table1: pd.DataFrame
+    same: bool | None
+    eval_rows: list = field(default_factory=list)
+    polar_rows: list = field(default_factory=list)
+    rob_rows: list = field(default_factory=list)
+    spread_rows: list = field(default_factory=list)
+    glossy_rows: list = field(default_factory=list)
+    skipped: list = field(default_factory=list)
+    failures: list = field(default_factory=list)
+    findings: list = field(default_factory=list)
+    differ: list = field(default_factory=list)
+    first: tuple | None = None
+
+
 def section(ctx: ReportContext) -> Section:
     """The paper's protocol (Table 1), its evaluation on every dataset and its robustness."""
-    n_trials = 40 if ctx.quick else 400
+    return render(ctx, compute(ctx))
+
+
+def compute(ctx: ReportContext) -> ProtocolResults:
+    """Evaluate the paper's protocol, the glossy-aware one and their robustness on every
+    dataset of the run."""
     table1, same = _table1(ctx)
-    paper2 = ctx.paper_table("table2_fit_quality_12pt.csv")
-    paper5 = ctx.paper_table("table5_methods_r2.csv")
-    eval_rows, polar_rows, rob_rows, spread_rows, skipped = [], [], [], [], []
-    glossy_rows, failures, findings, differ = [], [], [], []
-    first = None
+    res = ProtocolResults(40 if ctx.quick else 400, table1, same)
+    papers = (ctx.paper_table("table2_fit_quality_12pt.csv"),
+              ctx.paper_table("table5_methods_r2.csv"))
     for name, meas in ctx.datasets.items():
         ctx.progress(f"protocol: {name}")
         try:
@@ -102,97 +128,129 @@ def section(ctx: ReportContext) -> Section:
             ev = evaluate_protocol(proto, meas, "two-lobe", seed=ctx.seed, reference=reference,
                                    what="the paper's protocol")
         except (IrreflectError, FitError) as exc:
-            skipped.append(f"{name}: {exc}")
+            res.skipped.append(f"{name}: {exc}")
             continue
-        gammas = " / ".join(f"{g:g}" for g in proto.settings["gammas_deg"])
-        row = {
-            "dataset": name,
-            "gammas (deg)": gammas,
-            "points": meas.n_points,
-            "interpolated": ev.n_interpolated,
-            "R^2 protocol": round(ev.r2, 4),
-            "R^2 protocol, its gamma range": round(ev.r2_within, 4),
-            "RMSE protocol": float(f"{ev.rmse:.3g}"),
-            "R^2 all points": round(ev.reference_r2, 4),
-            "verdict": ev.status,
-            "cause": _kinds(ev),
-        }
-        if paper2 is not None and name in set(paper2["material"]):
-            row["R^2 paper, 12 points"] = float(paper2.set_index("material").loc[name, "r2"])
-        if paper5 is not None and name in set(paper5["material"]):
-            a = paper5[(paper5["material"] == name) & (paper5["method"] == "A")]
-            if len(a):
-                row["R^2 paper, all points"] = float(a["r2"].iloc[0])
-        eval_rows.append(row)
-        worst_g, worst_e = max(ev.polar_errors.items(), key=lambda kv: (np.nan_to_num(kv[1]), kv[0]))
-        if not ev.verdict.passed:
-            failures.append(f"**{name}**: {_item(ev.verdict)}")
-        if ev.failed:
-            snapped = _snapped_r2(meas, ctx.seed)
-            findings.append(Finding(0, name, (
-                f"the paper's protocol (gammas {gammas} deg) with the power interpolated at "
-                f"its exact angles (protocol evaluation) gives R^2 = {ev.r2:.4g} against "
-                f"{ev.reference_r2:.4g}, polar-area error up to {worst_e:.4g} % (at |gamma| "
-                f"{worst_g:g} deg); cause: " + _first_cause(ev)), key="paper-protocol"))
-            if snapped is not None and abs(snapped - ev.r2) > 0.05:
-                differ.append(f"{name}: R^2 {snapped:.4g} with the points snapped (Tables 2 "
-                              f"and 5) and {ev.r2:.4g} with the power interpolated at the "
-                              "protocol's exact angles")
-        try:
-            gp = glossy_protocol_for(meas, reference, seed=ctx.seed)
-            ev_g = evaluate_protocol(gp, meas, "two-lobe", seed=ctx.seed, reference=reference,
-                                     what="the glossy-aware protocol")
-        except (IrreflectError, FitError) as exc:
-            skipped.append(f"{name} (glossy-aware protocol): {exc}")
-        else:
-            g_gammas = " / ".join(f"{g:g}" for g in gp.settings["gammas_deg"])
-            glossy_rows.append({
-                "dataset": name,
-                "lobe half width (deg)": " / ".join(
-                    f"{w:.2g}" for w in _half_widths(reference, gp.settings["gammas_deg"])),
-                "R^2 all points": round(ev.reference_r2, 4),
-                "R^2 paper protocol": round(ev.r2, 4),
-                "paper protocol": ev.status,
-                "R^2 glossy-aware": round(ev_g.r2, 4),
-                "glossy-aware": ev_g.status,
-                "glossy-aware cause": _kinds(ev_g),
-                "glossy gammas (deg)": g_gammas,
-                "layout": gp.settings["layout"],
-            })
-            if not ev_g.verdict.passed:
-                failures.append(f"**{name}** (glossy-aware, gammas {g_gammas} deg, designed from "
-                                f"this scan): {_item(ev_g.verdict)}")
-                if ev.failed and ev_g.failed:
-                    findings.append(Finding(0, name, (
-                        f"the glossy-aware protocol (gammas {g_gammas} deg) also fails: "
-                        f"R^2 {ev_g.r2:.4g}; cause: " + _first_cause(ev_g))))
-            elif ev.failed:
-                findings.append(Finding(1, name, (
-                    f"the glossy-aware protocol (gammas {g_gammas} deg, lobe points at the "
-                    f"specular lobe's half width, designed from this scan) passes with R^2 "
-                    f"{ev_g.r2:.4g} where the paper's gives {ev.r2:.4g}; without a dense scan "
-                    f"to design from, measure adaptively (`irreflect next`, {CAMPAIGN_DOC})")))
-        polar_rows.append({"dataset": name, **{f"{g:g}": round(e, 2)
-                                               for g, e in ev.polar_errors.items()},
-                           "worst": round(worst_e, 2)})
-        rob = protocol_robustness(proto, reference, dense=meas, n_trials=n_trials,
-                                  seed=ctx.seed)
-        s = rob.r2_summary()
-        rob_rows.append({
-            "dataset": name, "trials": n_trials,
-            "R^2 nominal": round(s["r2_nominal"], 4), "R^2 median": round(s["r2_median"], 4),
-            "R^2 5th percentile": round(s["r2_p5"], 4),
-            "R^2 95th percentile": round(s["r2_p95"], 4),
-            "failed fits": s["n_failed"], "flagged": rob.flagged,
-            "reasons": "; ".join(rob.reasons) if rob.reasons else "",
-        })
-        spread_rows.append({"dataset": name, **{
-            n: round(float(r) * 100, 1) for n, r in zip(rob.param_names, rob.relative_spread,
-                                                        strict=True)}})
+        worst_g, worst_e = _paper_rows(ctx, res, name, meas, proto, ev, papers)
+        _glossy_rows(ctx, res, name, meas, ev, reference)
+        _robustness_rows(ctx, res, name, meas, proto, ev, reference, worst_e)
         loss = ev.reference_r2 - ev.r2
-        if first is None or loss > first[0]:
-            first = (loss, name, meas, proto, ev, reference)
+        if res.first is None or loss > res.first[0]:
+            res.first = (loss, name, meas, proto, ev, reference)
+    return res
 
+
+def _paper_rows(ctx, res, name, meas, proto, ev, papers):
+    """The paper's protocol on one dataset: its evaluation row, its failure and finding.
+    Returns the worst polar-area error's (|gamma|, percent)."""
+    eval_rows, failures, findings, differ = res.eval_rows, res.failures, res.findings, \
+        res.differ
+    paper2, paper5 = papers
+    gammas = " / ".join(f"{g:g}" for g in proto.settings["gammas_deg"])
+    row = {
+        "dataset": name,
+        "gammas (deg)": gammas,
+        "points": meas.n_points,
+        "interpolated": ev.n_interpolated,
+        "R^2 protocol": round(ev.r2, 4),
+        "R^2 protocol, its gamma range": round(ev.r2_within, 4),
+        "RMSE protocol": float(f"{ev.rmse:.3g}"),
+        "R^2 all points": round(ev.reference_r2, 4),
+        "verdict": ev.status,
+        "cause": _kinds(ev),
+    }
+    if paper2 is not None and name in set(paper2["material"]):
+        row["R^2 paper, 12 points"] = float(paper2.set_index("material").loc[name, "r2"])
+    if paper5 is not None and name in set(paper5["material"]):
+        a = paper5[(paper5["material"] == name) & (paper5["method"] == "A")]
+        if len(a):
+            row["R^2 paper, all points"] = float(a["r2"].iloc[0])
+    eval_rows.append(row)
+    worst_g, worst_e = max(ev.polar_errors.items(), key=lambda kv: (np.nan_to_num(kv[1]), kv[0]))
+    if not ev.verdict.passed:
+        failures.append(f"**{name}**: {_item(ev.verdict)}")
+    if ev.failed:
+        snapped = _snapped_r2(meas, ctx.seed)
+        findings.append(Finding(0, name, (
+            f"the paper's protocol (gammas {gammas} deg) with the power interpolated at "
+            f"its exact angles (protocol evaluation) gives R^2 = {ev.r2:.4g} against "
+            f"{ev.reference_r2:.4g}, polar-area error up to {worst_e:.4g} % (at |gamma| "
+            f"{worst_g:g} deg); cause: " + _first_cause(ev)), key="paper-protocol"))
+        if snapped is not None and abs(snapped - ev.r2) > 0.05:
+            differ.append(f"{name}: R^2 {snapped:.4g} with the points snapped (Tables 2 "
+                          f"and 5) and {ev.r2:.4g} with the power interpolated at the "
+                          "protocol's exact angles")
+    return worst_g, worst_e
+
+
+def _glossy_rows(ctx, res, name, meas, ev, reference):
+    """The glossy-aware protocol on one dataset, beside the paper's."""
+    glossy_rows, failures, findings, skipped = res.glossy_rows, res.failures, res.findings, \
+        res.skipped
+    try:
+        gp = glossy_protocol_for(meas, reference, seed=ctx.seed)
+        ev_g = evaluate_protocol(gp, meas, "two-lobe", seed=ctx.seed, reference=reference,
+                                 what="the glossy-aware protocol")
+    except (IrreflectError, FitError) as exc:
+        skipped.append(f"{name} (glossy-aware protocol): {exc}")
+    else:
+        g_gammas = " / ".join(f"{g:g}" for g in gp.settings["gammas_deg"])
+        glossy_rows.append({
+            "dataset": name,
+            "lobe half width (deg)": " / ".join(
+                f"{w:.2g}" for w in _half_widths(reference, gp.settings["gammas_deg"])),
+            "R^2 all points": round(ev.reference_r2, 4),
+            "R^2 paper protocol": round(ev.r2, 4),
+            "paper protocol": ev.status,
+            "R^2 glossy-aware": round(ev_g.r2, 4),
+            "glossy-aware": ev_g.status,
+            "glossy-aware cause": _kinds(ev_g),
+            "glossy gammas (deg)": g_gammas,
+            "layout": gp.settings["layout"],
+        })
+        if not ev_g.verdict.passed:
+            failures.append(f"**{name}** (glossy-aware, gammas {g_gammas} deg, designed from "
+                            f"this scan): {_item(ev_g.verdict)}")
+            if ev.failed and ev_g.failed:
+                findings.append(Finding(0, name, (
+                    f"the glossy-aware protocol (gammas {g_gammas} deg) also fails: "
+                    f"R^2 {ev_g.r2:.4g}; cause: " + _first_cause(ev_g))))
+        elif ev.failed:
+            findings.append(Finding(1, name, (
+                f"the glossy-aware protocol (gammas {g_gammas} deg, lobe points at the "
+                f"specular lobe's half width, designed from this scan) passes with R^2 "
+                f"{ev_g.r2:.4g} where the paper's gives {ev.r2:.4g}; without a dense scan "
+                f"to design from, measure adaptively (`irreflect next`, {CAMPAIGN_DOC})")))
+
+
+def _robustness_rows(ctx, res, name, meas, proto, ev, reference, worst_e):
+    """The paper's protocol's polar-area errors and Monte Carlo robustness on one dataset."""
+    polar_rows, rob_rows, spread_rows, n_trials = res.polar_rows, res.rob_rows, \
+        res.spread_rows, res.n_trials
+    polar_rows.append({"dataset": name, **{f"{g:g}": round(e, 2)
+                                           for g, e in ev.polar_errors.items()},
+                       "worst": round(worst_e, 2)})
+    rob = protocol_robustness(proto, reference, dense=meas, n_trials=n_trials,
+                              seed=ctx.seed)
+    s = rob.r2_summary()
+    rob_rows.append({
+        "dataset": name, "trials": n_trials,
+        "R^2 nominal": round(s["r2_nominal"], 4), "R^2 median": round(s["r2_median"], 4),
+        "R^2 5th percentile": round(s["r2_p5"], 4),
+        "R^2 95th percentile": round(s["r2_p95"], 4),
+        "failed fits": s["n_failed"], "flagged": rob.flagged,
+        "reasons": "; ".join(rob.reasons) if rob.reasons else "",
+    })
+    spread_rows.append({"dataset": name, **{
+        n: round(float(r) * 100, 1) for n, r in zip(rob.param_names, rob.relative_spread,
+                                                    strict=True)}})
+
+
+def render(ctx: ReportContext, res: ProtocolResults) -> Section:
+    """The protocol section from its results: tables, figures and the markdown."""
+    glossy_rows, eval_rows, polar_rows, rob_rows, spread_rows, first = (
+        res.glossy_rows, res.eval_rows, res.polar_rows, res.rob_rows, res.spread_rows,
+        res.first)
+    table1 = res.table1
     tables = {"protocol_table1": table1}
     if glossy_rows:
         tables["protocol_glossy"] = pd.DataFrame(glossy_rows)
@@ -212,7 +270,15 @@ def section(ctx: ReportContext) -> Section:
             title=f"{name}: two-lobe model fitted on the protocol vs on all points",
         )
         figures["protocol_polar"] = save_figure(fig, ctx.figure_path("protocol_polar"))
+    return Section(key="protocol", title="Measurement protocol (section 4.3, Tables 1-2)",
+                   markdown="\n".join(_markdown(ctx, res)), tables=tables, figures=figures,
+                   findings=res.findings)
 
+
+def _markdown(ctx: ReportContext, res: ProtocolResults) -> list[str]:
+    """The section's text, its tables and figures by reference."""
+    same, failures, differ, skipped = res.same, res.failures, res.differ, res.skipped
+    eval_rows, glossy_rows = res.eval_rows, res.glossy_rows
     if same is True:
         match = "It is identical to the paper's Table 1, point for point and in the same order."
     elif same is False:
@@ -256,40 +322,45 @@ def section(ctx: ReportContext) -> Section:
             "",
         ]
     if eval_rows:
-        md += [
-            "The two-lobe model fitted on the protocol's 12 points only, judged against all "
-            "points of each dataset (`R^2 protocol`; `its gamma range` counts only the points "
-            "whose |gamma| lies within the protocol's), next to the fit on all points. Where "
-            "the protocol's angles are not in a dataset, the power is interpolated along "
-            "theta within 5 deg (`interpolated` points). The paper's columns are its Table 2 "
-            "(12 points) and Table 5 (Method A)." + _data_note(ctx, eval_rows),
-            "",
-            "{table:protocol_evaluation}",
-            "",
-            "Relative polar-area error (section 5.3, percent) of the protocol fit per angle of "
-            "incidence |gamma| (deg)" + _polar_note(polar_rows, eval_rows),
-            "",
-            "{table:protocol_polar_error_pct}",
-            "",
-            f"Robustness: {n_trials} Monte Carlo trials of goniometer errors (uniform +-1 deg on "
-            "each arm, one gamma error per gamma setting, one theta error per point) and 1 % "
-            "power noise, the material played by the two-lobe fit on all points; R^2 against "
-            "all points, and the robust spread (IQR / 1.349) of every coefficient in percent of "
-            "its value (of max(|value|, 1) for the exponents v_*). A protocol is flagged when a "
-            "spread exceeds 100 % or two coefficients correlate beyond |0.99|.",
-            "",
-            "{table:protocol_robustness}",
-            "",
-            "{table:protocol_coefficient_spread_pct}",
-            "",
-            "{figure:protocol_points}",
-            "",
-            "{figure:protocol_polar}",
-        ]
+        md += _evaluation_markdown(ctx, res)
     if skipped:
         md += ["", "Not evaluated: " + "; ".join(skipped)]
-    return Section(key="protocol", title="Measurement protocol (section 4.3, Tables 1-2)",
-                   markdown="\n".join(md), tables=tables, figures=figures, findings=findings)
+    return md
+
+
+def _evaluation_markdown(ctx: ReportContext, res: ProtocolResults) -> list[str]:
+    """The evaluation, polar-area error and robustness tables with their text."""
+    eval_rows, polar_rows, n_trials = res.eval_rows, res.polar_rows, res.n_trials
+    return [
+        "The two-lobe model fitted on the protocol's 12 points only, judged against all "
+        "points of each dataset (`R^2 protocol`; `its gamma range` counts only the points "
+        "whose |gamma| lies within the protocol's), next to the fit on all points. Where "
+        "the protocol's angles are not in a dataset, the power is interpolated along "
+        "theta within 5 deg (`interpolated` points). The paper's columns are its Table 2 "
+        "(12 points) and Table 5 (Method A)." + _data_note(ctx, eval_rows),
+        "",
+        "{table:protocol_evaluation}",
+        "",
+        "Relative polar-area error (section 5.3, percent) of the protocol fit per angle of "
+        "incidence |gamma| (deg)" + _polar_note(polar_rows, eval_rows),
+        "",
+        "{table:protocol_polar_error_pct}",
+        "",
+        f"Robustness: {n_trials} Monte Carlo trials of goniometer errors (uniform +-1 deg on "
+        "each arm, one gamma error per gamma setting, one theta error per point) and 1 % "
+        "power noise, the material played by the two-lobe fit on all points; R^2 against "
+        "all points, and the robust spread (IQR / 1.349) of every coefficient in percent of "
+        "its value (of max(|value|, 1) for the exponents v_*). A protocol is flagged when a "
+        "spread exceeds 100 % or two coefficients correlate beyond |0.99|.",
+        "",
+        "{table:protocol_robustness}",
+        "",
+        "{table:protocol_coefficient_spread_pct}",
+        "",
+        "{figure:protocol_points}",
+        "",
+        "{figure:protocol_polar}",
+    ]
 
 
 def _data_note(ctx: ReportContext, rows: list[dict]) -> str:

@@ -93,7 +93,39 @@ def section(ctx: ReportContext) -> Section:
                   "verdicts and warnings, `irreflect fit --save`):\n\n```\n"
                   + "\n".join(notes) + "\n```\n")
 
-    # the scene
+    md.append(_scene_markdown(ctx, scene, (rays, bounces), tables, figures))
+    # the comparison
+    variants, glossy_note = _variants(scene, ctx.quick)
+    results = []
+    for label, variant in variants:
+        ctx.progress(f"room: {label}")  # whole: a line per step through a pipe
+        res = simulate(variant, method="montecarlo", bounces=bounces, rays=rays, seed=ctx.seed)
+        results.append((label, res, summary_table(res)))
+    rows = _comparison_rows(scene, results)
+    tables["room_comparison"] = pd.DataFrame(rows)
+    md.append("### What the fitted materials change\n\nThe same room three ways: every surface "
+              "Lambertian with the scene's total reflectance; the fitted two-lobe materials; and "
+              "the fitted materials with a glossy real material as floor (same total reflectance, "
+              "its measured angular shape). Range error: phase-based ranging at the emitter's "
+              "modulation frequency, multipath phasor against the geometric line of sight "
+              "(positive = the range looks longer). Monte Carlo standard errors are in "
+              "`irreflect room`'s outputs (about 1 % of the reflected gain per order at 20000 "
+              "rays).\n\n{table:room_comparison}\n\n")
+    if len(variants) < 3:
+        md.append(f"*No glossy real floor: {glossy_note}.*\n\n")
+    md.append(_result_figures(ctx, scene, results, figures))
+    ctx.progress("room: validation")
+    val_md, val_tables = validation_page(ctx.quick)
+    tables.update(val_tables)
+    md.append(val_md)
+    return Section("room", TITLE, "".join(md), tables, figures)
+
+
+def _scene_markdown(ctx, scene, rays_bounces, tables, figures) -> str:
+    """The scene's table, the surface model's text and the materials' figures (added to
+    ``tables`` and ``figures``)."""
+    rays, bounces = rays_bounces
+    md = []
     rows = [{"surface": face, "material": name, "source": scene.materials[name].source,
              "3D model": scene.materials[name].describe()}
             for face, name in zip(("wall x=0", "wall x=max", "wall y=0", "wall y=max", "floor",
@@ -129,13 +161,12 @@ def section(ctx: ReportContext) -> Section:
             md.append(f"{{figure:{key}}} ")
     md.append("\n\n")
 
-    # the comparison
-    variants, glossy_note = _variants(scene, ctx.quick)
-    results = []
-    for label, variant in variants:
-        ctx.progress(f"room: {label}")  # whole: a line per step through a pipe
-        res = simulate(variant, method="montecarlo", bounces=bounces, rays=rays, seed=ctx.seed)
-        results.append((label, res, summary_table(res)))
+    return "".join(md)
+
+
+def _comparison_rows(scene, results) -> list:
+    """Per receiver (and grid mean) and surface variant: gain, reflected share, delay
+    spread, range error and their change against the Lambertian room."""
     rows = []
     base = results[0][2].set_index(["emitter", "receiver"])
     for label, _res, summ in results:
@@ -165,18 +196,13 @@ def section(ctx: ReportContext) -> Section:
                 "d range error vs Lambertian (cm)": round(100 * (sub.range_error_m.mean()
                                                                  - bsub.range_error_m.mean()), 2),
             })
-    tables["room_comparison"] = pd.DataFrame(rows)
-    md.append("### What the fitted materials change\n\nThe same room three ways: every surface "
-              "Lambertian with the scene's total reflectance; the fitted two-lobe materials; and "
-              "the fitted materials with a glossy real material as floor (same total reflectance, "
-              "its measured angular shape). Range error: phase-based ranging at the emitter's "
-              "modulation frequency, multipath phasor against the geometric line of sight "
-              "(positive = the range looks longer). Monte Carlo standard errors are in "
-              "`irreflect room`'s outputs (about 1 % of the reflected gain per order at 20000 "
-              "rays).\n\n{table:room_comparison}\n\n")
-    if len(variants) < 3:
-        md.append(f"*No glossy real floor: {glossy_note}.*\n\n")
-    # figures: h(t) and gains for the first receiver, maps
+    return rows
+
+
+def _result_figures(ctx, scene, results, figures) -> str:
+    """h(t) and the gains per order at the first receiver, and the first grid's maps, of
+    the fitted materials (added to ``figures``); their markdown."""
+    md = []
     label, res, summ = results[1]
     ax = plot_impulse_response(res, 0, 0)
     save(ax, ctx.figure_path("room_impulse"))
@@ -204,11 +230,7 @@ def section(ctx: ReportContext) -> Section:
             figures[key] = ctx.figure_path(key)
         md.append("{figure:room_map_range_error} {figure:room_map_range_change} "
                   "{figure:room_map_gain}\n\n")
-    ctx.progress("room: validation")
-    val_md, val_tables = validation_page(ctx.quick)
-    tables.update(val_tables)
-    md.append(val_md)
-    return Section("room", TITLE, "".join(md), tables, figures)
+    return "".join(md)
 
 
 def materials_table(scene) -> pd.DataFrame:

@@ -76,6 +76,33 @@ def section(ctx: ReportContext) -> Section:
     if not results:
         return Section("selection", TITLE, "No dataset could be searched: " + "; ".join(skipped))
 
+    front_rows, table5_rows, findings = _summary_rows(ctx, results, methods, budget, paper5)
+    fronts = pd.DataFrame(front_rows)
+    table5 = pd.DataFrame(table5_rows)
+
+    figures = {}
+    for name, res in results.items():
+        ctx.progress(f"selection figure: {name}")
+        fig = plot_selection(res, methods=methods[name],
+                             protocol_mask=_protocol_mask(res.measurements))
+        figures[f"selection_{name}"] = save_figure(fig, ctx.figure_path(f"selection_{name}"))
+    figures["optimal_points"] = _figure_points(ctx, results)
+    best = pd.DataFrame(_best_rows(results))
+
+    md = _markdown(ctx, results, methods, budget, skipped)
+    return Section(
+        key="selection",
+        title=TITLE,
+        markdown="\n".join(md),
+        tables={"selection_fronts": fronts, "selection_table5": table5,
+                "selection_best12": best},
+        figures=figures,
+        findings=findings,
+    )
+
+
+def _summary_rows(ctx, results, methods, budget, paper5):
+    """Per dataset: the frontier's summary row, its Table 5 rows and its findings."""
     front_rows, table5_rows, findings = [], [], []
     for name, res in results.items():
         m = methods[name]
@@ -108,16 +135,11 @@ def section(ctx: ReportContext) -> Section:
             row["A >= B >= 12"] = "holds" if m["order_holds"] else "violated"
             table5_rows.append(row)
         findings += _findings(name, res, m, settings_text(budget, ctx.seed))
-    fronts = pd.DataFrame(front_rows)
-    table5 = pd.DataFrame(table5_rows)
+    return front_rows, table5_rows, findings
 
-    figures = {}
-    for name, res in results.items():
-        ctx.progress(f"selection figure: {name}")
-        fig = plot_selection(res, methods=methods[name],
-                             protocol_mask=_protocol_mask(res.measurements))
-        figures[f"selection_{name}"] = save_figure(fig, ctx.figure_path(f"selection_{name}"))
-    figures["optimal_points"] = _figure_points(ctx, results)
+
+def _best_rows(results) -> list:
+    """The best PAPER_N points of each dataset, as (gamma, theta) text."""
     best_rows = []
     for name, res in results.items():
         mask = res.best_mask(PAPER_N)
@@ -127,8 +149,11 @@ def section(ctx: ReportContext) -> Section:
         best_rows.append({"dataset": name, f"best {PAPER_N} points (gamma, theta), deg": "; ".join(
             f"({g:g}, {t:g})" for g, t in zip(meas.gamma_deg[mask], meas.theta_deg[mask],
                                               strict=True))})
-    best = pd.DataFrame(best_rows)
+    return best_rows
 
+
+def _markdown(ctx, results, methods, budget, skipped) -> list:
+    """The section's text lines around its tables and figures."""
     md = [
         "The optimiser searches subsets of each dense set for the fewest points whose fit "
         "(on those points only) still describes all points: objectives N and 1 - R^2, "
@@ -187,15 +212,7 @@ def section(ctx: ReportContext) -> Section:
     ]
     if skipped:
         md += ["", "Not searched: " + "; ".join(skipped)]
-    return Section(
-        key="selection",
-        title=TITLE,
-        markdown="\n".join(md),
-        tables={"selection_fronts": fronts, "selection_table5": table5,
-                "selection_best12": best},
-        figures=figures,
-        findings=findings,
-    )
+    return md
 
 
 def _range(e) -> str:

@@ -36,6 +36,10 @@ from ..errors import IrreflectError, SceneError
 from ..validation import check_budget, note_memory_option
 from .materials import fit_notes
 
+#: A run's settings when neither the scene's [simulation] nor the caller sets them.
+DEFAULTS = {"method": "montecarlo", "bounces": 3, "cell_m": 0.25, "rays": 20000, "seed": 0,
+            "time_resolution_ns": 0.25}
+
 C_LIGHT = 299_792_458.0
 #: A cell pair of the recursive method costs this many Lambertian ones when some material is
 #: not Lambertian (lobes evaluated per pair: 2e6 against 7e7 pairs/s on a busy 2-core machine).
@@ -81,8 +85,6 @@ def _is_client(obj) -> bool:
 def resolve_settings(scene, overrides: Mapping) -> dict:
     """The settings a run will use: the engine's defaults, the scene's [simulation], then
     ``overrides`` that are not None."""
-    from .engine import DEFAULTS
-
     out = dict(DEFAULTS)
     out.update(scene.settings)
     out.update({k: v for k, v in overrides.items() if v is not None})

@@ -36,14 +36,12 @@ from .._progress import progress as progress_display
 from ..errors import IrreflectError
 from . import kernels as K
 from . import recursive as R
-from .checks import check_room_budget, check_simulate_arguments
+from .checks import DEFAULTS, check_room_budget, check_simulate_arguments
 from .geometry import boxes_array, face_material_indices, line_of_sight
 from .materials import check_brdf
 from .results import summary_table, write_results
 from .scene import METHODS, Scene
 
-DEFAULTS = {"method": "montecarlo", "bounces": 3, "cell_m": 0.25, "rays": 20000, "seed": 0,
-            "time_resolution_ns": 0.25}
 #: receivers per task of a process pool or Dask cluster (fixed: results do not depend on it)
 TASK_RECEIVERS = 8
 #: the recursive method's error estimate: the same run at this multiple of the cell size

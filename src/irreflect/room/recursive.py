@@ -29,6 +29,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from . import gather as G
 from . import kernels as K
 from . import transport as T
 from .geometry import Cells, build_tree, discretize
@@ -258,7 +259,7 @@ def _hist_shapes(arr: T.Arrivals, n_bins: int) -> T.Shapes:
     first = np.where(any_, np.argmax(nz, axis=1), 0)
     last = np.where(any_, h.shape[1] - 1 - np.argmax(nz[:, ::-1], axis=1), -1)
     shapes = _ragged(first, np.where(any_, last - first + 1, 0))
-    T.hist_fill(np.where(any_, arr.power, 0.0), h, shapes)
+    G.hist_fill(np.where(any_, arr.power, 0.0), h, shapes)
     return shapes
 
 
@@ -270,10 +271,10 @@ def _gamma_shapes(arr: T.Arrivals, dt: float, n_bins: int) -> T.Shapes:
     start = np.zeros(N, np.int64)
     count = np.zeros(N, np.int64)
     for j in np.nonzero(arr.power > 0)[0]:
-        start[j], count[j], _, _ = T.gamma_window(arr.power, arr.m1, arr.m2, arr.t0, dt,
+        start[j], count[j], _, _ = G.gamma_window(arr.power, arr.m1, arr.m2, arr.t0, dt,
                                                   n_bins, j)
     shapes = _ragged(start, count)
-    T.gamma_fill(arr.power, arr.m1, arr.m2, arr.t0, dt, n_bins, shapes)
+    G.gamma_fill(arr.power, arr.m1, arr.m2, arr.t0, dt, n_bins, shapes)
     return shapes
 
 
@@ -375,7 +376,7 @@ def receiver_link(geo: Geometry, st: EmitterState, receiver, n_bins: int):
           (float(receiver.gain_area), float(np.cos(np.radians(receiver.fov_deg)))))
     for k in range(Kb):
         sums = np.zeros(5)
-        T.gather(geo.pack, geo.mats, geo.ext, st.sources[k], rx, st.shapes[k], st.knobs[k],
+        G.gather(geo.pack, geo.mats, geo.ext, st.sources[k], rx, st.shapes[k], st.knobs[k],
                  (hist[k], sums))
         power[k], m1[k], m2[k] = sums[0], sums[1], sums[2]
         ph[k] = sums[3] + 1j * sums[4]

@@ -237,6 +237,44 @@ class _Progress:
             self.bar.close()
 
 
+def _checked_run(meas, model_obj, run, selector, pop_size, generations, max_points,
+                 candidates, checkpoint, more):
+    """:func:`run_selection`'s arguments checked (one line naming the setting): returns
+    (max_points, checkpoint_every, the candidate mask, (n_min, n_max), the first
+    population's masks). ``more``: (initial, checkpoint_every, include_all_points)."""
+    initial, checkpoint_every, include_all_points = more
+    if isinstance(pop_size, bool) or not isinstance(pop_size, numbers.Integral) or \
+            isinstance(generations, bool) or not isinstance(generations, numbers.Integral) or \
+            pop_size < 2 or generations < 1:
+        raise IrreflectError(
+            f"pop_size must be an integer >= 2 and generations >= 1; found {pop_size!r} and "
+            f"{generations!r}"
+        )
+    if max_points is not None:
+        max_points = check_int(max_points, "max_points", 1)
+    checkpoint_every = check_int(checkpoint_every, "checkpoint_every", 1)
+    if checkpoint is not None and not isinstance(checkpoint, str | os.PathLike):
+        raise IrreflectError(f"checkpoint must be a file path (or None); found {checkpoint!r}")
+    n = meas.n_points
+    check_selection_budget(n, max_points, meas.name, option="max_points")
+    check_search_budget(pop_size, generations, n)
+    cand = np.ones(n, bool) if candidates is None else np.asarray(candidates, bool)
+    n_min, n_max = check_sizes(n, model_obj.n_params, max_points, candidates)
+    if initial is not None:
+        initial = check_masks(initial, n, "initial")
+    if checkpoint is not None and not run.resumable:
+        resumable = [k for k, v in SELECTORS.items() if v.resumable]
+        raise IrreflectError(f"selector '{selector}' does not save checkpoints: drop "
+                             f"--checkpoint or use {', '.join(resumable)}")
+    if initial is not None and not run.takes_initial:
+        raise IrreflectError(f"selector '{selector}' does not start from given masks "
+                             "('initial'): drop them or use nsga2")
+    if run.takes_initial and include_all_points and cand.sum() <= n_max:
+        full = cand[None].copy()
+        initial = full if initial is None else np.vstack([initial, full])
+    return max_points, checkpoint_every, cand, (n_min, n_max), initial
+
+
 def run_selection(measurements, model="two-lobe", selector: str = "nsga2",
                   pop_size: int = DEFAULT_POP_SIZE, generations: int = DEFAULT_GENERATIONS,
                   seed: int = 0, max_points: int | None = None,
@@ -287,35 +325,10 @@ def run_selection(measurements, model="two-lobe", selector: str = "nsga2",
     meas = as_measurements(measurements)
     model_obj = get_model(model)
     run = get_selector(selector)
-    if isinstance(pop_size, bool) or not isinstance(pop_size, numbers.Integral) or \
-            isinstance(generations, bool) or not isinstance(generations, numbers.Integral) or \
-            pop_size < 2 or generations < 1:
-        raise IrreflectError(
-            f"pop_size must be an integer >= 2 and generations >= 1; found {pop_size!r} and "
-            f"{generations!r}"
-        )
-    if max_points is not None:
-        max_points = check_int(max_points, "max_points", 1)
-    checkpoint_every = check_int(checkpoint_every, "checkpoint_every", 1)
-    if checkpoint is not None and not isinstance(checkpoint, str | os.PathLike):
-        raise IrreflectError(f"checkpoint must be a file path (or None); found {checkpoint!r}")
+    max_points, checkpoint_every, cand, (n_min, n_max), initial = _checked_run(
+        meas, model_obj, run, selector, pop_size, generations, max_points, candidates,
+        checkpoint, (initial, checkpoint_every, include_all_points))
     n = meas.n_points
-    check_selection_budget(n, max_points, meas.name, option="max_points")
-    check_search_budget(pop_size, generations, n)
-    cand = np.ones(n, bool) if candidates is None else np.asarray(candidates, bool)
-    n_min, n_max = check_sizes(n, model_obj.n_params, max_points, candidates)
-    if initial is not None:
-        initial = check_masks(initial, n, "initial")
-    if checkpoint is not None and not run.resumable:
-        resumable = [k for k, v in SELECTORS.items() if v.resumable]
-        raise IrreflectError(f"selector '{selector}' does not save checkpoints: drop "
-                             f"--checkpoint or use {', '.join(resumable)}")
-    if initial is not None and not run.takes_initial:
-        raise IrreflectError(f"selector '{selector}' does not start from given masks "
-                             "('initial'): drop them or use nsga2")
-    if run.takes_initial and include_all_points and cand.sum() <= n_max:
-        full = cand[None].copy()
-        initial = full if initial is None else np.vstack([initial, full])
     evaluator = SubsetEvaluator(meas.gamma_deg, meas.theta_deg, meas.power, meas.sigma,
                                 model_obj, settings=search_fit)
     pilot = None

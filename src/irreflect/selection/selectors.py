@@ -31,16 +31,18 @@ from ..errors import IrreflectError, unknown_name
 from ..models import Geometry
 from .checkpoint import load_checkpoint, restore, save_checkpoint
 from .problem import (
-    FeasibleRankAndCrowding,
     MaskDuplicateElimination,
-    MaskEvaluator,
     SizeRepair,
     SizeVariedSampling,
     SubsetCrossover,
     SubsetEvaluator,
     SubsetMutation,
-    SubsetNSGA2,
     SubsetProblem,
+)
+from .pymoo_overrides import (
+    FeasibleRankAndCrowding,
+    MaskEvaluator,
+    SubsetNSGA2,
     binary_tournament,
 )
 

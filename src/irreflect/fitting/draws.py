@@ -4,7 +4,7 @@ A fit's random numbers (the Latin-hypercube screening, the jitter of the random 
 the basin hops) are ``splitmix64`` hashes of (seed, stream, index) (Steele, Lea and
 Flood 2014, the finaliser of Java's SplittableRandom), not the draws of a
 ``numpy.random.Generator``. A counter-based generator has no state: the compiled kernel
-(:mod:`irreflect._kernel`, which has the same functions compiled) draws the very same
+(:mod:`.draws_kernel`, which has the same functions compiled) draws the very same
 numbers inside its one call from the seed alone, so a fit pays no generator set-up in
 Python, and the numpy reference implementation, which uses these functions, searches from
 the same candidates. Uniforms are bit for bit the same on both sides; normals (Box and

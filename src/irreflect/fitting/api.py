@@ -1,0 +1,264 @@
+""":func:`fit`: one table, one model, a global least-squares fit with everything a user is
+owed (the search, the finish, the checks, a second search when the first looks like a
+local optimum).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import time
+from warnings import warn
+
+import numpy as np
+
+from ..data import as_measurements
+from ..errors import FitError, FitWarning, IrreflectError
+from ..models import (
+    get_model,
+    parse_spec,
+)
+from ..validation import check_fit_options, check_seed, check_starts, short_list
+from .engine import _kernel_codes, _kernel_geometry
+from .finish import finish, finished_by_kernel
+from .options import (
+    FIT_SETTINGS,
+    FitOptions,
+)
+from .results import FitResult, _check_sigma, _radians_and_weights, check_fit_data, judge
+from .search import fit_plain_table, search_and_finish
+
+#: :func:`retry_reasons`: an R^2 below this, or (weighted by 1/sigma^2) a reduced chi^2
+#: above the other, looks like a local optimum rather than the model's best.
+RETRY_R2 = 0.95
+RETRY_CHI2 = 2.0
+#: The second search's result is kept when its cost is lower by more than this fraction.
+RETRY_GAIN = 1e-9
+#: Tolerance (deg) when matching ``G`` of ``MODEL@G`` to a measured angle of incidence.
+GAMMA_TOL_DEG = 1e-6
+
+
+def points_at_incidence(measurements, gamma_abs_deg: float, label: str = "the fit"):
+    """The points of one angle of incidence ``|gamma| = gamma_abs_deg`` (degrees), for a
+    ``MODEL@G`` fit; a one-line error listing the measured ones when there are none."""
+    meas = as_measurements(measurements)
+    sel = np.abs(np.abs(meas.gamma_deg) - abs(gamma_abs_deg)) <= GAMMA_TOL_DEG
+    if not sel.any():
+        available = np.unique(np.abs(meas.gamma_deg))
+        raise IrreflectError(
+            f"{meas.name}: no measurements at |gamma| = {abs(gamma_abs_deg):g} deg to fit "
+            f"'{label}'; found |gamma| = {short_list(available, fmt=lambda g: f'{g:g}')}: "
+            "choose one of them after '@'"
+        )
+    return meas.subset(sel)
+
+
+def fit(measurements, model="two-lobe", options: FitOptions | None = None,
+        **settings) -> FitResult:
+    """Fit a reflection model to a measurement table by global least squares.
+
+    The search: (1) the model's data-driven starts (for the paper's models, from the
+    per-angle-of-incidence decomposition of `irreflect.models.lobe_profile`: the
+    mirror peak, its width, the diffuse floor) and seeded random perturbations of them;
+    (2) a screening of the model's whole shape space (a grid for one or two nonlinear
+    coordinates, a Latin hypercube beyond); the projected cost of every candidate is
+    computed, and the ``n_data_starts`` best data-driven ones and the ``n_keep`` best
+    *in different basins* are kept; (3) a batched bounded Levenberg-Marquardt from all of them, with the
+    linear coefficients eliminated (variable projection); (4) global line searches through
+    the best point along every coordinate, and Levenberg-Marquardt again from any better
+    point, until none is found (at most ``max_rounds``). The scale of ``power`` does not
+    change the shape coefficients.
+
+    Parameters
+    ----------
+    measurements : Measurements, pandas.DataFrame or path
+        Table with ``gamma_deg, theta_deg, power`` (degrees) and optional ``sigma``.
+    model : str or ReflectionModel
+        A specification ``name[:N][+extension...][@G]`` (see
+        :mod:`irreflect.models.registry`; names from `irreflect.models.model_names`).
+        With ``@G`` the model is fitted to the points of ``|gamma| = G`` degrees only (the
+        paper's Phong at 10 deg, ``phong@10``) and the result describes those points
+        (score it on all points with its ``predict``).
+    options : FitOptions, optional
+        The fit's settings as one object (:class:`~irreflect.fitting.options.FitOptions`:
+        seed, search sizes, engine, warm starts, retry); keywords override its fields.
+    **settings
+        Any field of :class:`~irreflect.fitting.options.FitOptions` by name: ``seed``
+        (the same seed gives the same result), ``n_random_starts``, ``n_screen``,
+        ``n_keep``, ``n_data_starts``, ``use_sigma``, ``max_iter``, ``max_rounds``,
+        ``polish``, ``engine`` (``"compiled"`` or ``"numpy"``), ``extra_starts``,
+        ``n_hops``, ``retry`` (search a second time, more widely, when the result looks
+        like a local optimum: :func:`retry_reasons`; the result's ``retried`` says why).
+
+    Returns
+    -------
+    FitResult
+        With ``converged``, ``message``, ``at_bound``, ``ill_determined`` and ``warnings``.
+
+    Raises
+    ------
+    DataError
+        Constant or non-finite power, zero sigma, or no degree of freedom left.
+    FitError
+        No start reaches a finite optimum, non-finite coefficients, or a fit that cannot
+        beat a constant (R^2 <= 0).
+    """
+    opts = _options(options, settings)
+    spec = parse_spec(model) if isinstance(model, str) and "@" in model else None
+    opts = _checked(opts, spec.model_text if spec is not None else model)
+    if spec is not None and spec.at_gamma_deg is not None:  # 'phong@10': one incidence
+        sub = points_at_incidence(as_measurements(measurements), spec.at_gamma_deg, str(spec))
+        return dataclasses.replace(fit(sub, spec.model_text, opts), model=str(spec))
+    t0 = time.perf_counter()
+    meas = as_measurements(measurements)  # a path is read once, for both searches
+    try:
+        result = _fit_search(meas, model, t0, opts)
+        failure = None
+    except FitError as exc:
+        if not opts.retry:
+            raise
+        result, failure = None, exc
+    reasons = retry_reasons(result) if opts.retry else ()
+    if reasons:
+        result = _search_again(meas, model, t0, result, failure, reasons, opts)
+    source = getattr(meas, "name", None) or "table"
+    for text in result.warnings:
+        warn(FitWarning(f"{source}, {result.model}: {text}"), stacklevel=2)
+    return result
+
+
+def _options(options: FitOptions | None, settings: dict) -> FitOptions:
+    """``options`` (default: FitOptions()) with the keyword ``settings`` applied; an
+    unknown keyword is a TypeError, as for any function."""
+    unknown = sorted(set(settings) - set(FIT_SETTINGS))
+    if unknown:
+        raise TypeError(f"fit() got an unexpected keyword argument '{unknown[0]}' (its "
+                        f"settings: {', '.join(FIT_SETTINGS)})")
+    if options is None:
+        return FitOptions(**settings) if settings else _DEFAULT_OPTIONS
+    return dataclasses.replace(options, **settings) if settings else options
+
+
+_DEFAULT_OPTIONS = FitOptions()
+
+
+def _checked(opts: FitOptions, model) -> FitOptions:
+    """``opts`` with its counts, flags and seed checked (one line naming the setting) and
+    ``extra_starts`` as a float array of the model's nonlinear coordinates."""
+    check_fit_options(seed=opts.seed, n_random_starts=opts.n_random_starts,
+                      n_screen=opts.n_screen, n_keep=opts.n_keep,
+                      n_data_starts=opts.n_data_starts, use_sigma=opts.use_sigma,
+                      max_iter=opts.max_iter, max_rounds=opts.max_rounds, polish=opts.polish,
+                      n_hops=opts.n_hops, retry=opts.retry)
+    if opts.extra_starts is None:
+        return opts
+    extra = check_starts(opts.extra_starts, get_model(model).n_nonlinear)
+    return dataclasses.replace(opts, extra_starts=extra)
+
+
+def retry_reasons(result) -> tuple[str, ...]:
+    """Why a result looks like a local optimum rather than the model's best (empty: it
+    does not): coefficients at a bound of their physical range or ill-determined, a
+    local search that did not converge, R^2 below :data:`RETRY_R2`, a weighted fit's
+    reduced chi^2 above :data:`RETRY_CHI2`, or (None) no fit that beats a constant.
+    :func:`fit` searches again when there is any."""
+    if result is None:
+        return ("no fit beat a constant",)
+    reasons = []
+    if result.at_bound:
+        reasons.append(f"at a bound: {', '.join(result.at_bound)}")
+    if result.ill_determined:
+        reasons.append(f"ill-determined: {', '.join(result.ill_determined)}")
+    if not result.converged:
+        reasons.append("not converged")
+    if result.r2 < RETRY_R2:
+        reasons.append(f"R^2 {result.r2:.4g} < {RETRY_R2:g}")
+    if result.sigma is not None and result.chi2_reduced > RETRY_CHI2:
+        reasons.append(f"reduced chi^2 {result.chi2_reduced:.4g} > {RETRY_CHI2:g}")
+    saturated = result.saturated_gammas_deg
+    if saturated.size:
+        # where the share is 1 the curve no longer sees u_as and v_as: the landscape has
+        # basins the unsaturated law has not (wild_material seeds 212, 1811: a grazing
+        # angle saturated at 1.4x the generating coefficients' cost, no other sign)
+        reasons.append("the specular share saturates at |gamma| = "
+                       + ", ".join(f"{g:g}" for g in saturated) + " deg")
+    return tuple(reasons)
+
+
+def _search_again(meas, model, t0, first, failure, reasons, opts: FitOptions):
+    """:func:`fit`'s second search (:meth:`FitOptions.widened`), from the first result too;
+    the second result when its cost is lower by more than :data:`RETRY_GAIN`, else the
+    first, marked ``retried``, with both searches' starts, evaluations and time."""
+    z_first = n_nonlinear = None
+    if first is not None:
+        model_obj = first.model_object
+        z_first = model_obj.from_natural(first.values[None])[0]
+        n_nonlinear = model_obj.n_nonlinear
+    try:
+        second = _fit_search(meas, model, t0, opts.widened(meas.n_points, z_first, n_nonlinear))
+    except FitError:
+        if first is None:
+            raise failure from None
+        second = None
+    # the second only when lower by more than rounding (1e-9): a tie along a flat
+    # direction keeps the first, whatever the scale of power
+    best = first if second is None or (
+        first is not None and not second.cost < first.cost * (1.0 - RETRY_GAIN)) else second
+    spent = [r for r in (first, second) if r is not None]
+    outcome = ("the second search found a lower cost" if best is second else
+               "the second search found no lower cost")
+    return dataclasses.replace(
+        best, retried=f"{'; '.join(reasons)}: {outcome}",
+        fit_ms=(time.perf_counter() - t0) * 1e3,
+        n_starts=sum(r.n_starts for r in spent), nfev=sum(r.nfev for r in spent))
+
+
+def _fit_search(meas, model, t0, opts: FitOptions) -> FitResult:
+    """One global search of :func:`fit` (the table as Measurements; ``t0`` when the fit
+    began); the result's warnings are not issued here."""
+    seed = check_seed(opts.seed)
+    model_obj = get_model(model)
+    opts = opts.sized_for(model_obj, meas.n_points)
+    source = getattr(meas, "name", None) or "table"
+    sigma = meas.sigma if (opts.use_sigma and meas.sigma is not None) else None
+    check_fit_data(meas.power, model_obj, source)
+    if sigma is not None:
+        _check_sigma(sigma, source)
+    codes = _kernel_codes(model_obj, opts.engine)
+    table = kgeo = None
+    if codes is not None and codes.size == 0:  # the plain two-lobe model: one compiled call
+        out, fin, exact = fit_plain_table(model_obj, meas, sigma, opts)
+    else:
+        gamma, theta, weights = _radians_and_weights(meas, sigma)
+        kgeo = _kernel_geometry(gamma, theta) if codes is not None else None
+        table = (gamma, theta, meas.power, weights)
+        out, fin, exact = search_and_finish(model_obj, table, opts, kgeo)
+    if out is None:
+        raise FitError(
+            f"fit of '{model_obj.name}' to {source} failed: no start reached a finite cost; "
+            "check the data for extreme values"
+        )
+    zb, ab, cb, converged, message, n_starts, n_evals = out
+    if fin is not None:
+        fin = finished_by_kernel(model_obj, fin[0], meas.power, source, *fin[1:])
+    else:
+        if table is None:
+            gamma, theta, weights = _radians_and_weights(meas, sigma)
+            table = (gamma, theta, meas.power, weights)
+        fin = finish(model_obj, zb, ab, cb, table, sigma is not None, opts.engine, kgeo,
+                     source)
+    # the distinct angles of incidence stand for all (judge's checks look at each once)
+    angles = table[0] if exact is None else exact
+    at_bound, ill, warnings = judge(model_obj, fin.values, fin.stderr, fin.singular, angles,
+                                    converged, message)
+    dof = meas.n_points - model_obj.n_params
+    return FitResult(
+        model=model_obj.name, param_names=model_obj.param_names, values=fin.values,
+        stderr=fin.stderr, covariance=fin.covariance, r2=fin.r2, rmse=fin.rmse, mse=fin.mse,
+        chi2_reduced=float(2 * cb / dof) if sigma is not None else float("nan"),
+        residuals=fin.residuals, gamma_deg=meas.gamma_deg.copy(),
+        theta_deg=meas.theta_deg.copy(), power=meas.power.copy(),
+        sigma=None if sigma is None else sigma.copy(), n_points=meas.n_points,
+        n_params=model_obj.n_params, nfev=int(n_evals), n_starts=n_starts,
+        fit_ms=(time.perf_counter() - t0) * 1e3, seed=seed, cost=cb, converged=converged,
+        message=message, at_bound=at_bound, ill_determined=ill, warnings=warnings,
+        model_object=model_obj)

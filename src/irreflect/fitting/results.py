@@ -1,0 +1,262 @@
+"""A fit's result and the checks every command prints: :class:`FitResult`, the refusal of
+tables no fit can be honest about (:func:`check_fit_data`) and the flags of a result
+(:func:`judge`: at a bound, ill-determined, not converged, the model's own validity).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .. import metrics
+from ..data import check_enough_points
+from ..errors import DataError, IrreflectError
+from ..models import (
+    ReflectionModel,
+    get_model,
+)
+from ..models.paper import specular_share
+from ..validation import check_angles_deg
+from .cache import per_model
+
+
+# ----------------------------------------------------------------------------- results
+@dataclass(frozen=True, repr=False)
+class FitResult:
+    """Outcome of one fit. Frozen: the fitter is not kept inside it.
+
+    Besides the coefficients and the quality measures, a result says how far it can be
+    trusted: ``converged`` and ``message`` (why the optimiser stopped), ``at_bound`` (the
+    coefficients that sit on a bound of their physical range), ``ill_determined`` (those
+    the data do not pin down: standard error larger than the value, or part of a
+    near-singular covariance) and ``warnings`` (one line each, printed by every command).
+    """
+
+    model: str
+    param_names: tuple[str, ...]
+    values: np.ndarray
+    stderr: np.ndarray
+    covariance: np.ndarray
+    r2: float
+    rmse: float
+    mse: float
+    chi2_reduced: float
+    residuals: np.ndarray
+    gamma_deg: np.ndarray
+    theta_deg: np.ndarray
+    power: np.ndarray
+    sigma: np.ndarray | None
+    n_points: int
+    n_params: int
+    nfev: int
+    n_starts: int
+    fit_ms: float
+    seed: int
+    cost: float
+    converged: bool = True
+    message: str = "converged"
+    at_bound: tuple[str, ...] = ()
+    ill_determined: tuple[str, ...] = ()
+    warnings: tuple[str, ...] = ()
+    model_object: ReflectionModel | None = field(default=None, compare=False)
+    retried: str = ""  # why fit() searched a second time, and what it found (empty: no)
+
+    def __repr__(self) -> str:
+        flags = "" if not self.warnings else f", {len(self.warnings)} warning(s)"
+        params = ", ".join(f"{k}={v:.4g}" for k, v in self.params.items())
+        return (f"FitResult(model={self.model!r}, n_points={self.n_points}, r2={self.r2:.6f}, "
+                f"{params}, converged={self.converged}{flags})")
+
+    @property
+    def params(self) -> dict[str, float]:
+        return dict(zip(self.param_names, map(float, self.values), strict=True))
+
+    @property
+    def stderrs(self) -> dict[str, float]:
+        return dict(zip(self.param_names, map(float, self.stderr), strict=True))
+
+    @property
+    def correlation(self) -> np.ndarray:
+        sd = np.sqrt(np.clip(np.diag(self.covariance), 0, None))
+        with np.errstate(divide="ignore", invalid="ignore"):
+            return self.covariance / np.outer(sd, sd)
+
+    @property
+    def fitted(self) -> np.ndarray:
+        return self.power - self.residuals
+
+    def predict(self, gamma_deg, theta_deg) -> np.ndarray:
+        """Model power at the given angles (degrees, paper convention)."""
+        model = self.model_object or get_model(self.model)
+        gamma_deg, theta_deg = check_angles_deg(gamma_deg, theta_deg)
+        return model.predict_deg(self.values, gamma_deg, theta_deg)
+
+    @property
+    def saturated_gammas_deg(self) -> np.ndarray:
+        """The measured angles of incidence (|gamma|, degrees) where the fitted specular
+        share is 1 (:func:`irreflect.models.paper.specular_share`): there the reflection
+        is all specular. Empty for a model without a saturating share."""
+        model = self.model_object or get_model(self.model)
+        if not model.share_cap:
+            return np.empty(0)
+        g = np.abs(self.gamma_deg)
+        share = specular_share(self.values[0], self.values[1], np.cos(np.radians(g)))
+        saturated = share >= 1.0
+        # the share at every point (elementwise, so the same as at each distinct angle);
+        # the distinct angles only when one saturates (np.unique costs more than the rest)
+        return np.unique(g[saturated]) if saturated.any() else np.empty(0)
+
+    def verdict(self):
+        """What R^2 cannot say: per angle of incidence whether the specular lobe is resolved
+        and the shape reproduced, and the coefficients' checks
+        (:class:`irreflect.verdict.FitVerdict`)."""
+        from ..verdict import fit_verdict
+
+        return fit_verdict(self)
+
+    def polar_errors(self) -> dict[float, float]:
+        """Relative polar-area error (section 5.3) per angle of incidence, in percent."""
+        return metrics.polar_area_errors(
+            self.gamma_deg, self.theta_deg, self.power, self.predict
+        )
+
+    def to_dict(self) -> dict:
+        return {
+            "model": self.model,
+            "params": self.params,
+            "stderr": self.stderrs,
+            "r2": self.r2,
+            "rmse": self.rmse,
+            "mse": self.mse,
+            "n_points": self.n_points,
+            "n_params": self.n_params,
+            "nfev": self.nfev,
+            "fit_ms": self.fit_ms,
+            "seed": self.seed,
+            "converged": self.converged,
+            "message": self.message,
+            "at_bound": list(self.at_bound),
+            "ill_determined": list(self.ill_determined),
+            "warnings": list(self.warnings),
+            "retried": self.retried,
+            "verdict": self.verdict().to_dict(),
+        }
+
+    def report(self, warnings: bool = True) -> str:
+        """Readable fit report: the verdict first (:meth:`verdict`), then coefficients with
+        errors, quality, the verdict per angle of incidence, then (with ``warnings``) the
+        warnings, one line each."""
+        verdict = self.verdict()
+        lines = [
+            verdict.summary(),
+            f"model {self.model}: {self.n_points} points, {self.n_params} parameters, "
+            f"{self.n_starts} starts, {self.nfev} evaluations, {self.fit_ms:.1f} ms",
+            f"{self.message}",
+        ]
+        if self.retried:
+            lines.append(f"searched a second time, more widely ({self.retried})")
+        lines.append(f"{'parameter':<10}{'value':>14}{'std. error':>14}")
+        for name, v, s in zip(self.param_names, self.values, self.stderr, strict=True):
+            flag = "  at bound" if name in self.at_bound else (
+                "  ill-determined" if name in self.ill_determined else "")
+            lines.append(f"{name:<10}{v:>14.6g}{s:>14.3g}{flag}")
+        lines.append(f"R^2 = {self.r2:.6f}   RMSE = {self.rmse:.6g}   MSE = {self.mse:.6g}")
+        if self.sigma is not None:
+            lines.append(f"reduced chi^2 = {self.chi2_reduced:.4g} (weighted by 1/sigma^2)")
+        errors = self.polar_errors()
+        if errors:
+            lines.append("relative polar-area error per angle of incidence (section 5.3, the "
+                         "model at the measured receivers):")
+            lines.append("  " + "  ".join(f"{g:g} deg: {e:.2f}%" for g, e in errors.items()))
+        lines.append("per angle of incidence (the model's continuous curve; lobe half width "
+                     "and the receivers within one and two half widths of the mirror):")
+        lines += ["  " + row for row in verdict.table()]
+        if warnings:
+            lines += [f"warning: {w}" for w in self.warnings]
+        return "\n".join(lines)
+
+
+def check_fit_data(power, model, source: str = "table") -> None:
+    """Refuse tables no fit can be honest about: no degree of freedom left
+    (``n_points <= n_params``), non-finite or constant power."""
+
+    power = np.asarray(power)
+    n = power.size
+    check_enough_points(n, model, source)
+    low, high = float(power.min()), float(power.max())  # NaN or inf show in either
+    if not (math.isfinite(low) and math.isfinite(high)):
+        raise DataError(f"{source}: power has non-finite values: remove or fix those rows")
+    if high == low:
+        raise DataError(
+            f"{source}: power is constant ({power.flat[0]:g} at all {n} points): a reflection "
+            "model needs the power measured at varying angles; check the power column"
+        )
+
+
+def _fmt_bound(b):
+    return f"{b:g}"
+
+
+def _bound_checks(model) -> tuple:
+    """Per parameter of ``model``: (name, ((side, bound, tolerance) per finite bound))."""
+    def make():
+        out = []
+        for p in model.params:
+            checks = tuple((side, b, 1e-6 * abs(b) if b != 0 else 1e-12)
+                           for side, b in (("lower", p.lower), ("upper", p.upper))
+                           if math.isfinite(b))
+            out.append((p.name, checks))
+        return tuple(out)
+
+    return per_model(model, "bound checks", make)
+
+
+def judge(model, values, stderr, singular, gamma_rad, converged, message,
+          validity: bool = True) -> tuple:
+    """(at_bound, ill_determined, warnings) of a fit: the checks every command prints
+    (``validity``: run the model's own check, :meth:`~irreflect.models.ReflectionModel.validity_warnings`, too)."""
+    at_bound, detail = [], []
+    values_f = np.asarray(values, float).tolist()  # Python floats: scalar tests in µs, not 10s
+    for (name, checks), v in zip(_bound_checks(model), values_f, strict=True):
+        for side, b, tol in checks:
+            if (side == "lower" and v <= b + tol) or (side == "upper" and v >= b - tol):
+                at_bound.append(name)
+                detail.append(f"{name} = {v:.4g} ({side} bound {_fmt_bound(b)})")
+    ill, ill_detail = [], []
+    for p, v, s, sing in zip(model.params, values_f, np.asarray(stderr, float).tolist(),
+                             np.asarray(singular, bool).tolist(), strict=True):
+        if not math.isfinite(s) or s > abs(v) or sing:
+            ill.append(p.name)
+            why = "near-singular covariance" if sing else "std. error > |value|"
+            ill_detail.append(f"{p.name} = {v:.4g} +- {s:.2g} ({why})")
+    warnings = []
+    if not converged:
+        warnings.append(f"not converged: {message}; the coefficients may not be the optimum")
+    if at_bound:
+        warnings.append(
+            "at a bound of the physical range: " + ", ".join(detail)
+            + ": the data push past the model's range or do not constrain it"
+        )
+    if ill:
+        warnings.append("ill-determined by these data: " + ", ".join(ill_detail)
+                        + ": measure more angles or fix these coefficients")
+    if validity:
+        warnings += list(model.validity_warnings(values, gamma_rad))
+    return tuple(at_bound), tuple(ill), tuple(warnings)
+
+
+def _radians_and_weights(meas, sigma) -> tuple:
+    """A table's angles in radians and its weights ``1 / sigma^2`` (1 without sigma)."""
+    weights = np.ones_like(meas.power) if sigma is None else 1.0 / sigma**2
+    return np.radians(meas.gamma_deg), np.radians(meas.theta_deg), weights
+
+
+def _check_sigma(sigma, source) -> None:
+    if (sigma <= 0).any():
+        raise IrreflectError(
+            f"{source}: sigma must be > 0 to weight a fit by 1/sigma^2, found "
+            f"{int(np.sum(sigma <= 0))} zero or negative value(s): fix them or drop the "
+            "sigma column to fit unweighted"
+        )
