@@ -25,10 +25,11 @@
      chi-square quantile at level ``alpha / m`` (``m`` effects tried, Bonferroni) or, for
      ``S`` not empty, ``X`` explains less than ``min_share`` of the excess residual ``S``
      leaves (the chi-square above what noise alone would give: a sliver of misfit an
-     extra term can always mop up is not a second effect). A non-empty ``S`` whose
-     residual is consistent with the noise (lack of fit and structure tests at ``alpha``)
-     is adequate without more: a further effect is sought only where the named ones leave
-     structure (a gate: the specific tests follow a significant global one);
+     extra term can always mop up is not a second effect). This holds for an ``S`` whose
+     residual passes the lack-of-fit and structure tests too: those omnibus tests spread
+     their power over every direction a residual can take, the likelihood ratio puts it
+     on the one direction ``X`` adds (a second effect of chi-square 30 hides in a
+     lack of fit on 100 degrees of freedom);
    * sets are tried by size, from the empty one (the base model): the smallest adequate
      explanations win. One: its effects are named. Several of the same size: each fits as
      well as the model that holds both (neither is rejected against it): the data cannot
@@ -656,9 +657,7 @@ def _select(search: _Search, names, max_effects: int, alpha: float, min_share: f
         for s in contenders:
             parent = search.get(s)
             tried = [x for x in names if x not in s]
-            if size >= max_effects or not tried or (s and parent.consistent(alpha)):
-                # an explanation whose residual is consistent with the noise is not grown:
-                # a further effect is sought only where the named ones leave structure
+            if size >= max_effects or not tried:
                 ok.append(s)
                 continue
             level = alpha / len(tried)
