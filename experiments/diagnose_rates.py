@@ -46,6 +46,10 @@ Usage::
 
     .venv/bin/python experiments/diagnose_rates.py [--seeds 0:300] [--jobs 2]
         [--no-saturate] [--out cases.csv]
+    .venv/bin/python experiments/diagnose_rates.py --summarize part1.csv part2.csv
+
+``--summarize`` prints the rates of per-case tables written by ``--out`` (a seed range run
+in parts, joined) without diagnosing again.
 
 ``--no-saturate`` draws the same cases with the specular share kept below 0.95 on each
 table (the paper's unbounded law then holds): it separates what the diagnosis does from
@@ -278,6 +282,9 @@ def main(argv=None) -> int:
                         help="keep the specular share below 0.95 on every table")
     parser.add_argument("--jobs", type=int, default=1, help="worker processes (default 1)")
     parser.add_argument("--out", help="write the per-case table as CSV")
+    parser.add_argument("--summarize", nargs="+", metavar="CSV",
+                        help="print the rates of per-case tables written by --out (runs "
+                             "over parts of a seed range, joined) instead of running")
     args = parser.parse_args(argv)
     a, _, b = args.seeds.partition(":")
     seeds = range(int(a), int(b))
@@ -285,14 +292,26 @@ def main(argv=None) -> int:
         parser.error(f"--seeds {args.seeds}: empty range, expected A:B with A < B")
     jobs = [(s, not args.no_saturate) for s in seeds]
     t0 = time.perf_counter()
-    if args.jobs > 1:
+    if args.summarize:
+        missing = [p for p in args.summarize if not Path(p).is_file()]
+        if missing:
+            parser.error(f"--summarize: no such file {missing[0]}; expected CSV files "
+                         "written by --out")
+        df = pd.concat([pd.read_csv(p) for p in args.summarize], ignore_index=True)
+        df = df.sort_values("seed").drop_duplicates("seed").reset_index(drop=True)
+        df["alternatives"] = df["alternatives"].fillna("")
+        args.seeds = f"{df['seed'].min()}:{df['seed'].max() + 1}"
+        args.jobs = 0
+        rows = None
+    elif args.jobs > 1:
         with ProcessPoolExecutor(args.jobs) as pool:
             rows = list(tqdm(pool.map(one_case, jobs), total=len(jobs), desc="diagnose",
                              file=sys.stderr, leave=False))
     else:
         rows = [one_case(j) for j in tqdm(jobs, desc="diagnose", file=sys.stderr, leave=False)]
-    df = pd.DataFrame(rows)
-    if args.out:
+    if rows is not None:
+        df = pd.DataFrame(rows)
+    if args.out and rows is not None:
         from irreflect._atomic import atomic_path
 
         with atomic_path(Path(args.out)) as tmp:
@@ -309,6 +328,8 @@ def main(argv=None) -> int:
           f"{lambda_star(1, 40):.1f}, {lambda_star(2, 40):.1f})")
     print(summary(df).to_string(index=False))
     effect = df["n_effects"] > 0
+    if "identifiable_rivals" not in df:  # a table written before completeness was asked
+        df["identifiable_rivals"], df["complete"], df["beyond"] = df["identifiable"], True, ""
     rivals = effect & df["identifiable_rivals"].astype(bool)
     incomplete = rivals & ~df["complete"].astype(bool)
     wrong = df["outcome"].isin(["wrong", "ambiguous, wrong"])
@@ -344,10 +365,11 @@ def main(argv=None) -> int:
         cols = ["seed", "base", "truth", "named", "alternatives", "verdict", "grid", "noise",
                 "lambda", "identifiable", "closest", "margin", "beyond"]
         print(bad[cols].to_string(index=False))
+    run = (f"whole run {time.perf_counter() - t0:.0f} s with {args.jobs} job(s) (truth "
+           "analysis included; timings on a shared machine are noisy)" if rows is not None
+           else f"from {len(args.summarize)} table(s) written by --out")
     print(f"\ntime per diagnosis: median {df['seconds'].median():.2f} s, 90th percentile "
-          f"{df['seconds'].quantile(0.9):.2f} s, max {df['seconds'].max():.1f} s; whole run "
-          f"{time.perf_counter() - t0:.0f} s with {args.jobs} job(s) (truth analysis "
-          "included; timings on a shared machine are noisy)")
+          f"{df['seconds'].quantile(0.9):.2f} s, max {df['seconds'].max():.1f} s; {run}")
     return 0
 
 
