@@ -144,7 +144,8 @@ def _profile(e2: np.ndarray, s2: np.ndarray, scale: float, ratios=_RATIO_GRID,
         a = max(float(np.mean(u)), 1e-300)
         if robust:  # Huber's scale: reweight the largest, a few fixed-point steps
             for _ in range(4):
-                w = np.minimum(1.0, np.sqrt(c2 * a / np.maximum(u, 1e-300)))
+                with np.errstate(over="ignore", divide="ignore"):  # u = 0: weight 1
+                    w = np.minimum(1.0, np.sqrt(c2 * a / u))
                 a = max(float(np.mean(w * u)), 1e-300)
             return float(np.sum(np.log(a * g) + _huber(u / a, c2))), a
         return float(np.sum(np.log(a * g)) + u.size), a
@@ -196,7 +197,8 @@ def _nll_ab(e2, s2, big_a, big_b) -> float:
     """``-2 log L`` (Huber's, as in :func:`_profile`) of the window variances
     ``v = A + B s2``."""
     v = np.maximum(big_a + big_b * s2, 1e-300)
-    return float(np.sum(np.log(v) + _huber(e2 / v, 25.0)))
+    with np.errstate(over="ignore"):  # a variance of ~0 where a residual is not: inf
+        return float(np.sum(np.log(v) + _huber(e2 / v, 25.0)))
 
 
 def _upper_a(e2, s2, big_a, big_b, allowance) -> float:
