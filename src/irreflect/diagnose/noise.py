@@ -144,7 +144,8 @@ def _profile(e2: np.ndarray, s2: np.ndarray, scale: float, ratios=_RATIO_GRID,
         a = max(float(np.mean(u)), 1e-300)
         if robust:  # Huber's scale: reweight the largest, a few fixed-point steps
             for _ in range(4):
-                w = np.minimum(1.0, np.sqrt(c2 * a / np.maximum(u, 1e-300)))
+                with np.errstate(over="ignore", divide="ignore"):  # u = 0: weight 1
+                    w = np.minimum(1.0, np.sqrt(c2 * a / u))
                 a = max(float(np.mean(w * u)), 1e-300)
             return float(np.sum(np.log(a * g) + _huber(u / a, c2))), a
         return float(np.sum(np.log(a * g)) + u.size), a
@@ -186,6 +187,38 @@ def _upper_b(e2, s2, big_a, big_b, allowance) -> float:
     for _ in range(40):
         mid = 0.5 * (a + b)
         if nll(np.exp(mid)) - best <= allowance:
+            a = mid
+        else:
+            b = mid
+    return float(np.sqrt(np.exp(a)))
+
+
+def _nll_ab(e2, s2, big_a, big_b) -> float:
+    """``-2 log L`` (Huber's, as in :func:`_profile`) of the window variances
+    ``v = A + B s2``."""
+    v = np.maximum(big_a + big_b * s2, 1e-300)
+    with np.errstate(over="ignore"):  # a variance of ~0 where a residual is not: inf
+        return float(np.sum(np.log(v) + _huber(e2 / v, 25.0)))
+
+
+def _upper_a(e2, s2, big_a, big_b, allowance) -> float:
+    """With the proportional variance held at ``big_b``, the largest additive scale ``a``
+    (``v = a^2 + B s2``) whose ``-2 log L`` is within ``allowance`` of the best over
+    ``a`` in ``[0, inf)``."""
+    best = min(_nll_ab(e2, s2, big_a, big_b), _nll_ab(e2, s2, 0.0, big_b))
+    typical = float(np.median(e2)) if e2.size else 0.0
+    lo = max(big_a, 1e-24 * max(typical, 1e-300))
+    hi = lo
+    for _ in range(80):  # bracket: grow until the likelihood has fallen by the allowance
+        hi *= 4.0
+        if _nll_ab(e2, s2, hi, big_b) - best > allowance:
+            break
+    else:
+        return float(np.sqrt(hi))
+    a, b = np.log(lo), np.log(hi)
+    for _ in range(40):
+        mid = 0.5 * (a + b)
+        if _nll_ab(e2, s2, np.exp(mid), big_b) - best <= allowance:
             a = mid
         else:
             b = mid
@@ -263,7 +296,12 @@ def estimate_noise(measurements, residuals=None, *, fitted=None, order: int = 2,
         # windows where the model itself changes fast on the scale of the grid (a narrow
         # lobe, its flanks): there the model's own error does not cancel in the
         # differences, and it would pass for noise proportional to the power
-        smooth = _log_bend(weights, meas.theta_deg, f) <= LOG_BEND
+        # (the bend of ln(P + a), with ``a`` the robust scale of all pseudo-residuals:
+        # where the model lies below the noise, how sharply it bends cannot matter, and
+        # those windows are what tells the additive part; a power of exactly zero, far
+        # from a narrow lobe, would otherwise leave them out and the additive part would
+        # collapse to nothing)
+        smooth = _log_bend(weights, meas.theta_deg, f + a_hat) <= LOG_BEND
         e2, s2 = (e * e)[smooth], s2[smooth]
         scale = float(np.max(s2)) if s2.size else 1.0
         nll0, _, _ = _profile(e2, s2, scale, ratios=[0.0], robust=True)
@@ -274,6 +312,20 @@ def estimate_noise(measurements, residuals=None, *, fitted=None, order: int = 2,
             a_hat = max(float(np.sqrt(big_a)), floor)
             b_hat = float(np.sqrt(big_a * rho))
             test = f"; noise proportional to the power found (likelihood ratio p = {p:.2g})"
+            # the additive part is then told only by the windows of the lowest power; when
+            # they cannot tell it from zero (the likelihood ratio of a = 0 is not
+            # significant at alpha) a zero would make the faintest points look exact and
+            # any small misfit there an effect: its one-sided 1 - alpha upper bound is
+            # used, as for the proportional part above the covered powers
+            allowance = float(special.chdtri(1, 2 * alpha))
+            big_b = big_a * rho
+            lr_a = _nll_ab(e2, s2, 0.0, big_b) - _nll_ab(e2, s2, big_a, big_b)
+            if lr_a < allowance:
+                a_up = _upper_a(e2, s2, big_a, big_b, allowance)
+                if a_up > a_hat:
+                    a_hat = a_up
+                    test += (f"; the additive part is not told from zero (likelihood ratio "
+                             f"{max(lr_a, 0.0):.2g}): its upper bound a = {a_up:.3g}")
         else:
             big_a, rho = a_hat * a_hat, 0.0
             test = f"; no noise proportional to the power found (p = {p:.2g})"

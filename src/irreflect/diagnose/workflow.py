@@ -25,10 +25,11 @@
      chi-square quantile at level ``alpha / m`` (``m`` effects tried, Bonferroni) or, for
      ``S`` not empty, ``X`` explains less than ``min_share`` of the excess residual ``S``
      leaves (the chi-square above what noise alone would give: a sliver of misfit an
-     extra term can always mop up is not a second effect). A non-empty ``S`` whose
-     residual is consistent with the noise (lack of fit and structure tests at ``alpha``)
-     is adequate without more: a further effect is sought only where the named ones leave
-     structure (a gate: the specific tests follow a significant global one);
+     extra term can always mop up is not a second effect). This holds for an ``S`` whose
+     residual passes the lack-of-fit and structure tests too: those omnibus tests spread
+     their power over every direction a residual can take, the likelihood ratio puts it
+     on the one direction ``X`` adds (a second effect of chi-square 30 hides in a
+     lack of fit on 100 degrees of freedom);
    * sets are tried by size, from the empty one (the base model): the smallest adequate
      explanations win. One: its effects are named. Several of the same size: each fits as
      well as the model that holds both (neither is rejected against it): the data cannot
@@ -506,10 +507,21 @@ def assess(result: FitResult, noise: NoiseEstimate, effects: Sequence[str] = (),
 
 
 # ----------------------------------------------------------------------------- the search
-def _share(before: Assessment, after: Assessment) -> float:
-    """Share of the excess residual (chi2 above its noise expectation) an extension removes."""
+def _share(before: Assessment, after: Assessment, alpha: float | None = None) -> float:
+    """Share of the excess residual (chi2 above its noise expectation) an extension
+    removes. The excess is taken as no less than one standard deviation of chi-square
+    (``sqrt(2 dof)``); with ``alpha`` (a further effect on top of named ones), no less
+    than the excess noise alone leaves in ``alpha`` of tables (the ``1 - alpha``
+    quantile of chi-square, less the dof): a residual whose excess is within that has
+    none that can be measured, and a further effect that removes less than half of that
+    is a sliver an extra term mops up, not an effect (the named effects' true forms,
+    which the catalogue follows only nearly, a tilt growing as ``sin^2.4 gamma`` rather
+    than ``sin^2``, a reflectance ``1 + c sin^2 gamma`` rather than ``cos^w``, leave such
+    slivers along the direction of another effect)."""
     b, a = before.lack_of_fit, after.lack_of_fit
-    excess = max(b.chi2 - b.dof, np.sqrt(2.0 * b.dof))
+    floor = np.sqrt(2.0 * b.dof) if alpha is None else \
+        max(float(special.chdtri(b.dof, alpha)) - b.dof, np.sqrt(2.0 * b.dof))
+    excess = max(b.chi2 - b.dof, floor)
     return float(np.clip((b.chi2 - a.chi2) / excess, 0.0, 1.0))
 
 
@@ -605,7 +617,8 @@ class _Search:
         return self.sets.model(canonical_order(effects)).n_params
 
 
-def _beaten(search: _Search, s, other, level: float, min_share: float) -> bool:
+def _beaten(search: _Search, s, other, level: float, min_share: float,
+            alpha: float = 0.01) -> bool:
     """Whether explanation ``s`` is rejected in favour of the one holding both it and
     ``other``: the likelihood ratio to ``other`` (a lower bound of the one to that union)
     exceeds the quantile at ``level`` on the union's extra degrees of freedom, and (for
@@ -618,7 +631,7 @@ def _beaten(search: _Search, s, other, level: float, min_share: float) -> bool:
     df = search.n_params(union) - search.n_params(s)
     if not a.deviance - b.deviance > _quantile(level, df, search.noise):
         return False
-    return not s or _share(a, b) >= min_share
+    return not s or _share(a, b, alpha) >= min_share
 
 
 def _quantile(level: float, df: int, noise: NoiseEstimate) -> float:
@@ -656,9 +669,7 @@ def _select(search: _Search, names, max_effects: int, alpha: float, min_share: f
         for s in contenders:
             parent = search.get(s)
             tried = [x for x in names if x not in s]
-            if size >= max_effects or not tried or (s and parent.consistent(alpha)):
-                # an explanation whose residual is consistent with the noise is not grown:
-                # a further effect is sought only where the named ones leave structure
+            if size >= max_effects or not tried:
                 ok.append(s)
                 continue
             level = alpha / len(tried)
@@ -678,7 +689,7 @@ def _select(search: _Search, names, max_effects: int, alpha: float, min_share: f
                 df = a.fit.n_params - parent.fit.n_params
                 lr = max(parent.deviance - a.deviance, 0.0)
                 p = _lr_p_value(lr, df, noise)
-                share = _share(parent, a)
+                share = _share(parent, a, alpha if s else None)
                 rss_b = float(np.sum(parent.fit.residuals ** 2))
                 rss_a = float(np.sum(a.fit.residuals ** 2))
                 row.append(Candidate(set_name(u), a, a.bic - parent.bic, share,
@@ -695,7 +706,7 @@ def _select(search: _Search, names, max_effects: int, alpha: float, min_share: f
         grown = list(dict.fromkeys(grown))
         if grown:  # an explanation no single effect improves may still be beaten by one
             best = min(grown, key=search.dev)  # grown from another
-            ok = [s for s in ok if not _beaten(search, s, best, level_all, min_share)]
+            ok = [s for s in ok if not _beaten(search, s, best, level_all, min_share, alpha)]
         if ok or not grown:
             adequate = ok
             break
