@@ -234,6 +234,25 @@ def deviance(residuals, fitted, noise: NoiseEstimate) -> float:
     return float(np.sum((r / noise.sigma) ** 2))
 
 
+def _additive_bound(e2, s2, big_a, rho, alpha, a_hat) -> tuple[float, str]:
+    """The additive noise part when a proportional part was found, and a note.
+
+    The additive part is then told only by the windows of the lowest power; when they
+    cannot tell it from zero (the likelihood ratio of a = 0 is not significant at alpha) a
+    zero would make the faintest points look exact and any small misfit there an effect:
+    its one-sided 1 - alpha upper bound is used, as for the proportional part above the
+    covered powers."""
+    allowance = float(special.chdtri(1, 2 * alpha))
+    big_b = big_a * rho
+    lr_a = _nll_ab(e2, s2, 0.0, big_b) - _nll_ab(e2, s2, big_a, big_b)
+    if lr_a < allowance:
+        a_up = _upper_a(e2, s2, big_a, big_b, allowance)
+        if a_up > a_hat:
+            return a_up, (f"; the additive part is not told from zero (likelihood ratio "
+                          f"{max(lr_a, 0.0):.2g}): its upper bound a = {a_up:.3g}")
+    return a_hat, ""
+
+
 def estimate_noise(measurements, residuals=None, *, fitted=None, order: int = 2, seed: int = 0,
                    n_sim: int = 400, alpha: float = 0.01) -> NoiseEstimate:
     """Noise of a measurement table: the ``sigma`` column if present, else estimated.
@@ -312,20 +331,8 @@ def estimate_noise(measurements, residuals=None, *, fitted=None, order: int = 2,
             a_hat = max(float(np.sqrt(big_a)), floor)
             b_hat = float(np.sqrt(big_a * rho))
             test = f"; noise proportional to the power found (likelihood ratio p = {p:.2g})"
-            # the additive part is then told only by the windows of the lowest power; when
-            # they cannot tell it from zero (the likelihood ratio of a = 0 is not
-            # significant at alpha) a zero would make the faintest points look exact and
-            # any small misfit there an effect: its one-sided 1 - alpha upper bound is
-            # used, as for the proportional part above the covered powers
-            allowance = float(special.chdtri(1, 2 * alpha))
-            big_b = big_a * rho
-            lr_a = _nll_ab(e2, s2, 0.0, big_b) - _nll_ab(e2, s2, big_a, big_b)
-            if lr_a < allowance:
-                a_up = _upper_a(e2, s2, big_a, big_b, allowance)
-                if a_up > a_hat:
-                    a_hat = a_up
-                    test += (f"; the additive part is not told from zero (likelihood ratio "
-                             f"{max(lr_a, 0.0):.2g}): its upper bound a = {a_up:.3g}")
+            a_hat, note = _additive_bound(e2, s2, big_a, rho, alpha, a_hat)
+            test += note
         else:
             big_a, rho = a_hat * a_hat, 0.0
             test = f"; no noise proportional to the power found (p = {p:.2g})"
