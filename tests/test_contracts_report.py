@@ -10,6 +10,7 @@ the report: nothing is turned into a silent "not available".
 
 from __future__ import annotations
 
+import importlib
 import re
 from pathlib import Path
 
@@ -37,14 +38,35 @@ def context(tmp_path_factory) -> ReportContext:
                          scene=SCENE)
 
 
+#: What does the fitting and simulation a section's ``compute`` may call and its ``render``
+#: may not (the names as the sections import them).
+HEAVY = ("fit", "compare_models", "run_selection", "compare_methods", "simulate", "replay",
+         "evaluate_protocol", "glossy_protocol_for", "paper_protocol_for",
+         "protocol_robustness", "diagnose", "hidden_case", "validation", "glossy_floor")
+
+
+def _refuse(name):
+    def refused(*args, **kwargs):
+        raise AssertionError(f"render called {name}: fits and simulations belong in compute")
+    return refused
+
+
 @pytest.fixture(scope="module")
 def made(context):
-    """Each section's output, computed once for every test of this module."""
+    """Each section's output, computed once for every test of this module, as
+    ``render(ctx, compute(ctx))`` with every fitting and simulation function of the
+    section's module refusing to run during ``render``."""
     cache: dict[str, Section] = {}
 
     def get(name: str) -> Section:
         if name not in cache:
-            cache[name] = ALL[name](context)
+            module = importlib.import_module(ALL[name].__module__)
+            results = module.compute(context)
+            with pytest.MonkeyPatch.context() as mp:
+                for heavy in HEAVY:
+                    if hasattr(module, heavy):
+                        mp.setattr(module, heavy, _refuse(heavy))
+                cache[name] = module.render(context, results)
         return cache[name]
 
     return get
@@ -63,6 +85,10 @@ def test_the_registry_holds_functions_in_report_order():
     for name, function in ALL.items():
         assert callable(function), name
         assert function.__module__ == f"irreflect.report.{name}", (name, function.__module__)
+        module = importlib.import_module(function.__module__)
+        # every section is compute(ctx) -> results, then render(ctx, results) -> Section
+        assert callable(getattr(module, "compute", None)), name
+        assert callable(getattr(module, "render", None)), name
 
 
 @pytest.mark.parametrize("name", _params())

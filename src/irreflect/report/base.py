@@ -1,7 +1,11 @@
 """The contract between the report's sections and its runner (``irreflect reproduce``).
 
 Each section is a function ``section(ctx: ReportContext) -> Section`` in its own module of
-:mod:`irreflect.report`, listed in :data:`irreflect.report.sections.SECTIONS`. The runner
+:mod:`irreflect.report`, listed in :data:`irreflect.report.sections.SECTIONS`; every
+section is written as ``compute(ctx)``, which does all its fitting, simulation and number
+work and returns a small dataclass of results, and ``render(ctx, results) -> Section``, which
+only writes tables, figures and markdown from them (``section = render(compute(ctx))``,
+so a section's text can be changed or tested without refitting). The runner
 (:mod:`irreflect.report.runner`) builds one context, calls every section, writes
 each section's tables as CSV (``out/tables/<name>.csv``) and renders them into
 ``report.md`` / ``report.html`` at the ``{table:<name>}`` placeholders of the section's

@@ -3,7 +3,7 @@ beside ours, every model on every dataset, Table 7 quoted."""
 
 from __future__ import annotations
 
-from dataclasses import replace
+from dataclasses import dataclass, replace
 
 import numpy as np
 import pandas as pd
@@ -35,8 +35,30 @@ def _generating_curve(meas, paper3: pd.DataFrame | None):
     return replace(meas, power=clean, sigma=None, name=f"{meas.name} (Table 3 curve)"), predict
 
 
+@dataclass(frozen=True)
+class CompareResults:
+    """What the compare section found (computed by :func:`compute`, written out by
+    :func:`render`): every dataset's model comparison, the note on the data it added or
+    moved, Table 6 beside ours, the rows of every model on every dataset, the paper's
+    Tables 6 and 7 (or None) and the findings."""
+
+    comparisons: dict
+    real_note: str
+    table6: pd.DataFrame
+    rows: list
+    paper6: pd.DataFrame | None
+    paper7: pd.DataFrame | None
+    findings: list
+
+
 def section(ctx: ReportContext) -> Section:
     """Report section: Table 6 beside ours, every model on every dataset, Table 7 quoted."""
+    return render(ctx, compute(ctx))
+
+
+def compute(ctx: ReportContext) -> CompareResults:
+    """Fit every model to every dataset (and the real PTFE table when present), Table 6
+    with its noise-free-curve columns, and the findings."""
     datasets = dict(ctx.datasets)
     real_note = ""
     root = real_data_dir()
@@ -47,8 +69,6 @@ def section(ctx: ReportContext) -> Section:
                      "`../shared/datasets/real`.")
     paper6 = ctx.paper_table("table6_polar_error_pct.csv")
     paper3 = ctx.paper_table("table3_parameters.csv")
-    paper7 = ctx.paper_table("table7_literature_error_pct.csv")
-
     comparisons = {}
     for name, meas in datasets.items():
         ctx.progress(f"compare models on {name}")
@@ -60,10 +80,14 @@ def section(ctx: ReportContext) -> Section:
     if moved:
         real_note += (" Where a table has no 10 deg incidence, phong@ is fitted at its nearest "
                       "measured one (" + "; ".join(moved) + ").")
-
     table6 = _table6(comparisons, paper6, paper3, ctx.seed, ctx)
+    return CompareResults(comparisons, real_note, table6, _model_rows(comparisons), paper6,
+                          ctx.paper_table("table7_literature_error_pct.csv"),
+                          _findings(ctx, comparisons))
 
-    # every model on every dataset
+
+def _model_rows(comparisons) -> list:
+    """Every model on every dataset: one row per model (and per skipped model)."""
     rows = []
     for name, comp in comparisons.items():
         t = comp.table()
@@ -75,11 +99,33 @@ def section(ctx: ReportContext) -> Section:
                          "BIC": round(r["bic"], 1), "dBIC": round(r["delta_bic"], 1)})
         for model, why in comp.skipped.items():
             rows.append({"dataset": name, "model": model, "fitted on": f"skipped: {why}"})
-    tables = {"compare_models": pd.DataFrame(rows)}
+    return rows
+
+
+def _findings(ctx: ReportContext, comparisons) -> list:
+    """A finding per dataset of the run where another model beats the two-lobe by BIC."""
+    findings = []
+    for name, comp in comparisons.items():
+        if name not in ctx.datasets or "two-lobe" not in comp.scores:
+            continue
+        best = comp.best_by_bic
+        if best != "two-lobe":
+            d = comp.scores["two-lobe"].bic - comp.scores[best].bic
+            findings.append(Finding(1, name, (
+                f"{best} describes the data better than the two-lobe model (BIC lower by "
+                f"{d:.0f}; mean polar-area error {comp.scores[best].mean_error_pct:.1f} % "
+                f"against {comp.scores['two-lobe'].mean_error_pct:.1f} %)")))
+    return findings
+
+
+def render(ctx: ReportContext, res: CompareResults) -> Section:
+    """The compare section from its results: tables, figures and the markdown."""
+    comparisons, table6 = res.comparisons, res.table6
+    tables = {"compare_models": pd.DataFrame(res.rows)}
     if len(table6):
         tables["compare_table6"] = table6
-    if paper7 is not None:
-        tables["compare_table7_quoted"] = paper7
+    if res.paper7 is not None:
+        tables["compare_table7_quoted"] = res.paper7
 
     # figures: Fig. 25 (terrazzo if present, as in the paper), error vs gamma for every dataset
     figures = {}
@@ -95,26 +141,14 @@ def section(ctx: ReportContext) -> Section:
     figures["compare_errors"] = save_figure(plot_error_lines(comparisons),
                                             ctx.figure_path("compare_errors"))
 
-    findings = []
-    for name, comp in comparisons.items():
-        if name not in ctx.datasets or "two-lobe" not in comp.scores:
-            continue
-        best = comp.best_by_bic
-        if best != "two-lobe":
-            d = comp.scores["two-lobe"].bic - comp.scores[best].bic
-            findings.append(Finding(1, name, (
-                f"{best} describes the data better than the two-lobe model (BIC lower by "
-                f"{d:.0f}; mean polar-area error {comp.scores[best].mean_error_pct:.1f} % "
-                f"against {comp.scores['two-lobe'].mean_error_pct:.1f} %)")))
-    md = _section_markdown(comparisons, table6, paper6, real_note, ctx)
+    md = _section_markdown(comparisons, table6, res.paper6, res.real_note, ctx)
     if "compare_table6" not in tables:
         md = md.replace("{table:compare_table6}",
                         "(none of the paper's three materials is among this run's datasets)")
-    if paper7 is None:
+    if res.paper7 is None:
         md = md.replace("{table:compare_table7_quoted}", "(the paper's tables were not found)")
     return Section(key="compare", title="Model comparison on the same data (section 5.3)",
-                   markdown=md, tables=tables, figures=figures, findings=findings)
-
+                   markdown=md, tables=tables, figures=figures, findings=list(res.findings))
 
 def _errors(comp, label) -> dict:
     return comp.scores[label].per_gamma_error_pct if label in comp.scores else {}

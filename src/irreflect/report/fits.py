@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import statistics
 import time
+from dataclasses import dataclass
 
 import numpy as np
 import pandas as pd
@@ -45,88 +46,134 @@ fits:"""
 
 
 
+@dataclass(frozen=True)
+class FitsResults:
+    """What the fits section found (computed by :func:`compute`, written out by
+    :func:`render`): the rows of Tables 2-4 and of the fit checks, the paper protocol's
+    verdict per material, the snapping notes, the findings, and per dataset what its
+    figures show (the all-points fit, the protocol's mask and its 12-point fit or None)."""
+
+    rows2: list
+    rows3: list
+    rows4: list
+    checks: list
+    verdicts: dict
+    notes: list
+    findings: list
+    shown: dict
+
+
 def section(ctx: ReportContext) -> Section:
     """Tables 2-4 and Figs. 15-17, 20-23 from the two-lobe fits."""
+    return render(ctx, compute(ctx))
+
+
+def compute(ctx: ReportContext) -> FitsResults:
+    """Fit every dataset on the paper's 12 protocol points, time the fits, and check
+    every all-points fit."""
     t2_paper = ctx.paper_table("table2_fit_quality_12pt.csv")
     t3_paper = ctx.paper_table("table3_parameters.csv")
-    t4_paper = ctx.paper_table("table4_fit_time_ms.csv")
-    rows2, rows3, rows4, figures, notes, findings = [], [], [], {}, [], []
-    verdicts = {}  # material -> the paper protocol's verdict (protocol.advice.assess)
-    repeats = 5 if ctx.quick else 50
+    res = FitsResults([], [], [], [], {}, [], [], {})
     for name, meas in ctx.datasets.items():
         ctx.progress(f"fits: {name}")
         full = ctx.fits[name]
         mask, snaps = protocol_mask(meas)
         twelve = fit(meas.subset(mask), seed=ctx.seed, use_sigma=False) if mask.sum() >= 7 else None
-        paper2 = t2_paper.set_index("material").loc[name] if (
-            t2_paper is not None and name in set(t2_paper.material)) else None
         if twelve is not None:
-            pred = twelve.predict(meas.gamma_deg, meas.theta_deg)
-            r2_12 = metrics.r2(meas.power, pred)
-            r2_all = metrics.r2(meas.power, full.predict(meas.gamma_deg, meas.theta_deg))
-            rows2.append({
-                "material": name, "points fitted": int(mask.sum()),
-                "R^2 ours": round(r2_12, 4),
-                "R^2 paper": paper2["r2"] if paper2 is not None else np.nan,
-                "RMSE ours": round(metrics.rmse(meas.power, pred), 4),
-                "RMSE paper": paper2["rmse"] if paper2 is not None else np.nan,
-                "MSE ours": metrics.mse(meas.power, pred),
-                "MSE paper": paper2["mse"] if paper2 is not None else np.nan,
-                "R^2 all-points fit": round(r2_all, 4),
-            })
-            verdicts[name] = assess_subset(meas, subset_fit=twelve, reference=full)
-            if verdicts[name].failed:
-                far = max((np.hypot(g - g2, t - t2) for g, t, g2, t2 in snaps), default=0.0)
-                findings.append(Finding(0, name, (
-                    "the paper's 12-point protocol fails: fitted on its 12 points (Tables 2 "
-                    "and 5; " + (f"{len(snaps)} of them snapped to the nearest measured "
-                                 f"angles, up to {far:.2g} deg away" if snaps
-                                 else "every point measured") +
-                    f") the model predicts all points with R^2 = {round(r2_12, 4):.4g}, "
-                    f"against {round(r2_all, 4):.4g} for the fit on all points"),
-                    key="paper-protocol"))
+            _table2_row(res, name, meas, full, twelve, mask, snaps, t2_paper)
         if snaps:
-            notes.append(f"{name}: protocol points snapped to the nearest measured point: "
-                         + ", ".join(f"({g:g}, {t:g}) -> ({g2:g}, {t2:g})"
-                                     for g, t, g2, t2 in snaps))
-        for label, res in (("all points", full), ("12 points", twelve)):
-            if res is None:
-                continue
-            row = {"material": name, "fitted on": label}
-            row.update({k: v for k, v in res.params.items()})
-            rows3.append(row)
-            row = {"material": name, "fitted on": f"std. error ({label})"}
-            row.update({k: v for k, v in res.stderrs.items()})
-            rows3.append(row)
-        if t3_paper is not None and name in set(t3_paper.material):
-            row = {"material": name, "fitted on": "paper (12 points)"}
-            row.update(t3_paper.set_index("material").loc[name].to_dict())
-            rows3.append(row)
+            res.notes.append(f"{name}: protocol points snapped to the nearest measured point: "
+                             + ", ".join(f"({g:g}, {t:g}) -> ({g2:g}, {t2:g})"
+                                         for g, t, g2, t2 in snaps))
+        _table3_rows(res, name, full, twelve, t3_paper)
         sub = meas.subset(mask) if twelve is not None else meas
-        times = []
-        for i in range(repeats):
-            t0 = time.perf_counter()
-            fit(sub, seed=i, use_sigma=False)
-            times.append((time.perf_counter() - t0) * 1e3)
-        paper_ms = (t4_paper.set_index("material").loc[name, "fit_time_ms"]
-                    if t4_paper is not None and name in set(t4_paper.material) else np.nan)
-        rows4.append({"material": name, "points": sub.n_points,
-                      "ours median (ms)": round(statistics.median(times), 2),
-                      "paper (ms, MATLAB R2015, Core 2 Duo E8400)": paper_ms,
-                      "repeats": repeats})
-        figures.update(_fit_figures(ctx, name, meas, full, mask if twelve is not None else None,
-                                    twelve))
+        res.rows4.append(_table4_row(ctx, name, sub))
+        res.shown[name] = (meas, full, mask if twelve is not None else None, twelve)
     checks, unconverged = _fit_checks(ctx)
-    findings += unconverged
-    table2 = pd.DataFrame(rows2)
+    res.checks.extend(checks)
+    res.findings.extend(unconverged)
+    return res
+
+
+def _table2_row(res, name, meas, full, twelve, mask, snaps, t2_paper) -> None:
+    """Table 2's row of one dataset, the paper protocol's verdict and its finding."""
+    paper2 = t2_paper.set_index("material").loc[name] if (
+        t2_paper is not None and name in set(t2_paper.material)) else None
+    pred = twelve.predict(meas.gamma_deg, meas.theta_deg)
+    r2_12 = metrics.r2(meas.power, pred)
+    r2_all = metrics.r2(meas.power, full.predict(meas.gamma_deg, meas.theta_deg))
+    res.rows2.append({
+        "material": name, "points fitted": int(mask.sum()),
+        "R^2 ours": round(r2_12, 4),
+        "R^2 paper": paper2["r2"] if paper2 is not None else np.nan,
+        "RMSE ours": round(metrics.rmse(meas.power, pred), 4),
+        "RMSE paper": paper2["rmse"] if paper2 is not None else np.nan,
+        "MSE ours": metrics.mse(meas.power, pred),
+        "MSE paper": paper2["mse"] if paper2 is not None else np.nan,
+        "R^2 all-points fit": round(r2_all, 4),
+    })
+    res.verdicts[name] = assess_subset(meas, subset_fit=twelve, reference=full)
+    if res.verdicts[name].failed:
+        far = max((np.hypot(g - g2, t - t2) for g, t, g2, t2 in snaps), default=0.0)
+        res.findings.append(Finding(0, name, (
+            "the paper's 12-point protocol fails: fitted on its 12 points (Tables 2 "
+            "and 5; " + (f"{len(snaps)} of them snapped to the nearest measured "
+                         f"angles, up to {far:.2g} deg away" if snaps
+                         else "every point measured") +
+            f") the model predicts all points with R^2 = {round(r2_12, 4):.4g}, "
+            f"against {round(r2_all, 4):.4g} for the fit on all points"),
+            key="paper-protocol"))
+
+
+def _table3_rows(res, name, full, twelve, t3_paper) -> None:
+    """Table 3's rows of one dataset: coefficients and standard errors of both fits and
+    the paper's coefficients."""
+    for label, fitted in (("all points", full), ("12 points", twelve)):
+        if fitted is None:
+            continue
+        row = {"material": name, "fitted on": label}
+        row.update({k: v for k, v in fitted.params.items()})
+        res.rows3.append(row)
+        row = {"material": name, "fitted on": f"std. error ({label})"}
+        row.update({k: v for k, v in fitted.stderrs.items()})
+        res.rows3.append(row)
+    if t3_paper is not None and name in set(t3_paper.material):
+        row = {"material": name, "fitted on": "paper (12 points)"}
+        row.update(t3_paper.set_index("material").loc[name].to_dict())
+        res.rows3.append(row)
+
+
+def _table4_row(ctx: ReportContext, name: str, sub) -> dict:
+    """Table 4's row of one dataset: the median time of repeated fits on ``sub``."""
+    t4_paper = ctx.paper_table("table4_fit_time_ms.csv")
+    repeats = 5 if ctx.quick else 50
+    times = []
+    for i in range(repeats):
+        t0 = time.perf_counter()
+        fit(sub, seed=i, use_sigma=False)
+        times.append((time.perf_counter() - t0) * 1e3)
+    paper_ms = (t4_paper.set_index("material").loc[name, "fit_time_ms"]
+                if t4_paper is not None and name in set(t4_paper.material) else np.nan)
+    return {"material": name, "points": sub.n_points,
+            "ours median (ms)": round(statistics.median(times), 2),
+            "paper (ms, MATLAB R2015, Core 2 Duo E8400)": paper_ms,
+            "repeats": repeats}
+
+
+def render(ctx: ReportContext, res: FitsResults) -> Section:
+    """The fits section from its results: tables, figures and the markdown."""
+    figures = {}
+    for name, (meas, full, mask, twelve) in res.shown.items():
+        figures.update(_fit_figures(ctx, name, meas, full, mask, twelve))
+    table2 = pd.DataFrame(res.rows2)
     if len(table2) and table2["R^2 paper"].isna().all():
         table2 = table2.drop(columns=["R^2 paper", "RMSE paper", "MSE paper"])
-    tables = {"table2_fit_quality": table2, "table3_coefficients": pd.DataFrame(rows3),
-              "table4_fit_time": pd.DataFrame(rows4), "fit_checks": pd.DataFrame(checks)}
-    markdown = _markdown(ctx, rows2, verdicts, notes, figures)
+    tables = {"table2_fit_quality": table2, "table3_coefficients": pd.DataFrame(res.rows3),
+              "table4_fit_time": pd.DataFrame(res.rows4),
+              "fit_checks": pd.DataFrame(res.checks)}
+    markdown = _markdown(ctx, res.rows2, res.verdicts, res.notes, figures)
     figures = {k: v for k, v in figures.items() if not k.startswith("_")}
-    return Section("fits", TITLE, markdown, tables, figures, findings=findings)
-
+    return Section("fits", TITLE, markdown, tables, figures, findings=list(res.findings))
 
 def _fit_checks(ctx: ReportContext):
     """Every all-points fit's verdict and checks (rows), and a finding per fit that did

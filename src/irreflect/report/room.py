@@ -10,6 +10,7 @@ Monte Carlo in Lambertian and glossy rooms, energy).
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -78,23 +79,42 @@ def _variants(scene, quick):
     return out, note
 
 
+@dataclass(frozen=True)
+class RoomResults:
+    """What the room section found (computed by :func:`compute`, written out by
+    :func:`render`): the scene and its simulation settings, what its materials' files
+    say of their fits, the scene's and the materials' table rows, every surface variant's
+    simulation ``(label, result, summary)``, why there is no glossy floor (when there is
+    none), the comparison rows and the validation page's tables and numbers."""
+
+    scene: object
+    rays: int
+    bounces: int
+    notes: list
+    scene_rows: list
+    materials: pd.DataFrame
+    results: list
+    glossy_note: str
+    rows: list
+    validation: Validation
+
+
 def section(ctx: ReportContext) -> Section:
     """The scene's room with Lambertian, fitted and glossy-floor surfaces, and the
     validation page (``ctx.scene``: the scene's TOML file)."""
+    return render(ctx, compute(ctx))
+
+
+def compute(ctx: ReportContext) -> RoomResults:
+    """Simulate the scene's room with every surface variant and run the validation."""
     if ctx.scene is None:
         raise ValueError("the room section needs a scene: ReportContext(scene=SCENE.toml)")
     scene = load_scene(ctx.scene)
     rays = 1500 if ctx.quick else int(scene.settings.get("rays", 20000))
     bounces = int(scene.settings.get("bounces", 3))
-    tables, figures, md = {}, {}, []
     notes = material_notes(scene, ctx.allow_unphysical)
-    if notes:  # what the materials' own fits said of them
-        md.append("What the scene's materials say of their own fits (their material files' "
-                  "verdicts and warnings, `irreflect fit --save`):\n\n```\n"
-                  + "\n".join(notes) + "\n```\n")
-
-    md.append(_scene_markdown(ctx, scene, (rays, bounces), tables, figures))
-    # the comparison
+    scene_rows = _scene_rows(scene)
+    materials = materials_table(scene)
     variants, glossy_note = _variants(scene, ctx.quick)
     results = []
     for label, variant in variants:
@@ -102,7 +122,23 @@ def section(ctx: ReportContext) -> Section:
         res = simulate(variant, method="montecarlo", bounces=bounces, rays=rays, seed=ctx.seed)
         results.append((label, res, summary_table(res)))
     rows = _comparison_rows(scene, results)
-    tables["room_comparison"] = pd.DataFrame(rows)
+    ctx.progress("room: validation")
+    return RoomResults(scene, rays, bounces, notes, scene_rows, materials, results,
+                       glossy_note, rows, validation(ctx.quick))
+
+
+def render(ctx: ReportContext, res: RoomResults) -> Section:
+    """The room section from its results: tables, figures and the markdown."""
+    scene = res.scene
+    tables, figures, md = {}, {}, []
+    if res.notes:  # what the materials' own fits said of them
+        md.append("What the scene's materials say of their own fits (their material files' "
+                  "verdicts and warnings, `irreflect fit --save`):\n\n```\n"
+                  + "\n".join(res.notes) + "\n```\n")
+    tables["room_scene"] = pd.DataFrame(res.scene_rows)
+    tables["room_materials"] = res.materials
+    md.append(_scene_markdown(ctx, scene, (res.rays, res.bounces), figures))
+    tables["room_comparison"] = pd.DataFrame(res.rows)
     md.append("### What the fitted materials change\n\nThe same room three ways: every surface "
               "Lambertian with the scene's total reflectance; the fitted two-lobe materials; and "
               "the fitted materials with a glossy real material as floor (same total reflectance, "
@@ -111,21 +147,16 @@ def section(ctx: ReportContext) -> Section:
               "(positive = the range looks longer). Monte Carlo standard errors are in "
               "`irreflect room`'s outputs (about 1 % of the reflected gain per order at 20000 "
               "rays).\n\n{table:room_comparison}\n\n")
-    if len(variants) < 3:
-        md.append(f"*No glossy real floor: {glossy_note}.*\n\n")
-    md.append(_result_figures(ctx, scene, results, figures))
-    ctx.progress("room: validation")
-    val_md, val_tables = validation_page(ctx.quick)
-    tables.update(val_tables)
-    md.append(val_md)
+    if len(res.results) < 3:
+        md.append(f"*No glossy real floor: {res.glossy_note}.*\n\n")
+    md.append(_result_figures(ctx, scene, res.results, figures))
+    tables.update(res.validation.tables)
+    md.append(validation_markdown(res.validation))
     return Section("room", TITLE, "".join(md), tables, figures)
 
 
-def _scene_markdown(ctx, scene, rays_bounces, tables, figures) -> str:
-    """The scene's table, the surface model's text and the materials' figures (added to
-    ``tables`` and ``figures``)."""
-    rays, bounces = rays_bounces
-    md = []
+def _scene_rows(scene) -> list:
+    """The scene's table: every surface with its material, source and 3D model."""
     rows = [{"surface": face, "material": name, "source": scene.materials[name].source,
              "3D model": scene.materials[name].describe()}
             for face, name in zip(("wall x=0", "wall x=max", "wall y=0", "wall y=max", "floor",
@@ -133,7 +164,14 @@ def _scene_markdown(ctx, scene, rays_bounces, tables, figures) -> str:
     rows += [{"surface": f"box {b.name}", "material": b.materials[5],
               "source": scene.materials[b.materials[5]].source,
               "3D model": scene.materials[b.materials[5]].describe()} for b in scene.boxes]
-    tables["room_scene"] = pd.DataFrame(rows)
+    return rows
+
+
+def _scene_markdown(ctx, scene, rays_bounces, figures) -> str:
+    """The scene's text, the surface model's text and the materials' figures (added to
+    ``figures``)."""
+    rays, bounces = rays_bounces
+    md = []
     md.append(f"Scene `{scene.path}`: {scene.size[0]:g} x {scene.size[1]:g} x {scene.size[2]:g} m, "
               f"{len(scene.emitters)} emitter(s), {len(scene.receivers)} receivers "
               f"({len(scene.grids)} grid(s)); Monte Carlo with next-event estimation, {rays} rays "
@@ -151,7 +189,6 @@ def _scene_markdown(ctx, scene, rays_bounces, tables, figures) -> str:
               "departs from the fitted one:\n\n{table:room_materials}\n\n"
               "The polar plots show a material's intensity in the plane of incidence and in "
               "planes rotated about the normal.\n\n")
-    tables["room_materials"] = materials_table(scene)
     for name, mat in scene.materials.items():
         if mat.model == "two-lobe":
             ax = plot_material_3d(mat, 50.0)
@@ -252,8 +289,27 @@ def materials_table(scene) -> pd.DataFrame:
     return pd.DataFrame(rows)
 
 
+@dataclass(frozen=True)
+class Validation:
+    """The validation page's numbers: its tables, the closed-form line of sight of
+    Barry's configuration A (W) and its delay (s), and the Monte Carlo rays per link."""
+
+    tables: dict
+    los: float
+    tau: float
+    rays: int
+
+
 def validation_page(quick: bool):
-    """Checks against what exists, as report tables (numbers measured in this run)."""
+    """Checks against what exists, as report tables (numbers measured in this run):
+    (markdown, tables)."""
+    checks = validation(quick)
+    return validation_markdown(checks), checks.tables
+
+
+def validation(quick: bool) -> Validation:
+    """Run the validation page's checks (simulations against closed forms, numerical
+    integration, Monte Carlo, swapped links and energy)."""
     tables = {}
     scene = barry_configuration_a()
     los, tau = line_of_sight_closed_form(scene.emitters[0], scene.receivers[0])
@@ -285,34 +341,39 @@ def validation_page(quick: bool):
     tables["room_swapped"] = swapped_table(rays)
     tables["room_convergence"] = convergence_table(rays, cell)
     tables["room_checks"] = energy_checks(rays)
-    md = ("### Validation\n\nBarry et al. (1993), configuration A (5 x 5 x 3 m, walls and ceiling "
-          "0.8, floor 0.3, emitter at the ceiling centre facing down, receiver at (0.5, 1, 0), "
-          "1 cm^2, 85 deg): DC gain per order. The vlc-rm column is the independent "
-          "implementation run by `.venv/bin/python experiments/bench_room.py` (not by this report) "
-          "with Barry's point-to-point coupling between cells, which overestimates orders 2 and "
-          "up by about 1-2 % (near cells); irreflect integrates near cell pairs. Barry's paper "
-          "publishes h(t) curves, not gains; the line of sight is the closed form "
-          f"(Eq. 5), {los:.5g} at {tau * 1e9:.3f} ns.\n\n{{table:room_barry_a}}\n\n"
-          "One reflection off a single Lambertian floor (every other surface black): the "
-          "recursive method converges to the numerical integral as the cells shrink.\n\n"
-          "{table:room_one_bounce}\n\n"
-          "**Swapped links.** Emitter and receiver exchanged, the same (order-1) pattern at both "
-          "ends, in a room with a glossy floor and glossy walls (the two-lobe material of "
-          "`irreflect.room.validation`): with a reciprocal surface model every order must come "
-          "back the same; the paper's form does not.\n\n{table:room_swapped}\n\n"
-          "**Every order against Monte Carlo** at the default 0.25 m cells, Lambertian and glossy "
-          f"rooms, wide and narrow fields of view ({rays} rays per link; the recursive method's "
-          "own estimate of its error, from a run at twice the cell size, beside it; that "
-          "estimate sees the error that shrinks with the cells, not a bias that does not: on "
-          "glossy walls the method reads 0.5-0.9 % low at orders 1 and 3 in "
-          "`experiments/bench_room.py` while estimating 0.0-0.4 %).\n\n"
-          "{table:room_convergence}\n\n"
-          "**Energy.** In a closed room every reflected watt lands on a surface: the recursive "
-          "method's power arriving after k + 1 reflections against the power reflected at the "
-          "k-th (the albedo evaluated at each cell's incidence), and Monte Carlo's power left "
-          "after k reflections (its weights f cos / pdf) against the recursive method's.\n\n"
-          "{table:room_checks}\n")
-    return md, tables
+    return Validation(tables, los, tau, rays)
+
+
+def validation_markdown(checks: Validation) -> str:
+    """The validation page's text around its tables."""
+    los, tau, rays = checks.los, checks.tau, checks.rays
+    return ("### Validation\n\nBarry et al. (1993), configuration A (5 x 5 x 3 m, walls and ceiling "
+            "0.8, floor 0.3, emitter at the ceiling centre facing down, receiver at (0.5, 1, 0), "
+            "1 cm^2, 85 deg): DC gain per order. The vlc-rm column is the independent "
+            "implementation run by `.venv/bin/python experiments/bench_room.py` (not by this report) "
+            "with Barry's point-to-point coupling between cells, which overestimates orders 2 and "
+            "up by about 1-2 % (near cells); irreflect integrates near cell pairs. Barry's paper "
+            "publishes h(t) curves, not gains; the line of sight is the closed form "
+            f"(Eq. 5), {los:.5g} at {tau * 1e9:.3f} ns.\n\n{{table:room_barry_a}}\n\n"
+            "One reflection off a single Lambertian floor (every other surface black): the "
+            "recursive method converges to the numerical integral as the cells shrink.\n\n"
+            "{table:room_one_bounce}\n\n"
+            "**Swapped links.** Emitter and receiver exchanged, the same (order-1) pattern at both "
+            "ends, in a room with a glossy floor and glossy walls (the two-lobe material of "
+            "`irreflect.room.validation`): with a reciprocal surface model every order must come "
+            "back the same; the paper's form does not.\n\n{table:room_swapped}\n\n"
+            "**Every order against Monte Carlo** at the default 0.25 m cells, Lambertian and glossy "
+            f"rooms, wide and narrow fields of view ({rays} rays per link; the recursive method's "
+            "own estimate of its error, from a run at twice the cell size, beside it; that "
+            "estimate sees the error that shrinks with the cells, not a bias that does not: on "
+            "glossy walls the method reads 0.5-0.9 % low at orders 1 and 3 in "
+            "`experiments/bench_room.py` while estimating 0.0-0.4 %).\n\n"
+            "{table:room_convergence}\n\n"
+            "**Energy.** In a closed room every reflected watt lands on a surface: the recursive "
+            "method's power arriving after k + 1 reflections against the power reflected at the "
+            "k-th (the albedo evaluated at each cell's incidence), and Monte Carlo's power left "
+            "after k reflections (its weights f cos / pdf) against the recursive method's.\n\n"
+            "{table:room_checks}\n")
 
 
 def swapped_table(rays: int) -> pd.DataFrame:

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import pandas as pd
 
 from ..errors import FitError, IrreflectError
@@ -57,8 +59,30 @@ def select_command(budget: dict, seed: int, data: str = "DATA") -> str:
     return " ".join(argv + ["--out DIR"])
 
 
+@dataclass(frozen=True)
+class SelectionResults:
+    """What the selection section found (computed by :func:`compute`, written out by
+    :func:`render`): the search's budget, per dataset its selection result and the
+    methods A / B / 12, the datasets that could not be searched, and the rows of the
+    section's tables with its findings."""
+
+    budget: dict
+    results: dict
+    methods: dict
+    skipped: list
+    front_rows: list
+    table5_rows: list
+    best_rows: list
+    findings: list
+
+
 def section(ctx: ReportContext) -> Section:
     """Frontier, knee, enough points and best 12 per dataset (Figs. 18-19), Table 5."""
+    return render(ctx, compute(ctx))
+
+
+def compute(ctx: ReportContext) -> SelectionResults:
+    """Search every dataset's subsets and compare methods A, B and 12."""
     budget = _budget(ctx)
     paper5 = ctx.paper_table("table5_methods_r2.csv")
     results, methods, skipped = {}, {}, []
@@ -73,33 +97,34 @@ def section(ctx: ReportContext) -> Section:
             skipped.append(f"{name}: {exc}")
             continue
         results[name] = res
-    if not results:
-        return Section("selection", TITLE, "No dataset could be searched: " + "; ".join(skipped))
-
     front_rows, table5_rows, findings = _summary_rows(ctx, results, methods, budget, paper5)
-    fronts = pd.DataFrame(front_rows)
-    table5 = pd.DataFrame(table5_rows)
+    return SelectionResults(budget, results, methods, skipped, front_rows, table5_rows,
+                            _best_rows(results), findings)
 
+
+def render(ctx: ReportContext, res: SelectionResults) -> Section:
+    """The selection section from its results: tables, figures and the markdown."""
+    if not res.results:
+        return Section("selection", TITLE,
+                       "No dataset could be searched: " + "; ".join(res.skipped))
     figures = {}
-    for name, res in results.items():
+    for name, sel in res.results.items():
         ctx.progress(f"selection figure: {name}")
-        fig = plot_selection(res, methods=methods[name],
-                             protocol_mask=_protocol_mask(res.measurements))
+        fig = plot_selection(sel, methods=res.methods[name],
+                             protocol_mask=_protocol_mask(sel.measurements))
         figures[f"selection_{name}"] = save_figure(fig, ctx.figure_path(f"selection_{name}"))
-    figures["optimal_points"] = _figure_points(ctx, results)
-    best = pd.DataFrame(_best_rows(results))
-
-    md = _markdown(ctx, results, methods, budget, skipped)
+    figures["optimal_points"] = _figure_points(ctx, res.results)
+    md = _markdown(ctx, res.results, res.methods, res.budget, res.skipped)
     return Section(
         key="selection",
         title=TITLE,
         markdown="\n".join(md),
-        tables={"selection_fronts": fronts, "selection_table5": table5,
-                "selection_best12": best},
+        tables={"selection_fronts": pd.DataFrame(res.front_rows),
+                "selection_table5": pd.DataFrame(res.table5_rows),
+                "selection_best12": pd.DataFrame(res.best_rows)},
         figures=figures,
-        findings=findings,
+        findings=list(res.findings),
     )
-
 
 def _summary_rows(ctx, results, methods, budget, paper5):
     """Per dataset: the frontier's summary row, its Table 5 rows and its findings."""
