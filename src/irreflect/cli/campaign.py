@@ -306,7 +306,7 @@ def register(sub) -> None:
     p.add_argument("--save", metavar="MATERIAL.json",
                    help="write the campaign's fit of the readings as a material file (as "
                         "'irreflect fit --save' does; the readings weighted by the share of "
-                        "the range each stands for, as the verdict judged them)")
+                        "the range each stands for, as the verdict judged them; default: none)")
     p.add_argument("--json", action="store_true", help="one JSON object on stdout")
     p.set_defaults(handler=_cmd_next)
 
