@@ -558,3 +558,18 @@ def test_a_sliver_of_a_near_catalogue_form_is_not_taken_for_a_second_effect():
     extra = grown["offspecular_peak+angle_offset"]
     assert extra.p_value < extra.level  # significant, but a sliver
     assert extra.share_explained < 0.5
+
+
+def test_a_table_the_base_model_cannot_follow_gets_an_error_that_names_the_offset():
+    # held-out blind seed 30148: a matte base with a background 6 times its power; the base
+    # model has no offset and cannot beat a constant, and the diagnosis says what to try
+    from irreflect.diagnose import diagnose
+    from irreflect.diagnose.blind import blind_case
+    from irreflect.errors import FitError
+
+    case = blind_case(30148)
+    with pytest.raises(FitError) as info:
+        diagnose(case.measurements, seed=0)
+    text = str(info.value)
+    assert "cannot beat a constant" in text and "+background" in text
+    assert "\n" not in text

