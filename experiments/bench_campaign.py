@@ -128,9 +128,9 @@ def _warm_worker():
     timed: the load (about a second, several under load) is the process's, not the
     campaign's, and used to land on whichever table a worker replayed first."""
     warnings.simplefilter("ignore")
-    from irreflect import _kernel
+    from irreflect.fitting import warm
 
-    _kernel.warm()
+    warm()
 
 
 def run_one(job):
