@@ -215,6 +215,17 @@ def claim_output(path, kind: str = "dir", option: str = "--out", suffixes=None):
                 claim.release()
 
 
+@contextlib.contextmanager
+def claim_outputs(*claims):
+    """:func:`claim_output` for several outputs at once, each ``(path, kind, option[,
+    suffixes])``; a claim whose path is None is skipped (an option not given)."""
+    with contextlib.ExitStack() as stack:
+        for path, kind, option, *rest in claims:
+            if path is not None:
+                stack.enter_context(claim_output(path, kind, option, *rest))
+        yield
+
+
 def _check_owned(path: Path, option: str) -> None:
     """A folder a run may replace: absent, empty, written by irreflect (manifest), or
     holding only other irreflect output folders (e.g. ``out/select`` before

@@ -51,7 +51,7 @@ def _instrument(args):
 
 
 def _cmd_next(args) -> int:
-    from .._atomic import claim_output
+    from .._atomic import claim_outputs
 
     if args.out is not None:
         from ..validation import check_output_path
@@ -68,12 +68,8 @@ def _cmd_next(args) -> int:
     if args.save is not None and args.out is not None and (
             Path(args.save).absolute() == Path(args.out).absolute()):
         raise IrreflectError(f"--save and --out are both {args.out}: give two files")
-    with contextlib.ExitStack() as stack:
-        if args.out is not None:
-            stack.enter_context(claim_output(args.out, "file", "--out"))
-        if args.save is not None:
-            stack.enter_context(claim_output(args.save, "file", "--save",
-                                             suffixes=(".json",)))
+    with claim_outputs((args.out, "file", "--out"),
+                       (args.save, "file", "--save", (".json",))):
         return _next(args)
 
 

@@ -53,9 +53,7 @@ def register(sub) -> None:
 
 
 def _cmd_diagnose(args: argparse.Namespace) -> int:
-    import contextlib
-
-    from .._atomic import claim_output
+    from .._atomic import claim_outputs
     from ..errors import IrreflectError
     from ..models import get_model
     from ..models.extensions import get_extension
@@ -75,12 +73,8 @@ def _cmd_diagnose(args: argparse.Namespace) -> int:
     get_model(args.model)
     # outputs are claimed before the table is read: an output never replaces an input
     # (the table, also through a link or a hard link) of the same run
-    with contextlib.ExitStack() as stack:
-        if args.out is not None:
-            stack.enter_context(claim_output(args.out, "dir", "--out"))
-        if args.separate_out is not None:
-            stack.enter_context(claim_output(args.separate_out, "file", "--separate-out",
-                                             suffixes=(".csv",)))
+    with claim_outputs((args.out, "dir", "--out"),
+                       (args.separate_out, "file", "--separate-out", (".csv",))):
         return _diagnose(args, extensions)
 
 
