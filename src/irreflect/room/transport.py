@@ -407,6 +407,21 @@ def rect_coupling(cells, j, dst):
     return 0.5 * total  # (1/2pi) * pi: pi A_j F_jl
 
 
+@hot_inline
+def _term_ray(axis, cpsi, turn, n, i, mats, m, t, kind):
+    """One quadrature direction of a lobe term around ``axis`` and its weight (cosine at
+    the surface, share cap, the mirror term's facet factor; -1 below the surface): the same
+    in the pass that sums the quadrature and in the pass that deposits."""
+    o = _cone(axis, cpsi, TWO_PI * turn)
+    co = dot(o, n)
+    if co <= 0.0:
+        return o, -1.0
+    w = co * cap_at(mats.gcos[m], co)
+    if kind == TERM_MIRROR:
+        w *= w_factor(mats.tq[m, t], half_cos(i, o))
+    return o, w
+
+
 @hot
 def _sub_point(cells, j, s, k):
     """Gauss point ``k`` of ``s x s`` on cell ``j``: (position, weight fraction)."""
@@ -930,13 +945,10 @@ def lobe_rays(j0, j1, cells, faces, mats, ext, src, arr, knobs, budget):
             for it in range(n_t):
                 cpsi = ((it + 0.5) / n_t) ** (1.0 / (nn + 1.0))
                 for ia in range(n_a):
-                    o = _cone(axis, cpsi, TWO_PI * (ia + 0.5 * (it % 2)) / n_a)
-                    co = dot(o, n)
-                    if co <= 0.0:
+                    o, w = _term_ray(axis, cpsi, (ia + 0.5 * (it % 2)) / n_a, n, i, mats,
+                                     m, t, kind)
+                    if w < 0.0:
                         continue
-                    w = co * cap_at(mats.gcos[m], co)
-                    if kind == TERM_MIRROR:
-                        w *= w_factor(mats.tq[m, t], half_cos(i, o))
                     qsum += w
             if qsum <= 0.0:
                 continue
@@ -944,13 +956,10 @@ def lobe_rays(j0, j1, cells, faces, mats, ext, src, arr, knobs, budget):
             for it in range(n_t):
                 cpsi = ((it + 0.5) / n_t) ** (1.0 / (nn + 1.0))
                 for ia in range(n_a):
-                    o = _cone(axis, cpsi, TWO_PI * (ia + 0.5 * (it % 2)) / n_a)
-                    co = dot(o, n)
-                    if co <= 0.0:
+                    o, w = _term_ray(axis, cpsi, (ia + 0.5 * (it % 2)) / n_a, n, i, mats,
+                                     m, t, kind)
+                    if w < 0.0:
                         continue
-                    w = co * cap_at(mats.gcos[m], co)
-                    if kind == TERM_MIRROR:
-                        w *= w_factor(mats.tq[m, t], half_cos(i, o))
                     x, _ = _sub_point(cells, j, 2, k_origin % 4)
                     k_origin += 1
                     dst, dist = _ray_cell(cells, faces, x, n, o)
