@@ -230,6 +230,48 @@ def test_the_campaign_fit_is_not_dragged_by_one_reading_where_the_model_misfits(
     assert np.all(np.isfinite(campaign.fit.stderr))
 
 
+#: the first 10 settings the campaign chose on the RGL golden yellow paint (seed 0)
+GOLDEN = [(0.0, 0.0), (-31.6178, 31.6178), (-66.3495, 66.3495), (0.0, -50.0),
+          (-66.3495, 0.0), (-66.3495, 65.3495), (-31.6178, 67.0), (0.0, 1.0),
+          (-45.3703, 49.0), (-45.3703, 46.6203)]
+
+
+@pytest.mark.parametrize("continuation", [True, False])
+def test_a_fit_that_overshoots_where_nothing_is_measured_gives_way(real_dir, continuation):
+    # at 10 readings the golden yellow's global optimum sends the diffuse law to its bound
+    # and predicts a spike of many times the largest reading at an unmeasured setting (R^2
+    # far below 0 on all points); the continuation of the 9-reading fit explains the
+    # readings nearly as well and does not: the campaign keeps it, and tests the spike
+    import dataclasses
+
+    from irreflect.campaign import DesignRule
+    from irreflect.campaign.core import OVERSHOOT
+
+    dense = read_measurements(real_dir / "rgl_epfl" / "rgl_vch_golden_yellow.csv")
+    source = DenseInstrument(dense)
+    s = np.array(GOLDEN)
+    power = source.read(s[:, 0], s[:, 1], np.random.default_rng(0))
+    rows = pd.DataFrame({"gamma_deg": s[:, 0], "theta_deg": s[:, 1], "power": power})
+    rule = dataclasses.replace(DesignRule(), continuation=continuation)
+    campaign = Campaign(source.instrument(), rows.iloc[:9], seed=0, rule=rule)
+    assert campaign.r2_against(dense) > 0.85
+    campaign.add(rows.iloc[9:])
+    over = campaign._overshoot(campaign.fit.values, float(power.max()))
+    if continuation:
+        assert over <= OVERSHOOT
+        assert campaign.r2_against(dense) > 0.9
+        # the next proposals test the rejected fit where it put its spike: near the normal
+        # at an angle of incidence not measured yet, and say so
+        proposal = campaign.propose(3)
+        spike = proposal[proposal["why"].str.contains("rival fit")]
+        assert len(spike) == 1
+        assert abs(spike["theta_deg"].iloc[0]) <= 5.0
+        assert spike["gamma_deg"].iloc[0] not in set(s[:, 0])
+    else:
+        assert over > 5 * OVERSHOOT
+        assert campaign.r2_against(dense) < 0.0
+
+
 # ----------------------------------------------------------------------------- verdict
 def test_the_verdict_continues_until_the_curve_holds_then_stops():
     dense = _material(GLOSSY, step=2.0, noise=0.005, name="gloss")

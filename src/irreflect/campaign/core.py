@@ -69,6 +69,13 @@ STOP_HOLD = 2
 #: the benchmark's real sets it changed no campaign's R^2 by more than 1e-4 and took three
 #: quarters of a Cornell campaign's time (experiments/bench_campaign.py).
 FIT_OPTIONS = FitOptions(polish=False)
+#: The continuation of the previous readings' fit: one local search from it.
+#: A fit that predicts more than this many times the largest reading somewhere on the range
+#: is replaced by the continuation of the previous fit when that does not
+#: (:meth:`Campaign._choose_continuation`).
+OVERSHOOT = 1.5
+CONTINUATION_OPTIONS = FitOptions(polish=False, n_screen=1, n_keep=1, n_data_starts=0,
+                                  n_random_starts=0, n_hops=0, max_rounds=1, retry=False)
 #: The range's settings that weigh the readings (see :func:`range_weights`) are thinned to
 #: at most this many.
 MAX_RANGE_POINTS = 20_000
@@ -204,6 +211,7 @@ class Campaign:
         self._state: _State | None = None
         self._previous: dict[int, np.ndarray | None] = {}  # range predictions by readings
         self._warm: np.ndarray | None = None  # the latest fit's shape coordinates
+        self._values: dict[int, np.ndarray] = {}  # the fits' coefficients by readings
         if measured is not None:
             self.add(measured)
 
@@ -273,13 +281,67 @@ class Campaign:
                                                           self._settings[:, 0],
                                                           self._settings[:, 1])
             # the leave-one-out refits on the settings, then on the readings
-            state.loo, state.loo_own = leave_one_out(self.model, state.extra["weighted"],
+            weighted = state.extra["weighted"]
+            state.loo, state.loo_own = leave_one_out(self.model, weighted,
                                                      state.fit.values, g, t, seed=self.seed)
+            if self.rule.continuation:
+                self._choose_continuation(state, weighted, g, t)
         self._state = state
         if state.fit is not None:
+            self._values[self.n_measured] = np.asarray(state.fit.values, float)
             self._warm = self.model.from_natural(np.asarray(state.fit.values, float)[None])[0]
         self._previous[self.n_measured] = state.range_pred
         return state
+
+    def _choose_continuation(self, state: _State, weighted: Measurements, g, t) -> None:
+        """Replace the fit by the continuation of the previous readings' fit (its local
+        optimum on the current readings) when the global optimum overshoots.
+
+        With few readings the weighted least squares often has several optima of nearly
+        the same cost, and the global one can extrapolate wildly where nothing is
+        measured: a diffuse index law sent to its bound puts a spike of many times the
+        largest reading at an unmeasured setting (the golden yellow paint at 10 readings,
+        R^2 -16 against all points; Cornell Cayman at 11, -9.8). When the global optimum
+        predicts more than :data:`OVERSHOOT` times the largest reading somewhere on the
+        range and the continuation does not, the campaign keeps the continuation, and the
+        global optimum becomes a rival the next proposals test (it explains the readings
+        as well: :func:`~.design.build_prior`'s ``rivals``)."""
+        n = self.n_measured
+        before = max((m for m in self._values if m < n), default=None)
+        if before is None:
+            return
+        top = float(np.max(self.measurements.power))
+        if top <= 0:
+            return
+        over = self._overshoot(state.fit.values, top)
+        if over <= OVERSHOOT:
+            return
+        z0 = self.model.from_natural(self._values[before][None])[0]
+        try:
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore", FitWarning)
+                local = fit(weighted, self.model, CONTINUATION_OPTIONS, seed=self.seed,
+                            extra_starts=z0)
+        except (FitError, DataError):
+            return
+        values = np.asarray(local.values, float)
+        if self._overshoot(values, top) > OVERSHOOT:
+            return
+        state.extra["rivals"] = [np.asarray(state.fit.values, float)]
+        state.fit = _relative(local, self.model, self.measurements)
+        state.loo, state.loo_own = leave_one_out(self.model, weighted, values, g, t,
+                                                 seed=self.seed)
+        with np.errstate(all="ignore"):
+            state.range_pred = self.model.predict_deg(values, self._settings[:, 0],
+                                                      self._settings[:, 1])
+
+    def _overshoot(self, values, top: float) -> float:
+        """The largest power the coefficients predict on the range, in units of ``top``."""
+        s = self._settings
+        with np.errstate(all="ignore"):
+            pred = self.model.predict_deg(np.asarray(values, float), s[:, 0], s[:, 1])
+        peak = float(np.nanmax(pred)) if np.any(np.isfinite(pred)) else float("inf")
+        return peak / top
 
     def _range_prediction(self, n: int) -> np.ndarray | None:
         """The range prediction of the fit on the first ``n`` readings (in the order they
@@ -405,7 +467,8 @@ class Campaign:
             s = self._settings
             state.extra["prior"] = build_prior(self.model, state.fit, self.measurements,
                                                s[:, 0], s[:, 1], self.rule, loo=state.loo,
-                                               loo_own=state.loo_own)
+                                               loo_own=state.loo_own,
+                                               rivals=state.extra.get("rivals", ()))
         return state.extra["prior"]
 
     def _adaptive(self, k: int, state: _State, taken) -> list:
@@ -425,6 +488,10 @@ class Campaign:
         measured_g = {round(g, 6) for g in meas.gamma_deg}
         width = specular_half_width(self.model, res.values, s[:, 0])
         mags = np.abs(meas.gamma_deg)
+        prior_pred = state.range_pred
+        with np.errstate(all="ignore"):
+            rival_preds = [np.nan_to_num(self.model.predict_deg(q, s[:, 0], s[:, 1]))
+                           for q in state.extra.get("rivals", ())]
         rows = []
         extra_rows, extra_noise = [], []
         for _ in range(k):
@@ -452,6 +519,12 @@ class Campaign:
             if drop > 0.01:
                 flag = " (ill-determined)" if coef in res.ill_determined else ""
                 why += f"; shrinks the standard error of {coef}{flag} by {drop:.0%}"
+            for rival in rival_preds:
+                gap = abs(float(rival[j]) - float(prior_pred[j]))
+                if gap >= 0.5 * float(np.max(np.abs(rival - prior_pred))):
+                    why += (f"; tests a rival fit the readings allow as well (it predicts "
+                            f"{rival[j]:.3g} here, the fit {prior_pred[j]:.3g})")
+                    break
             if "specular lobe" in why and "u_ns" in res.ill_determined:
                 why += "; brackets the specular lobe's width"
             share = float(gains[j]) / total if total > 0 else float("nan")

@@ -14,7 +14,9 @@ work on real materials is the prior the posterior starts from; it is the sum of
   fit with the specular lobe 10 and 100 times narrower or wider (its linear scales
   refitted; weighted by how well each still explains the readings): the lobe is
   bracketed while its width is ill-determined, the mirror direction being known before
-  any reading;
+  any reading; and a rival fit the campaign set aside (a global optimum that overshoots
+  where nothing is measured), at full weight and unsettled by the readings, so that the
+  next reading tests it where it departs most;
 * **the model's laws in the angle of incidence may not hold** (``u cos^v(gamma)`` for the
   specular share, the lobe indices and the level): independent deviations of each, smooth
   in gamma, so that an angle of incidence the model would only reach by extrapolation or
@@ -65,6 +67,9 @@ class DesignRule:
     loo_misfit : weight of the leave-one-out refits' relative errors in the local misfit
     range_weights : fit the readings weighted by the share of the range each stands for
         (:func:`irreflect.campaign.core.range_weights`) to this power (0: equally)
+    continuation : when the fit overshoots where nothing is measured, keep the continuation
+        of the previous readings' fit and test the overshooting one
+        (:meth:`irreflect.campaign.Campaign._choose_continuation`)
     """
 
     coefficient_prior: float = 1.0
@@ -82,6 +87,7 @@ class DesignRule:
     shift_sd: float = 0.0
     loo_misfit: float = 0.5
     range_weights: float = 1.0
+    continuation: bool = True
 
 
 DEFAULT_RULE = DesignRule()
@@ -268,7 +274,8 @@ def leave_one_out(model, meas, values, gamma_deg, theta_deg, seed=0):
 
 
 def build_prior(model, result: FitResult, meas, gamma_deg, theta_deg,
-                rule: DesignRule = DEFAULT_RULE, loo=None, loo_own=None) -> Prior:
+                rule: DesignRule = DEFAULT_RULE, loo=None, loo_own=None,
+                rivals=()) -> Prior:
     """The prior covariance of the readings at the settings (gamma_deg, theta_deg) and at
     the measured readings, around the current fit (see the module docstring). The
     settings come first, the measured readings after them."""
@@ -315,6 +322,14 @@ def build_prior(model, result: FitResult, meas, gamma_deg, theta_deg,
             weight = np.exp(-0.5 * max(chi - base, 0.0) / max(n_meas, 1))
             alts.append(np.sqrt(weight) * (fa - f))
         parts.append(np.array(alts).T)
+    for q in rivals:
+        # a fit the readings allow as well as the current one: where the two differ the
+        # readings cannot tell (its departure at the readings is left out, so that they
+        # do not settle it)
+        with np.errstate(all="ignore"):
+            dev = np.nan_to_num(model.predict_deg(np.asarray(q, float), g, t)) - f
+        dev[n_set:] = 0.0
+        parts.append(dev[:, None])
     features = np.concatenate(parts, axis=1) if parts else np.zeros((len(g), 0))
     width = specular_half_width(model, values, g)
     lobe = np.arcsinh((-g - t) / width)
