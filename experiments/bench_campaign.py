@@ -91,13 +91,55 @@ def misfit_glossy(seed: int):
     return Measurements(gamma_deg=g, theta_deg=t, power=power, name=f"misfit-glossy-{seed}")
 
 
+def saturating(seed: int):
+    """A dense scan of a glossy material whose specular share saturates: ``u_as
+    cos^v_as(gamma)`` reaches 1 inside the measured range, and all the power is specular
+    beyond (as on the real Ibiza and golden yellow tables), with a halo around the lobe
+    in half of them (then the model misfits it) and grids of 3-9 angles of incidence."""
+    from irreflect.data import Measurements
+    from irreflect.models import two_lobe_power
+
+    rng = np.random.default_rng([seed, 4242])
+    n_g = int(rng.integers(3, 10))
+    top = rng.uniform(55.0, 80.0)
+    gammas = -np.unique(np.round(np.r_[0.0, top, rng.uniform(0.0, top, n_g - 2)], 2))
+    v_as = -rng.uniform(1.0, 5.0)
+    at = rng.uniform(0.45, 0.95) * top  # the share reaches 1 here
+    u_as = float(np.cos(np.radians(at)) ** -v_as)
+    u_nd, v_nd = 10 ** rng.uniform(-0.5, 0.7), rng.uniform(-2.0, 6.0)
+    u_ns, v_ns = 10 ** rng.uniform(1.3, 3.8), rng.uniform(-1.5, 1.5)
+    halo = rng.uniform(0.1, 0.3) if rng.random() < 0.5 else 0.0
+    step = float(rng.choice([0.5, 0.8, 1.0, 2.0]))
+    level = 10 ** rng.uniform(-2, 2)
+    noise = 10 ** rng.uniform(-2.5, -1.5)
+    g_all, t_all = [], []
+    for g in gammas:
+        th = np.arange(-85.0, 85.0 + 1e-9, step)
+        th = np.unique(np.round(np.r_[th, -g + np.arange(-3.0, 3.01, 0.5)], 4))
+        th = th[np.abs(th) <= 85.0]
+        g_all.append(np.full(th.size, g))
+        t_all.append(th)
+    g, t = np.concatenate(g_all), np.concatenate(t_all)
+    gr, tr = np.radians(g), np.radians(t)
+    clean = two_lobe_power(gr, tr, u_as, v_as, u_nd, v_nd, u_ns, v_ns, level)
+    if halo:
+        wide = two_lobe_power(gr, tr, u_as, v_as, u_nd, v_nd, u_ns / 10.0, v_ns, level)
+        diffuse = two_lobe_power(gr, tr, 0.0, 0.0, u_nd, v_nd, u_ns, v_ns, level)
+        share = np.minimum(1.0, u_as * np.cos(gr) ** v_as)
+        spec, spec_wide = clean - (1 - share) * diffuse, wide - (1 - share) * diffuse
+        clean = (1 - share) * diffuse + (1 - halo) * spec + halo * spec_wide
+    power = clean * (1 + noise * rng.standard_normal(clean.size))
+    return Measurements(gamma_deg=g, theta_deg=t, power=power, name=f"saturating-{seed}")
+
+
 def generated(n: int, first: int = 0) -> list[tuple[str, str, int]]:
     """(label, kind, seed) of the generated tables: ``n`` of each family, seeds from
     ``first`` (a new ``first`` gives tables no rule was tuned on)."""
     out = []
     for seed in range(first, first + n):
         out += [(f"glossy-{seed}", "glossy", seed), (f"matte-{seed}", "matte", seed),
-                (f"wild-{seed}", "wild", seed), (f"misfit-glossy-{seed}", "misfit", seed)]
+                (f"wild-{seed}", "wild", seed), (f"misfit-glossy-{seed}", "misfit", seed),
+                (f"saturating-{seed}", "saturating", seed)]
     effects = ("incidence_reflectance", "offspecular_peak", "specular_halo", "angle_offset",
                "retroreflection", "bump")
     for seed in range(first, first + max(1, n // 2)):
@@ -115,6 +157,8 @@ def load(kind: str, seed: int):
         return wild_material(seed).measurements
     if kind == "misfit":
         return misfit_glossy(seed)
+    if kind == "saturating":
+        return saturating(seed)
     if kind.startswith("hidden:"):
         from irreflect.diagnose.hidden import hidden_case
 

@@ -330,6 +330,34 @@ def test_add_refuses_a_repeated_reading_and_mixed_sigma():
     assert campaign.n_measured == 2
 
 
+def test_readings_of_zero_power_or_negative_noise_are_taken(tmp_path):
+    # beyond the lobe of a glossy material whose share saturates a reading is 0, and a
+    # lone reading of additive noise is as often below 0 as above: a whole table of either
+    # would be refused, but they are a campaign's readings so far (a generated saturating
+    # material and a noisy one stopped the benchmark's replays on them)
+    from irreflect.data import validate_table
+
+    tool = Instrument(gammas_deg=(-20, -40, -60))
+    zeros = [(-60.0, 0.0, 0.0), (-40.0, -30.0, 0.0)]
+    with pytest.raises(DataError, match="power is 0 in every row"):
+        validate_table(pd.DataFrame(zeros, columns=["gamma_deg", "theta_deg", "power"]))
+    campaign = Campaign(tool, zeros)
+    campaign.add([(-20.0, 50.0, -0.02)])
+    campaign.add([(-20.0, 20.0, 1e-120)])
+    assert campaign.n_measured == 4 and campaign.fit is None
+    assert "continue" in campaign.verdict().text
+    assert len(campaign.propose(2)) == 2
+    # the same through 'irreflect next'
+    measured = tmp_path / "measured.csv"
+    measured.write_text("gamma_deg,theta_deg,power\n-60,0,0\n-40,-30,-0.5\n")
+    code, stdout, err = _run(["next", measured, "--n", "2", "--gammas", "-20", "-40", "-60"])
+    assert code == 0, err
+    assert "verdict: continue" in stdout
+    # a whole table of them is still refused by the commands that fit it
+    code, _, err = _run(["fit", measured])
+    assert code != 0 and "power must be >= 0 up to noise" in err
+
+
 # ----------------------------------------------------------------------------- commands
 def test_next_on_a_header_only_table_writes_the_opening(tmp_path):
     measured = tmp_path / "measured.csv"

@@ -305,8 +305,13 @@ def _check_negative_power(power, sigma, source, rows):
 
 def validate_table(df: pd.DataFrame, source: str = "table", *,
                    average_duplicates: bool = False, name: str | None = None,
-                   _row_lines=None) -> Measurements:
-    """Check a table and convert it to :class:`Measurements` (see the module docstring)."""
+                   partial: bool = False, _row_lines=None) -> Measurements:
+    """Check a table and convert it to :class:`Measurements` (see the module docstring).
+
+    ``partial``: the table is a campaign's readings so far, not a table to fit on its own:
+    power may be 0 (or tiny) in every row and a reading may be negative noise, which a
+    whole table would refuse (a reading beyond the lobe of a glossy material is 0; one
+    reading of additive noise is as often below 0 as above)."""
     if not isinstance(df, pd.DataFrame):
         _fail(f"{source}: expected a table (pandas DataFrame), found {type(df).__name__}")
     rows = _Rows(_row_lines)
@@ -342,6 +347,8 @@ def validate_table(df: pd.DataFrame, source: str = "table", *,
             "unweighted"
         )
     peak = float(np.max(np.abs(power)))
+    if partial and peak < POWER_RANGE[0]:
+        peak = POWER_RANGE[0]
     if peak == 0:
         _fail(f"{source}: power is 0 in every row: nothing to fit; check the detector and the "
               "column")
@@ -371,7 +378,7 @@ def validate_table(df: pd.DataFrame, source: str = "table", *,
     if merged:
         notes.append(f"{source}: averaged {merged} duplicated (gamma, theta) row(s)")
         rows = _Rows()  # row numbers no longer match the file
-    note = _check_negative_power(power, sigma, source, rows)
+    note = None if partial else _check_negative_power(power, sigma, source, rows)
     if note:
         notes.append(note)
     for note in notes:  # said once per table; the CLI prints them as "irreflect: note: ..."
@@ -386,8 +393,10 @@ def validate_table(df: pd.DataFrame, source: str = "table", *,
 _SUFFIXES = (".csv", ".txt", "", ".parquet", ".pq")
 
 
-def read_measurements(path, *, average_duplicates: bool = False) -> Measurements:
-    """Read and validate a CSV or Parquet measurement table.
+def read_measurements(path, *, average_duplicates: bool = False,
+                      partial: bool = False) -> Measurements:
+    """Read and validate a CSV or Parquet measurement table (``partial``: a campaign's
+    readings so far, see :func:`validate_table`).
 
     CSV: UTF-8 text (a byte-order mark is allowed), a header line, commas between fields,
     ``.`` as decimal point, ``#`` starts a comment. Every row must have as many fields as
@@ -420,7 +429,8 @@ def read_measurements(path, *, average_duplicates: bool = False) -> Measurements
         lines = None
     else:
         df, lines = _read_csv(path, raw)
-    return validate_table(df, str(path), average_duplicates=average_duplicates, name=path.stem,
+    return validate_table(df, str(path), average_duplicates=average_duplicates,
+                          partial=partial, name=path.stem,
                           _row_lines=lines)
 
 

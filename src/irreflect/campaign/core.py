@@ -253,7 +253,7 @@ class Campaign:
                 f"{combined['theta_deg'].iloc[i]:g}) is given twice: average the "
                 "repeated readings into one row, or remove one")
         frame = combined.copy()
-        validate_table(frame, self.name)  # the table's own checks (signs, power, sigma)
+        validate_table(frame, self.name, partial=True)  # the table's checks (signs, sigma)
         self._rows = combined.reset_index(drop=True)
         self._sigma = has_sigma
         if self._state is not None and self._state.fit is not None:
@@ -691,5 +691,5 @@ def _as_rows(rows) -> pd.DataFrame:
         frame = pd.DataFrame(arr, columns=cols)
     if not len(frame):
         return pd.DataFrame(columns=["gamma_deg", "theta_deg", "power"])
-    meas = validate_table(frame.copy(), "readings")
+    meas = validate_table(frame.copy(), "readings", partial=True)
     return meas.to_frame().drop(columns=["material"], errors="ignore")
