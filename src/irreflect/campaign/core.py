@@ -95,19 +95,53 @@ def range_weights(range_deg: np.ndarray, gamma_deg, theta_deg) -> np.ndarray:
     campaign within 0.01 of the all-points fit from 12 readings on the satin (never, before:
     its 25th reading, 7 deg off the mirror at 69 deg, cost 0.008 of R^2), 12 on the iris
     film (17) and 13 on the colodur paint (18)."""
+    nearest, size = range_cells(range_deg, gamma_deg, theta_deg)
+    if size == 0:
+        return np.ones(0)
+    w = np.maximum(np.bincount(nearest, minlength=size).astype(float), 1.0)
+    return w / w.mean()
+
+
+def range_cells(range_deg: np.ndarray, gamma_deg, theta_deg) -> tuple[np.ndarray, int]:
+    """The reading nearest to each of the range's settings (gamma and theta in degrees
+    alike; the range thinned to :data:`MAX_RANGE_POINTS`), and the number of readings."""
     g = np.asarray(gamma_deg, float)
     t = np.asarray(theta_deg, float)
     if g.size == 0:
-        return np.ones(0)
-    r = np.asarray(range_deg, float)
-    if len(r) > MAX_RANGE_POINTS:
-        r = r[thin_settings(r, MAX_RANGE_POINTS)]
+        return np.zeros(0, int), 0
+    r = _thinned(range_deg)
     nearest = np.empty(len(r), int)
     for lo in range(0, len(r), 4096):  # in blocks: memory stays small on a fine range
         block = r[lo:lo + 4096]
         d = (block[:, None, 0] - g[None]) ** 2 + (block[:, None, 1] - t[None]) ** 2
         nearest[lo:lo + 4096] = np.argmin(d, axis=1)
-    w = np.maximum(np.bincount(nearest, minlength=g.size).astype(float), 1.0)
+    return nearest, g.size
+
+
+def _thinned(range_deg) -> np.ndarray:
+    r = np.asarray(range_deg, float)
+    if len(r) > MAX_RANGE_POINTS:
+        r = r[thin_settings(r, MAX_RANGE_POINTS)]
+    return r
+
+
+def power_weights(nearest: np.ndarray, f_range: np.ndarray, f_read: np.ndarray, *,
+                  cap: float = 0.0, floor: float = 0.0) -> np.ndarray:
+    """The power-aware quadrature of the range's squared error: reading ``i`` stands for
+    the sum over its cell (``nearest == i``) of ``(f_r / f_i)^2``, ``f`` a fit's predicted
+    power on the range settings (``f_range``) and at the readings (``f_read``), plus
+    ``floor`` times its peak over the range; the ratio capped at ``cap`` (0: not capped).
+    At least 1, scaled to a mean of 1. A relative misfit at a reading is a misfit in power
+    units in proportion to the predicted power over the range it stands for."""
+    fr = np.abs(np.nan_to_num(np.asarray(f_range, float), nan=0.0, posinf=0.0, neginf=0.0))
+    fi = np.abs(np.nan_to_num(np.asarray(f_read, float), nan=0.0, posinf=0.0, neginf=0.0))
+    peak = max(float(np.max(fr)) if fr.size else 0.0, float(np.max(fi)) if fi.size else 0.0,
+               1e-300)
+    add = max(float(floor), 1e-6) * peak
+    ratio = (fr + add) / (fi[nearest] + add)
+    if cap and cap > 0:
+        ratio = np.minimum(ratio, cap)
+    w = np.maximum(np.bincount(nearest, weights=ratio ** 2, minlength=fi.size), 1.0)
     return w / w.mean()
 
 
@@ -363,12 +397,41 @@ class Campaign:
 
     def _fit(self, meas: Measurements, extra_starts=None) -> tuple[FitResult, Measurements]:
         """The model fitted to ``meas`` with the readings weighted by how much of the range
-        each stands for (:func:`range_weights`), and the weighted table (its sigma carries
+        each stands for (:func:`range_weights`; with ``rule.power_weights``, blended with
+        :func:`power_weights` around the latest fit, or around a count-weighted fit of the
+        same readings with ``rule.power_refit``), and the weighted table (its sigma carries
         the weights). Without a sigma column the weights are relative: the coefficients'
         standard errors are scaled by the weighted residuals, as an unweighted fit's are."""
-        power = float(self.rule.range_weights)
-        w = (range_weights(self._range, meas.gamma_deg, meas.theta_deg) ** power
-             if power else np.ones(meas.n_points))
+        rule = self.rule
+        power = float(rule.range_weights)
+        share = float(rule.power_weights)
+        if not (power or share):
+            return self._fit_weighted(meas, np.ones(meas.n_points), extra_starts)
+        nearest, size = range_cells(self._range, meas.gamma_deg, meas.theta_deg)
+        count = np.maximum(np.bincount(nearest, minlength=size).astype(float), 1.0)
+        count = (count / count.mean()) ** power
+        if not share:
+            return self._fit_weighted(meas, count, extra_starts)
+        values = self._values[max(self._values)] if self._values else None
+        if rule.power_refit or values is None:
+            res, weighted = self._fit_weighted(meas, count, extra_starts)
+            if not rule.power_refit:
+                return res, weighted
+            values = res.values
+            start = self.model.from_natural(np.asarray(values, float)[None])[0]
+            extra_starts = (start if extra_starts is None
+                            else np.vstack([start, np.atleast_2d(extra_starts)]))
+        r = _thinned(self._range)
+        with np.errstate(all="ignore"):
+            f_range = self.model.predict_deg(values, r[:, 0], r[:, 1])
+            f_read = self.model.predict_deg(values, meas.gamma_deg, meas.theta_deg)
+        quad = power_weights(nearest, f_range, f_read, cap=float(rule.power_cap),
+                             floor=float(rule.power_floor))
+        w = count ** (1.0 - share) * quad ** share
+        return self._fit_weighted(meas, w / w.mean(), extra_starts)
+
+    def _fit_weighted(self, meas: Measurements, w: np.ndarray,
+                      extra_starts=None) -> tuple[FitResult, Measurements]:
         if meas.sigma is not None:
             sigma = meas.sigma / np.sqrt(w)
         else:

@@ -70,6 +70,15 @@ class DesignRule:
     continuation : when the fit overshoots where nothing is measured, keep the continuation
         of the previous readings' fit and test the overshooting one
         (:meth:`irreflect.campaign.Campaign._choose_continuation`)
+    power_weights : the share (0 to 1, geometric blend; 0: off) of the power-aware
+        quadrature in the readings' weights: a reading stands for the sum over its cell of
+        ``(f_r / f_i)^2`` (``f`` a fit's prediction, ``r`` the cell's range settings, ``i``
+        the reading) rather than the count of the cell
+        (:func:`irreflect.campaign.core.power_weights`); the rest is the count
+    power_cap : the ratio ``f_r / f_i`` capped at this (0: not capped)
+    power_floor : ``f`` plus this share of its peak over the range
+    power_refit : the prediction ``f`` from a count-weighted fit of the same readings
+        (then refitted; two fits), instead of the previous readings' fit
     """
 
     coefficient_prior: float = 1.0
@@ -88,6 +97,10 @@ class DesignRule:
     loo_misfit: float = 0.5
     range_weights: float = 1.0
     continuation: bool = True
+    power_weights: float = 0.0
+    power_cap: float = 0.0
+    power_floor: float = 0.0
+    power_refit: bool = False
 
 
 DEFAULT_RULE = DesignRule()
