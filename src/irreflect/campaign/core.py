@@ -316,10 +316,10 @@ class Campaign:
                                                           self._settings[:, 1])
             # the leave-one-out refits on the settings, then on the readings
             weighted = state.extra["weighted"]
+            if self.rule.continuation:
+                self._choose_continuation(state, weighted)
             state.loo, state.loo_own = leave_one_out(self.model, weighted,
                                                      state.fit.values, g, t, seed=self.seed)
-            if self.rule.continuation:
-                self._choose_continuation(state, weighted, g, t)
         self._state = state
         if state.fit is not None:
             self._values[self.n_measured] = np.asarray(state.fit.values, float)
@@ -327,7 +327,7 @@ class Campaign:
         self._previous[self.n_measured] = state.range_pred
         return state
 
-    def _choose_continuation(self, state: _State, weighted: Measurements, g, t) -> None:
+    def _choose_continuation(self, state: _State, weighted: Measurements) -> None:
         """Replace the fit by the continuation of the previous readings' fit (its local
         optimum on the current readings) when the global optimum overshoots.
 
@@ -363,8 +363,6 @@ class Campaign:
             return
         state.extra["rivals"] = [np.asarray(state.fit.values, float)]
         state.fit = _relative(local, self.model, self.measurements)
-        state.loo, state.loo_own = leave_one_out(self.model, weighted, values, g, t,
-                                                 seed=self.seed)
         with np.errstate(all="ignore"):
             state.range_pred = self.model.predict_deg(values, self._settings[:, 0],
                                                       self._settings[:, 1])
