@@ -85,8 +85,11 @@ def test_subset_fits_agree_between_the_engines():
         b = fit_subsets(*args, masks[:6], engine="numpy", exhaustive=True)
         rel_exhaustive += list(np.abs(a.cost / b.cost - 1))
     # the same search: the same optimum but where rounding sends a light (15-iteration)
-    # search down another path
-    assert np.mean(np.array(rel_batched) < 1e-6) >= 0.9
+    # search down another path. The numpy engine's rounding depends on the OpenBLAS kernel
+    # the CPU selects (the compiled engine's does not): on an AMD EPYC (AVX2) 53/60 agree
+    # with the Zen/Haswell kernels and 56/60 with Sandybridge/Nehalem/Prescott
+    # (OPENBLAS_CORETYPE); CI machines with AVX-512 gave >= 54/60
+    assert np.mean(np.array(rel_batched) < 1e-6) >= 0.85
     assert np.mean(np.array(rel_exhaustive) < 1e-6) >= 0.9
 
 
