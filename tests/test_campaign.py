@@ -469,18 +469,17 @@ def test_campaign_command_prints_and_writes_the_replay(tmp_path):
     assert doc["curves"]["paper"]["r2"]["12"] < doc["reference_r2"]
 
 
-#: a glossy material whose specular share u_as cos^v_as reaches 1 near 50 deg (the fit of
-#: all points of a generated saturating table, experiments/bench_campaign.py saturating-108)
-SATURATING = np.array([0.256, -4.94, 1.256, -1.03, 60.3, -0.56, 0.151])
+#: a glossy material whose specular share u_as cos^v_as reaches 1 near 50 deg (the draw of
+#: experiments/bench_campaign.py saturating-108, with its angles and noise)
+SATURATING = np.array([0.2556, -4.958, 1.2825, -0.8777, 60.50, -0.5597, 0.1508])
 
 
-def test_a_saturating_share_is_not_left_to_interpolation_over_a_wide_gap():
-    """Three angles of incidence (0, 37, 74 deg) with the share saturated at 74: the fit
-    settles on a wrong share law (R^2 0.84) that no reading at those angles moves. The
-    verdict does not stop on it; the next reading fills the gap, and the stop is good."""
+def _saturating_campaign(rule):
+    """The campaign on a dense scan of :data:`SATURATING` (the generated table's nine
+    angles of incidence) until its verdict stops: (campaign, whys, readings at the stop)."""
     rng = np.random.default_rng(108)
     g, t = [], []
-    for gamma in (0.0, -17.65, -27.4, -29.6, -36.88, -47.5, -48.1, -51.11, -74.08):
+    for gamma in (0.0, -17.65, -27.44, -29.65, -36.88, -47.49, -48.1, -51.11, -74.08):
         th = np.unique(np.r_[np.arange(-85.0, 85.01, 1.0), -gamma + np.arange(-3, 3.01, 0.5)])
         th = th[np.abs(th) <= 85.0]
         g.append(np.full(th.size, gamma))
@@ -488,10 +487,10 @@ def test_a_saturating_share_is_not_left_to_interpolation_over_a_wide_gap():
     g, t = np.concatenate(g), np.concatenate(t)
     clean = two_lobe_power(np.radians(g), np.radians(t), *SATURATING)
     dense = Measurements(gamma_deg=g, theta_deg=t,
-                         power=clean * (1 + 0.005 * rng.standard_normal(g.size)),
+                         power=clean * (1 + 0.0106 * rng.standard_normal(g.size)),
                          name="saturating")
     source = DenseInstrument(dense)
-    campaign = Campaign(source.instrument(), seed=0)
+    campaign = Campaign(source.instrument(), seed=0, rule=rule)
     whys, stop = [], None
     for _ in range(20):
         proposal = campaign.propose(1)
@@ -502,11 +501,23 @@ def test_a_saturating_share_is_not_left_to_interpolation_over_a_wide_gap():
         if campaign.verdict().stop:
             stop = campaign.n_measured
             break
+    return campaign, dense, whys, stop
+
+
+def test_a_saturating_share_is_not_left_to_interpolation_over_a_wide_gap():
+    """Three angles of incidence (0, 37, 74 deg) with the share saturated at 74: the fit
+    may settle on a wrong share law that no reading at those angles moves. The verdict
+    does not stop while the gap is open; a reading fills it, and the stop is good."""
+    import irreflect
+    from irreflect.campaign import DesignRule
+
+    campaign, dense, whys, stop = _saturating_campaign(DesignRule())
+    reference = irreflect.fit(dense, seed=0).r2
     assert stop is not None
     assert any("in the gap |gamma| 36.88-74.08 deg" in w for w in whys), whys
-    gap_g = [abs(x) for x in campaign.measurements.gamma_deg if 36.9 < abs(x) < 74.0]
-    assert gap_g  # a reading inside the gap before the stop
-    import irreflect
-
-    reference = irreflect.fit(dense, seed=0).r2
+    assert [x for x in campaign.measurements.gamma_deg if 36.9 < abs(x) < 74.0]
     assert campaign.r2_against(dense) >= reference - 0.02
+    # without the check no proposal names the gap (on the benchmark's own noise draw of
+    # this table the campaign then stopped at R^2 0.84; on this one it recovers anyway)
+    _, _, whys, _ = _saturating_campaign(DesignRule(saturated_gap=0))
+    assert not any("in the gap" in w for w in whys)

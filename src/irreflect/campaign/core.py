@@ -64,13 +64,6 @@ STOP_MIN_EXTRA = 3
 #: The fits without the last one to ``STOP_HOLD + 1`` readings must all agree (the curve has
 #: held for that many readings).
 STOP_HOLD = 2
-#: Where the fit's specular share saturates (reaches 1) at a measured angle of incidence,
-#: no stop while the measured angles leave a gap wider than this (deg, twice the laws'
-#: correlation length in gamma, ``DesignRule.law_gamma_scale``) that the instrument could
-#: fill: a share clipped at 1 makes readings there blind to the share's law, and a fit of
-#: three angles of incidence can settle on a wrong law (a generated saturating table
-#: stopped at R^2 0.84 against 0.9999 for all points).
-SATURATED_GAP_DEG = 30.0
 #: The search of the campaign's fits (passed to :func:`irreflect.fitting.fit`), each also
 #: started from the previous readings' fit. No scipy polish of a crawling local search: on
 #: the benchmark's real sets it changed no campaign's R^2 by more than 1e-4 and took three
@@ -735,15 +728,17 @@ class Campaign:
 
     def _saturated_gap(self, state: _State) -> tuple[float, float, float] | None:
         """Where the fit's specular share reaches 1 at a measured angle of incidence: the
-        widest gap in |gamma| between measured angles wider than
-        :data:`SATURATED_GAP_DEG`, the share saturated at one of its ends, with an angle the
+        widest gap in |gamma| between measured angles wider than ``rule.saturated_gap``
+        (deg; 0: off), the share saturated at one of its ends, with an angle the
         instrument can still set inside,
         ``(low, high, gamma)`` with ``gamma`` nearest the gap's middle; else None."""
         if "saturated_gap" in state.extra:
             return state.extra["saturated_gap"]
         state.extra["saturated_gap"] = None
         names = self.model.param_names
-        if state.fit is None or "u_as" not in names or "v_as" not in names:
+        widest = float(self.rule.saturated_gap)
+        if (not widest or state.fit is None or "u_as" not in names
+                or "v_as" not in names):
             return None
         from ..models.paper import specular_share
 
@@ -759,7 +754,7 @@ class Campaign:
         best = None
         for i, (a, b) in enumerate(zip(mags[:-1], mags[1:], strict=True)):
             inside = options[(np.abs(options) > a + 1e-6) & (np.abs(options) < b - 1e-6)]
-            if (b - a > SATURATED_GAP_DEG and inside.size and (full[i] or full[i + 1])
+            if (b - a > widest and inside.size and (full[i] or full[i + 1])
                     and (best is None or b - a > best[1] - best[0])):
                 c = float(inside[np.argmin(np.abs(np.abs(inside) - (a + b) / 2))])
                 best = (float(a), float(b), c)

@@ -83,8 +83,15 @@ class DesignRule:
         (:func:`_share_feature`: informative where the fit's share saturates at 1) rather
         than along ``u_as`` (zero there); off: on the real sets it took golden yellow from
         13 readings to 16 and changed no other, and the saturating tables it was meant for
-        are served by the verdict's saturated gap
-        (:data:`irreflect.campaign.core.SATURATED_GAP_DEG`)
+        are served by ``saturated_gap``
+    saturated_gap : deg; where the fit's specular share saturates (reaches 1) at a measured
+        angle of incidence, no stop while the measured angles leave a gap wider than this
+        next to it that the instrument could fill, and once that is all that keeps the
+        verdict from stopping, the next proposal fills it
+        (:meth:`irreflect.campaign.Campaign._saturated_gap`; 0: off). A clipped share makes
+        readings there blind to the share's law, and a fit of three angles of incidence
+        can settle on a wrong law: a generated saturating table stopped at R^2 0.84
+        against 0.9999 for all points. Twice the laws' correlation length in gamma
     """
 
     coefficient_prior: float = 1.0
@@ -108,6 +115,7 @@ class DesignRule:
     power_floor: float = 0.0
     power_refit: bool = True
     share_law: bool = False
+    saturated_gap: float = 30.0
 
 
 DEFAULT_RULE = DesignRule()
