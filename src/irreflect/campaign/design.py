@@ -79,11 +79,6 @@ class DesignRule:
     power_floor : ``f`` plus this share of its peak over the range
     power_refit : the prediction ``f`` from a count-weighted fit of the same readings
         (then refitted; two fits), instead of the previous readings' fit
-    share_law : the share's law deviation taken through the share itself
-        (:func:`_share_feature`: informative where the fit's share saturates at 1) rather
-        than along ``u_as`` (zero there); off: on the real sets it took golden yellow from
-        13 readings to 16 and changed no other, and the saturating tables it was meant for
-        are served by ``saturated_gap``
     saturated_gap : deg; where the fit's specular share saturates (reaches 1) at a measured
         angle of incidence, no stop while the measured angles leave a gap wider than this
         next to it that the instrument could fill, and once that is all that keeps the
@@ -114,7 +109,6 @@ class DesignRule:
     power_cap: float = 10.0
     power_floor: float = 0.0
     power_refit: bool = True
-    share_law: bool = False
     saturated_gap: float = 30.0
 
 
@@ -377,8 +371,6 @@ def _law_terms(model, rule: DesignRule, values, g, t, f, width) -> list:
         for name, sd in rule.law_sd.items():
             if name == "K" and "K" in names:
                 law.append((f, sd))
-            elif name == "u_as" and "v_as" in names and rule.share_law:
-                law.append((_share_feature(model, values, g, t), sd))
             elif name in names:
                 i = names.index(name)
                 v = values[i] if values[i] > 0 else 1e-3
@@ -404,27 +396,6 @@ def _law_terms(model, rule: DesignRule, values, g, t, f, width) -> list:
         tail = np.clip(peak, 0.0, None) / (1.0 + ratio) - cos_lobe
         law.append((tail, rule.tail_sd))
     return law
-
-
-def _share_feature(model, values, g, t) -> np.ndarray:
-    """A relative deviation of the specular share, ``a_s d f / d a_s``, at every setting:
-    ``a_s (f_spec - f_diffuse)`` with ``f_spec`` and ``f_diffuse`` the model with all the
-    power in one lobe (the model is linear in the share). Where ``u_as cos^v_as`` is
-    below 1 this is the derivative along ``u_as`` times ``u_as``; where the fit's share
-    saturates (is 1) that derivative is zero, yet the material's share may stay below 1
-    there: the term keeps the readings there informative about the share's law."""
-    from ..models.paper import specular_share
-
-    names = model.param_names
-    iu, iv = names.index("u_as"), names.index("v_as")
-    spec, diff = np.array(values, float), np.array(values, float)
-    spec[iu], spec[iv] = 1.0, 0.0
-    diff[iu], diff[iv] = 0.0, 0.0
-    with np.errstate(all="ignore"):
-        a = specular_share(values[iu], values[iv], np.cos(np.radians(g)))
-        gap = (np.nan_to_num(model.predict_deg(spec, g, t))
-               - np.nan_to_num(model.predict_deg(diff, g, t)))
-    return np.nan_to_num(a * gap)
 
 
 # ----------------------------------------------------------------------------- scoring
