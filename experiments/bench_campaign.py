@@ -349,14 +349,26 @@ def main(argv=None) -> int:
         import dataclasses
 
         from irreflect.campaign.design import DEFAULT_RULE
+        from irreflect.errors import IrreflectError
 
         changes = {}
+        knobs = [f.name for f in dataclasses.fields(DEFAULT_RULE)]
         for item in args.rule:
             key, _, value = item.partition("=")
-            current = getattr(DEFAULT_RULE, key)  # an unknown knob fails here, loudly
-            changes[key] = (value.lower() in ("1", "true", "yes") if isinstance(current, bool)
-                            else type(current)(value))
-        rule = dataclasses.replace(DEFAULT_RULE, **changes)
+            if key not in knobs:
+                parser.error(f"--rule {item}: expected KNOB=VALUE with a knob of DesignRule "
+                             f"({', '.join(knobs)}), found '{key}'")
+            current = getattr(DEFAULT_RULE, key)
+            try:
+                changes[key] = (value.lower() in ("1", "true", "yes")
+                                if isinstance(current, bool) else type(current)(value))
+            except (TypeError, ValueError):
+                parser.error(f"--rule {item}: expected a {type(current).__name__} for {key}, "
+                             f"found '{value}'")
+        try:
+            rule = dataclasses.replace(DEFAULT_RULE, **changes)
+        except IrreflectError as exc:
+            parser.error(f"--rule: {exc}")
         print(f"rule: {changes}")
     jobs_r, jobs_g = [], []
     if not args.generated_only:

@@ -521,3 +521,13 @@ def test_a_saturating_share_is_not_left_to_interpolation_over_a_wide_gap():
     # this table the campaign then stopped at R^2 0.84; on this one it recovers anyway)
     _, _, whys, _ = _saturating_campaign(DesignRule(saturated_gap=0))
     assert not any("in the gap" in w for w in whys)
+
+
+@pytest.mark.parametrize("knob,value", [("saturated_gap", -5.0), ("power_weights", 2.0),
+                                        ("power_cap", float("nan")), ("range_weights", -1.0)])
+def test_design_rule_refuses_a_knob_out_of_its_range(knob, value):
+    from irreflect.campaign import DesignRule
+
+    with pytest.raises(IrreflectError, match=knob):
+        DesignRule(**{knob: value})
+    assert getattr(DesignRule(**{knob: 0.0}), knob) == 0.0

@@ -44,6 +44,7 @@ import numpy as np
 from ..errors import FitWarning
 from ..fitting import FitResult, fit_subsets
 from ..protocol.core import lobe_half_width_deg
+from ..validation import check_number
 
 
 @dataclass(frozen=True)
@@ -110,6 +111,14 @@ class DesignRule:
     power_floor: float = 0.0
     power_refit: bool = True
     saturated_gap: float = 30.0
+
+    def __post_init__(self):
+        # the knobs this file's defaults rest on, checked where a caller sets them
+        check_number(self.power_weights, "power_weights", low=0.0, high=1.0)
+        check_number(self.power_cap, "power_cap", low=0.0)
+        check_number(self.power_floor, "power_floor", low=0.0)
+        check_number(self.range_weights, "range_weights", low=0.0)
+        check_number(self.saturated_gap, "saturated_gap", low=0.0, high=180.0)
 
 
 DEFAULT_RULE = DesignRule()
