@@ -160,6 +160,30 @@ def test_room_refuses_a_material_that_predicts_negative_power(tmp_path, capsys):
     assert "UNPHYSICAL: its model predicts negative power" in capsys.readouterr().out
 
 
+@pytest.mark.parametrize("a_1, a_2, flag_runs", [(1.3, -0.3, True), (1.05, 0.2, False)])
+def test_an_inline_scene_material_follows_the_material_file_rule(tmp_path, capsys, a_1, a_2,
+                                                                 flag_runs):
+    """A material given in the scene (model + params) is judged as a material file is: a
+    share outside [0, 1] that makes the model predict negative power is unphysical (refused
+    unless --allow-unphysical); one outside the bounds that does not is refused."""
+    params = (f"{{t_1 = 0.0, n_1 = 1.0, a_1 = {a_1}, t_2 = 1.0, n_2 = 50.0, a_2 = {a_2}, "
+              "K = 1.0}")
+    scene = tmp_path / "tiny.toml"
+    scene.write_text(ROOM.replace('file = "{file}"',
+                                  f'model = "n-lobe:2"\nparams = {params}'))
+    args = ["room", str(scene), "--out", str(tmp_path / "out"), "--rays", "200",
+            "--bounces", "1", "--no-figures", "--quiet"]
+    capsys.readouterr()
+    assert main(args) != 0
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "a_1 of n-lobe:2 must be a number from 0 to 1" in err[0]
+    assert ("--allow-unphysical" in err[0]) is flag_runs
+    assert not (tmp_path / "out").exists()
+    assert (main([*args, "--allow-unphysical"]) == 0) is flag_runs
+    if flag_runs:
+        assert "UNPHYSICAL: its model predicts negative power" in capsys.readouterr().out
+
+
 def test_reproduce_refuses_it_too_before_any_work(tmp_path, capsys):
     scene = _unphysical_material(tmp_path)
     assert main(["reproduce", "--quick", "--out", str(tmp_path / "report"), "--no-progress",

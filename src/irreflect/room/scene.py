@@ -38,7 +38,6 @@ from .materials import (
     BRDFS,
     REFLECTANCE,
     Material,
-    check_params,
     from_model,
     lambertian,
     load_material,
@@ -423,7 +422,9 @@ def _material(ctx: _Ctx, name: str, spec: dict) -> Material:
             ctx.fail(key, "model needs params = {NAME = VALUE, ...} (see 'irreflect models')")
         if "reflectance" not in spec:
             ctx.fail(key, 'give reflectance = RHO (total reflectance, 0..1) or "K"')
-        check_params(spec["model"], spec["params"], f"[materials.{name}]: params")
+        # a coefficient outside the model's bounds: refused by from_model unless the model
+        # then predicts negative power (unphysical: refused by irreflect room unless
+        # --allow-unphysical), as for a material file
         return from_model(spec["model"], spec["params"], spec["reflectance"], name=name,
                           source=f"{spec['model']} (scene)",
                           gamma_max_deg=spec.get("gamma_max_deg"))
