@@ -97,6 +97,29 @@ def test_positive_gammas_read_as_magnitudes_and_said_once(tmp_path):
     np.testing.assert_array_equal(m.theta_deg, [0, 10, 5])  # mirror stays on +theta
 
 
+@pytest.mark.parametrize("seed", [1, 2, 3])
+def test_a_glossy_table_in_the_mirrored_frame_reads_as_the_paper_frame(seed):
+    """gamma >= 0 with the readings peaking at theta = -gamma (the paper's frame mirrored):
+    both angles change sign. The same table with only gamma as magnitudes keeps theta."""
+    from irreflect.synthetic import synthetic_material
+
+    m = synthetic_material(seed, "glossy").measurements
+    df = pd.DataFrame({"gamma_deg": m.gamma_deg, "theta_deg": m.theta_deg, "power": m.power})
+    with pytest.warns(DataNotice, match="paper's frame mirrored"):
+        mirrored = validate_table(df.assign(gamma_deg=-df.gamma_deg, theta_deg=-df.theta_deg))
+    with pytest.warns(DataNotice, match="read as magnitudes"):
+        magnitudes = validate_table(df.assign(gamma_deg=df.gamma_deg.abs()))
+    for read in (mirrored, magnitudes):
+        np.testing.assert_array_equal(read.gamma_deg, m.gamma_deg)
+        np.testing.assert_array_equal(read.theta_deg, m.theta_deg)
+    # a matte curve has no peak to tell the frames apart: magnitudes, theta kept
+    flat = pd.DataFrame({"gamma_deg": [30.0] * 5, "theta_deg": [-40.0, -30, 0, 30, 40],
+                         "power": [1.0, 1.1, 1.2, 1.1, 1.0]})
+    with pytest.warns(DataNotice, match="read as magnitudes"):
+        read = validate_table(flat)
+    np.testing.assert_array_equal(read.theta_deg, flat.theta_deg)
+
+
 def test_small_negative_power_is_kept_and_reported():
     df = pd.DataFrame({"gamma_deg": [-10, -10, -10], "theta_deg": [0, 10, 20],
                        "power": [1.0, 0.5, -0.01]})

@@ -278,6 +278,25 @@ def _merge_duplicates(gamma, theta, power, sigma, source, rows, average):
     return gamma, theta, power, sigma, 0
 
 
+def _peak_sides(gamma, theta, power) -> list[int]:
+    """For each angle of incidence (a magnitude above 2 deg with readings on both sides of
+    the normal): +1 when its highest reading lies at the mirror of the magnitude frame
+    (theta = +|gamma|), -1 when at theta = -|gamma|, 0 when neither or both (a curve with
+    no clear specular peak)."""
+    sides = []
+    for g in np.unique(np.abs(gamma)):
+        at = np.abs(np.abs(gamma) - g) < 1e-9
+        t, p = theta[at], power[at]
+        if g < 2.0 or t.size < 4 or not (np.any(t > 0) and np.any(t < 0)):
+            continue
+        step = float(np.median(np.diff(np.unique(t)))) if np.unique(t).size > 1 else 1.0
+        near = max(3.0, 1.5 * step)
+        top = float(t[int(np.argmax(p))])
+        plus, minus = abs(top - g) <= near, abs(top + g) <= near
+        sides.append(int(plus) - int(minus))
+    return sides
+
+
 def _check_negative_power(power, sigma, source, rows):
     """Negative powers: only small noise around zero (else one line); returns the note on
     those kept, or None."""
@@ -365,10 +384,19 @@ def validate_table(df: pd.DataFrame, source: str = "table", *,
             "ambiguous: use the paper's convention (all <= 0, source side) or magnitudes (all >= 0)"
         )
     if positive:
-        gamma = -gamma
-        note = (f"{source}: all gamma_deg >= 0, read as magnitudes (gamma = -|gamma|) with the "
-                "mirror direction on the positive-theta side")
-        notes.append(note)
+        sides = [] if partial else _peak_sides(gamma, theta, power)
+        if sides and all(side < 0 for side in sides):
+            # the readings peak at theta = -gamma in the file's own signs: the paper's frame
+            # mirrored (source on the positive side), so theta turns with gamma
+            gamma, theta = -gamma, -theta
+            notes.append(f"{source}: all gamma_deg >= 0 and the readings peak at theta = "
+                         "-gamma at every angle of incidence: read as the paper's frame "
+                         "mirrored (gamma and theta both change sign, the mirror direction "
+                         "stays theta = -gamma)")
+        else:
+            gamma = -gamma
+            notes.append(f"{source}: all gamma_deg >= 0, read as magnitudes (gamma = "
+                         "-|gamma|) with the mirror direction on the positive-theta side")
     material = None
     if "material" in df.columns:
         mats = df["material"].dropna().astype(str).unique()
