@@ -112,6 +112,10 @@ def test_a_glossy_table_in_the_mirrored_frame_reads_as_the_paper_frame(seed):
     for read in (mirrored, magnitudes):
         np.testing.assert_array_equal(read.gamma_deg, m.gamma_deg)
         np.testing.assert_array_equal(read.theta_deg, m.theta_deg)
+    # the paper's gamma with theta counted the other way: kept, and said
+    with pytest.warns(DataNotice, match="peak at theta = gamma"):
+        flipped = validate_table(df.assign(theta_deg=-df.theta_deg))
+    np.testing.assert_array_equal(flipped.theta_deg, -m.theta_deg)
     # a matte curve has no peak to tell the frames apart: magnitudes, theta kept
     flat = pd.DataFrame({"gamma_deg": [30.0] * 5, "theta_deg": [-40.0, -30, 0, 30, 40],
                          "power": [1.0, 1.1, 1.2, 1.1, 1.0]})

@@ -397,6 +397,13 @@ def validate_table(df: pd.DataFrame, source: str = "table", *,
             gamma = -gamma
             notes.append(f"{source}: all gamma_deg >= 0, read as magnitudes (gamma = "
                          "-|gamma|) with the mirror direction on the positive-theta side")
+    elif not partial:
+        sides = _peak_sides(gamma, theta, power)
+        if sides and all(side < 0 for side in sides):
+            notes.append(f"{source}: the readings peak at theta = gamma (the source direction "
+                         "in the paper's convention) at every angle of incidence, not at the "
+                         "mirror theta = -gamma: if theta was counted positive on the source "
+                         "side, change its sign (a retroreflector may peak there)")
     material = None
     if "material" in df.columns:
         mats = df["material"].dropna().astype(str).unique()
