@@ -124,6 +124,26 @@ def test_a_glossy_table_in_the_mirrored_frame_reads_as_the_paper_frame(seed):
     np.testing.assert_array_equal(read.theta_deg, flat.theta_deg)
 
 
+def test_additive_noise_on_dark_readings_is_kept_and_an_offset_is_not():
+    """Without a sigma column, negative readings deeper than 2 % of the largest are kept
+    when they look like noise around zero (their own RMS sets the allowance); a sign
+    error or a detector offset is still refused."""
+    rng = np.random.default_rng(3)
+    theta = np.arange(-85.0, 86.0, 2.5)
+    lobe = 1000.0 * np.exp(-0.5 * ((theta - 30.0) / 3.0) ** 2)  # a mirror-like material
+    power = lobe + 30.0 * rng.standard_normal(theta.size)  # additive noise, 3 % of the peak
+    assert power.min() < -0.02 * power.max()
+    df = pd.DataFrame({"gamma_deg": -30.0, "theta_deg": theta, "power": power})
+    with pytest.warns(DataNotice, match="show an additive noise of"):
+        m = validate_table(df)
+    np.testing.assert_array_equal(m.power, power)
+    with pytest.raises(DataError, match="power must be >= 0 up to noise"):
+        validate_table(df.assign(power=-power))  # the column's sign
+    offset = lobe - 80.0 + 5.0 * rng.standard_normal(theta.size)  # dark readings all at -80
+    with pytest.raises(DataError, match="power must be >= 0 up to noise"):
+        validate_table(df.assign(power=offset))
+
+
 def test_small_negative_power_is_kept_and_reported():
     df = pd.DataFrame({"gamma_deg": [-10, -10, -10], "theta_deg": [0, 10, 20],
                        "power": [1.0, 0.5, -0.01]})

@@ -30,8 +30,11 @@ from .validation import MAX_FILE_BYTES, MAX_TABLE_ROWS, check_real_array, short_
 REQUIRED = ("gamma_deg", "theta_deg", "power")
 OPTIONAL = ("sigma", "material")
 #: A negative power is accepted as noise around zero only down to this fraction of the
-#: table's maximum power (or 4 sigma, when sigma is given).
+#: table's maximum power (or 4 sigma, when sigma is given; or, without sigma, 5 times the
+#: noise the negative readings themselves show, up to NEGATIVE_NOISE_MAX of the maximum:
+#: :func:`_negative_noise`).
 NEGATIVE_POWER_TOLERANCE = 0.02
+NEGATIVE_NOISE_MAX = 0.05
 #: The largest |power| of a table must lie in this range (squares and sums of squares of
 #: the fit stay finite and above underflow); any unit can be rescaled into it.
 POWER_RANGE = (1e-100, 1e100)
@@ -297,14 +300,40 @@ def _peak_sides(gamma, theta, power) -> list[int]:
     return sides
 
 
+def _negative_noise(power) -> float | None:
+    """The additive noise (1 sigma) a table without a sigma column shows through its
+    negative readings, when they look like noise around zero: at least 5 of them, the
+    largest |power| positive (not a sign error), as many small positive readings (up to
+    the deepest negative one) as half the negatives (noise is symmetric; a detector offset
+    pushes the dark readings all one way), and the deepest within 5 times their RMS (no
+    lone outlier). None otherwise."""
+    neg = power[power < 0]
+    peak = float(np.max(np.abs(power)))
+    if neg.size < 5 or not np.max(power) >= peak:
+        return None
+    rms = float(np.sqrt(np.mean(neg ** 2)))
+    deepest = float(-neg.min())
+    small = int(np.sum((power > 0) & (power <= deepest)))
+    if small < 0.5 * neg.size or deepest > 5.0 * rms or rms > NEGATIVE_NOISE_MAX * peak:
+        return None
+    return rms
+
+
 def _check_negative_power(power, sigma, source, rows):
     """Negative powers: only small noise around zero (else one line); returns the note on
     those kept, or None."""
     neg = power < 0
     if neg.any():
         limit = NEGATIVE_POWER_TOLERANCE * max(np.max(np.abs(power)), 1e-300)
+        noise = None
         if sigma is not None:
             limit = np.maximum(limit, 4 * sigma)
+        else:
+            noise = _negative_noise(power)
+            if noise is not None and 5.0 * noise > limit:
+                limit = 5.0 * noise
+            else:
+                noise = None
         too_neg = power < -np.broadcast_to(limit, power.shape)
         if too_neg.any():
             i = int(np.nonzero(too_neg)[0][0])
@@ -317,6 +346,11 @@ def _check_negative_power(power, sigma, source, rows):
                    f"is kept; without it, down to -{NEGATIVE_POWER_TOLERANCE:.0%} of the "
                    "largest power)")
             )
+        if noise is not None:
+            return (f"{source}: {int(neg.sum())} negative power value(s) kept as noise around "
+                    f"zero (they show an additive noise of {noise:.3g}, "
+                    f"{noise / np.max(power):.1%} of the largest power; give a sigma column "
+                    "to weight the fit by it)")
         return (f"{source}: {int(neg.sum())} slightly negative power value(s) kept as noise "
                 "around zero")
     return None

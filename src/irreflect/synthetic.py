@@ -244,6 +244,8 @@ def wild_material(seed: int) -> SyntheticTable:
     else:
         s = np.sqrt((level * clean) ** 2 + (0.2 * level * clean.max()) ** 2)
     power = clean + s * rng.standard_normal(clean.size)
+    # the reader refuses sigma below 1e-12 of the largest |power| (weights it cannot fit)
+    s = np.maximum(s, 1.01e-12 * np.max(np.abs(power)))
     meas = Measurements(gamma_deg=g, theta_deg=t, power=power,
                         sigma=s if with_sigma else None, name=f"wild-{kind}-{seed}")
     return SyntheticTable(meas, "two-lobe", params, clean, kind, "wild", seed)
