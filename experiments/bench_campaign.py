@@ -360,11 +360,28 @@ def main(argv=None) -> int:
                              f"({', '.join(knobs)}), found '{key}'")
             current = getattr(DEFAULT_RULE, key)
             try:
-                changes[key] = (value.lower() in ("1", "true", "yes")
-                                if isinstance(current, bool) else type(current)(value))
+                if isinstance(current, bool):
+                    changes[key] = value.lower() in ("1", "true", "yes")
+                elif isinstance(current, tuple | dict):
+                    # lobe_factors=0.1,10 or lobe_factors=[0.1,10]; law_sd={"u_as":0.5}
+                    import json
+
+                    text = value if value.lstrip().startswith(("[", "{")) else f"[{value}]"
+                    parsed = json.loads(text)
+                    if isinstance(current, tuple):
+                        changes[key] = tuple(float(x) for x in parsed)
+                    elif isinstance(parsed, dict):
+                        changes[key] = {**current, **{str(k): float(v)
+                                                      for k, v in parsed.items()}}
+                    else:
+                        raise ValueError(value)
+                else:
+                    changes[key] = type(current)(value)
             except (TypeError, ValueError):
-                parser.error(f"--rule {item}: expected a {type(current).__name__} for {key}, "
-                             f"found '{value}'")
+                what = ("comma-separated numbers" if isinstance(current, tuple) else
+                        'a JSON table {"NAME": number, ...}' if isinstance(current, dict)
+                        else f"a {type(current).__name__}")
+                parser.error(f"--rule {item}: expected {what} for {key}, found '{value}'")
         try:
             rule = dataclasses.replace(DEFAULT_RULE, **changes)
         except IrreflectError as exc:

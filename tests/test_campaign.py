@@ -531,3 +531,12 @@ def test_design_rule_refuses_a_knob_out_of_its_range(knob, value):
     with pytest.raises(IrreflectError, match=knob):
         DesignRule(**{knob: value})
     assert getattr(DesignRule(**{knob: 0.0}), knob) == 0.0
+
+
+@pytest.mark.parametrize("knob,value", [("lobe_factors", (0.1, -10.0)),
+                                        ("law_sd", {"u_as": float("inf")})])
+def test_design_rule_refuses_a_bad_entry_of_its_tuple_and_table_knobs(knob, value):
+    from irreflect.campaign import DesignRule
+
+    with pytest.raises(IrreflectError, match=knob):
+        DesignRule(**{knob: value})

@@ -119,6 +119,10 @@ class DesignRule:
         check_number(self.power_floor, "power_floor", low=0.0)
         check_number(self.range_weights, "range_weights", low=0.0)
         check_number(self.saturated_gap, "saturated_gap", low=0.0, high=180.0)
+        for factor in self.lobe_factors:
+            check_number(factor, "lobe_factors", low=0.0, low_open=True)
+        for name, sd in self.law_sd.items():
+            check_number(sd, f"law_sd[{name!r}]", low=0.0)
 
 
 DEFAULT_RULE = DesignRule()
