@@ -365,7 +365,7 @@ BUDGETS = {b.name: b for b in (
            "memory one run may take"),
     Budget("ray-bounces", 1e9, "ray-bounces",
            "Monte Carlo rays x emitter-receiver pairs x bounces of one room run"),
-    Budget("cell-pairs", 3e11, "cell pairs",
+    Budget("cell-pairs", 6e10, "cell pairs",
            "cells x cells met (at most 128 log2 cells) x emitters x (bounces - 1) + cells x "
            "emitter-receiver pairs of one recursive room run, a pair counted 30 times when "
            "a material is not Lambertian"),
