@@ -187,8 +187,8 @@ def run_one(job):
     meas = read_measurements(source) if kind == "file" else load(kind, int(source))
     if len(np.unique(meas.gamma_deg)) < 3 or meas.n_points < 40:
         return {"label": label, "kind": kind, "skipped": f"{meas.n_points} points, "
-                f"{len(np.unique(meas.gamma_deg))} angles of incidence (a dense table with "
-                "three or more is needed)"}
+                f"{len(np.unique(meas.gamma_deg))} angles of incidence (a dense table needs "
+                "40 points or more at three angles or more)"}
     t0 = time.perf_counter()
     try:
         from irreflect.campaign.design import DEFAULT_RULE
