@@ -1,6 +1,20 @@
 """Shared fixtures: seeded synthetic tables, the bundled datasets and the real data."""
 
+# ruff: noqa: E402 (the library thread counts are set before numpy is imported)
+
 from __future__ import annotations
+
+import os
+
+# One thread per numerical library in each test process, set before numpy loads (and
+# inherited by the pytest-xdist workers, which start after this file is read): the suite
+# runs 2 workers on 2 cores, and OpenBLAS's own threads on top of that oversubscribe the
+# cores and spin. A material build (scipy's nnls) took 1.3-29 s instead of 0.3-1.3 s;
+# irreflect's process pools do the same (irreflect.selection.parallel.one_thread_per_worker).
+# A user's own setting of these variables is kept.
+for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS",
+             "VECLIB_MAXIMUM_THREADS"):
+    os.environ.setdefault(_var, "1")
 
 import numpy as np
 import pandas as pd

@@ -42,10 +42,22 @@ def least_squares_reference(model, meas, n_starts: int = 50, seed: int = 0,
             jz = np.einsum("nlp,l->np", db[0], x[p:])
         return np.nan_to_num(np.concatenate([jz, b[0]], axis=1))
 
+    def resid_rows(_fun, xs):
+        """``resid`` of every point of ``xs`` (a map over them, as scipy's ``workers``
+        is called): the basis of all points in one call, then the product and the
+        clean-up point by point as in ``resid``, so the same numbers."""
+        x = np.array(list(xs), float)
+        with np.errstate(all="ignore"):
+            b = model.curve_basis(geom, x[:, :p], x[:, p:])
+            rows = np.array([b[k] @ x[k, p:] - y for k in range(len(x))])
+        return list(np.nan_to_num(rows, nan=1e10, posinf=1e10, neginf=-1e10))
+
     # a saturating share (model.share_cap): the curve is piecewise in the coefficients, so
     # the reference takes finite differences of it rather than sharing the fitter's
-    # derivative of the saturated rows
+    # derivative of the saturated rows; scipy's 3-point scheme evaluates its 2 x (p + L)
+    # shifted points through ``workers`` (a map), here all in one call of the basis
     jac_used = "3-point" if model.share_cap else jac
+    fd_map = resid_rows if model.share_cap else None
 
     rng = np.random.default_rng(seed)
     slo, shi = model.screen_box()
@@ -64,7 +76,7 @@ def least_squares_reference(model, meas, n_starts: int = 50, seed: int = 0,
             with warnings.catch_warnings():  # scipy's overflow notes on wild starts
                 warnings.simplefilter("ignore", RuntimeWarning)
                 res = least_squares(resid, x0, jac=jac_used, bounds=(lo, hi),
-                                    max_nfev=max_nfev)
+                                    max_nfev=max_nfev, workers=fd_map)
         except ValueError:  # a start where the model is not finite
             continue
         best = min(best, float(res.cost))

@@ -147,6 +147,30 @@ def test_sections_name_their_tables_and_figures_apart(made):
             figures[key] = name
 
 
+def test_report_room_section(made):
+    """The room section's numbers (moved here from test_room.py: the section is computed
+    once, for this and the contract tests above)."""
+    section = made("room")
+    comp = section.tables["room_comparison"]
+    lam = comp[comp.surfaces.str.startswith("Lambertian")]
+    assert (lam["d DC gain vs Lambertian %"] == 0).all()
+    assert comp["range error (cm)"].notna().all() and (comp["range error (cm)"] > 0).all()
+    barry = section.tables["room_barry_a"]
+    assert barry.loc[0, "closed form"] == pytest.approx(1.2318e-6, rel=1e-4)
+    one = section.tables["room_one_bounce"]
+    assert abs(one["relative error"]).is_monotonic_decreasing
+    swap = section.tables["room_swapped"]
+    rec = swap[swap.method == "recursive"]
+    assert (abs(rec["swapped / direct - 1"]) < 0.01).all()
+    conv = section.tables["room_convergence"]
+    assert {"order", "recursive / Monte Carlo - 1", "Monte Carlo 3 sigma"} <= set(conv.columns)
+    for key in ("room_impulse", "room_map_range_change"):
+        assert Path(section.figures[key]).exists()
+    for name in ("room_scene", "room_comparison", "room_barry_a", "room_checks", "room_swapped",
+                 "room_convergence", "room_materials"):
+        assert "{table:" + name + "}" in section.markdown
+
+
 def test_a_failing_section_stops_the_report(tmp_path, monkeypatch):
     def broken(ctx):
         raise RuntimeError("section broke")

@@ -179,10 +179,30 @@ def albedo_tables(terms, coef, gammas, cap=None) -> np.ndarray:
     # the albedo is smooth in gamma: quadrature at every 4th of many nodes, interpolated
     nodes = gammas if gammas.size <= 40 else np.unique(np.append(gammas[::4], gammas[-1]))
     out = np.empty((len(terms), len(gammas)))
+    where = (np.ascontiguousarray(nodes).tobytes(), np.ascontiguousarray(gtab).tobytes())
     for c, (kind, idx, q) in enumerate(terms):
-        vals = coef[c] * term_albedo_table(int(kind), int(idx), int(q), nodes, gtab, _X, _W)
+        vals = coef[c] * _term_albedo(int(kind), int(idx), int(q), nodes, gtab, where)
         out[c] = vals if nodes is gammas else np.interp(gammas, nodes, vals)
     return out
+
+
+#: Unit-amplitude term albedos already computed, by (kind, index, q, nodes, cap): a material
+#: asks for the same ones again (the energy cap's search, its final tables; the same
+#: material in every scene that names it, e.g. a scene read again) and each costs a
+#: quadrature of 2 x 32 x 32 directions per node.
+_TERM_ALBEDO: dict = {}
+
+
+def _term_albedo(kind: int, idx: int, q: int, nodes, gtab, where: tuple) -> np.ndarray:
+    key = (kind, idx, q, *where)
+    hit = _TERM_ALBEDO.get(key)
+    if hit is None:
+        hit = term_albedo_table(kind, idx, q, nodes, gtab, _X, _W)
+        hit.flags.writeable = False
+        if len(_TERM_ALBEDO) >= 4096:
+            _TERM_ALBEDO.clear()
+        _TERM_ALBEDO[key] = hit
+    return hit
 
 
 __all__ = ["dictionary", "plane_columns", "plane_grid", "fit_terms", "albedo_tables",
