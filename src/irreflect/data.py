@@ -319,6 +319,36 @@ def _negative_noise(power) -> float | None:
     return rms
 
 
+def _frame(gamma, theta, power, positive: bool, partial: bool, source):
+    """The paper's frame of a table's angles and the notes on it: gammas all >= 0 read as
+    magnitudes, or as the paper's frame mirrored when the readings peak at theta = -gamma
+    (:func:`_peak_sides`); a note when a table in the paper's convention peaks at the
+    source direction."""
+    out = []
+    if positive:
+        sides = [] if partial else _peak_sides(gamma, theta, power)
+        if sides and all(side < 0 for side in sides):
+            # the readings peak at theta = -gamma in the file's own signs: the paper's frame
+            # mirrored (source on the positive side), so theta turns with gamma
+            gamma, theta = -gamma, -theta
+            out.append(f"{source}: all gamma_deg >= 0 and the readings peak at theta = "
+                      "-gamma at every angle of incidence: read as the paper's frame "
+                      "mirrored (gamma and theta both change sign, the mirror direction "
+                      "stays theta = -gamma)")
+        else:
+            gamma = -gamma
+            out.append(f"{source}: all gamma_deg >= 0, read as magnitudes (gamma = "
+                      "-|gamma|) with the mirror direction on the positive-theta side")
+    elif not partial:
+        sides = _peak_sides(gamma, theta, power)
+        if sides and all(side < 0 for side in sides):
+            out.append(f"{source}: the readings peak at theta = gamma (the source direction "
+                      "in the paper's convention) at every angle of incidence, not at the "
+                      "mirror theta = -gamma: if theta was counted positive on the source "
+                      "side, change its sign (a retroreflector may peak there)")
+    return gamma, theta, out
+
+
 def _check_negative_power(power, sigma, source, rows):
     """Negative powers: only small noise around zero (else one line); returns the note on
     those kept, or None."""
@@ -417,27 +447,9 @@ def validate_table(df: pd.DataFrame, source: str = "table", *,
             f"{source}: gamma_deg mixes positive and negative angles of incidence, which is "
             "ambiguous: use the paper's convention (all <= 0, source side) or magnitudes (all >= 0)"
         )
-    if positive:
-        sides = [] if partial else _peak_sides(gamma, theta, power)
-        if sides and all(side < 0 for side in sides):
-            # the readings peak at theta = -gamma in the file's own signs: the paper's frame
-            # mirrored (source on the positive side), so theta turns with gamma
-            gamma, theta = -gamma, -theta
-            notes.append(f"{source}: all gamma_deg >= 0 and the readings peak at theta = "
-                         "-gamma at every angle of incidence: read as the paper's frame "
-                         "mirrored (gamma and theta both change sign, the mirror direction "
-                         "stays theta = -gamma)")
-        else:
-            gamma = -gamma
-            notes.append(f"{source}: all gamma_deg >= 0, read as magnitudes (gamma = "
-                         "-|gamma|) with the mirror direction on the positive-theta side")
-    elif not partial:
-        sides = _peak_sides(gamma, theta, power)
-        if sides and all(side < 0 for side in sides):
-            notes.append(f"{source}: the readings peak at theta = gamma (the source direction "
-                         "in the paper's convention) at every angle of incidence, not at the "
-                         "mirror theta = -gamma: if theta was counted positive on the source "
-                         "side, change its sign (a retroreflector may peak there)")
+    if positive or not partial:
+        gamma, theta, frame_notes = _frame(gamma, theta, power, positive, partial, source)
+        notes += frame_notes
     material = None
     if "material" in df.columns:
         mats = df["material"].dropna().astype(str).unique()
