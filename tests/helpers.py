@@ -58,6 +58,12 @@ def least_squares_reference(model, meas, n_starts: int = 50, seed: int = 0,
     # shifted points through ``workers`` (a map), here all in one call of the basis
     jac_used = "3-point" if model.share_cap else jac
     fd_map = resid_rows if model.share_cap else None
+    # least_squares takes ``workers`` from scipy 1.16 on (pyproject allows 1.11): older
+    # ones evaluate the same points one call each
+    import inspect
+
+    extra = ({"workers": fd_map}
+             if "workers" in inspect.signature(least_squares).parameters else {})
 
     rng = np.random.default_rng(seed)
     slo, shi = model.screen_box()
@@ -76,7 +82,7 @@ def least_squares_reference(model, meas, n_starts: int = 50, seed: int = 0,
             with warnings.catch_warnings():  # scipy's overflow notes on wild starts
                 warnings.simplefilter("ignore", RuntimeWarning)
                 res = least_squares(resid, x0, jac=jac_used, bounds=(lo, hi),
-                                    max_nfev=max_nfev, workers=fd_map)
+                                    max_nfev=max_nfev, **extra)
         except ValueError:  # a start where the model is not finite
             continue
         best = min(best, float(res.cost))
