@@ -287,8 +287,10 @@ def _peak_sides(gamma, theta, power) -> list[int]:
     (theta = +|gamma|), -1 when at theta = -|gamma|, 0 when neither or both (a curve with
     no clear specular peak)."""
     sides = []
-    for g in np.unique(np.abs(gamma)):
-        at = np.abs(np.abs(gamma) - g) < 1e-9
+    mags = np.abs(gamma)
+    order = np.argsort(mags, kind="stable")
+    values, starts = np.unique(mags[order], return_index=True)
+    for g, at in zip(values, np.split(order, starts[1:]), strict=True):
         t, p = theta[at], power[at]
         if g < 2.0 or t.size < 4 or not (np.any(t > 0) and np.any(t < 0)):
             continue
