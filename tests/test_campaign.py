@@ -534,9 +534,38 @@ def test_design_rule_refuses_a_knob_out_of_its_range(knob, value):
 
 
 @pytest.mark.parametrize("knob,value", [("lobe_factors", (0.1, -10.0)),
+                                        ("diffuse_factors", (0.0,)),
                                         ("law_sd", {"u_as": float("inf")})])
 def test_design_rule_refuses_a_bad_entry_of_its_tuple_and_table_knobs(knob, value):
     from irreflect.campaign import DesignRule
 
     with pytest.raises(IrreflectError, match=knob):
         DesignRule(**{knob: value})
+
+
+def test_diffuse_factors_bracket_the_diffuse_lobe_as_lobe_factors_do_the_specular_one():
+    from irreflect.campaign import DesignRule
+    from irreflect.campaign.design import build_prior
+    from irreflect.fitting import fit
+    from irreflect.models import get_model
+
+    model = get_model("two-lobe")
+    rule_off = DesignRule(lobe_factors=())
+    rule_on = DesignRule(lobe_factors=(), diffuse_factors=(0.5, 2.0))
+    spread = {}
+    for name, params in (("matte", MATTE), ("glossy", GLOSSY)):
+        meas = _material(params, step=10.0)
+        few = meas.subset(np.arange(meas.n_points) % 9 == 0)  # 13 readings
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            res = fit(few, model)
+        g, t = meas.gamma_deg, meas.theta_deg
+        off = build_prior(model, res, few, g, t, rule_off)
+        on = build_prior(model, res, few, g, t, rule_on)
+        assert on.features.shape[1] == off.features.shape[1] + 2
+        assert np.all(np.isfinite(on.features))
+        spread[name] = np.max(np.abs(on.features[: len(g), -2:]), axis=0) / np.max(meas.power)
+    # the matte readings pin the diffuse index down: a lobe half or twice as wide no longer
+    # explains them and carries no weight; the glossy readings leave it open
+    assert np.all(spread["matte"] < 1e-6)
+    assert np.all(spread["glossy"] > 1e-2)

@@ -54,6 +54,8 @@ class DesignRule:
     coefficient_prior : weight of the model's coefficients (Jacobian, broad prior)
     refits : weight of the leave-one-out refits
     lobe_factors : the specular lobe index times these factors, as alternatives
+    diffuse_factors : the same for the diffuse lobe index (empty: off; tried at stop 33,
+        no gain on the real sets)
     law_sd : relative deviation (1 sigma) of each law in gamma: share, indices, level
     law_gamma_scale : deg, how far in gamma a deviation of the laws extends
     misfit_min : smallest relative local misfit assumed (the fit's relative residuals, and
@@ -93,6 +95,7 @@ class DesignRule:
     coefficient_prior: float = 1.0
     refits: float = 1.0
     lobe_factors: tuple[float, ...] = (0.01, 0.1, 10.0, 100.0)
+    diffuse_factors: tuple[float, ...] = ()
     law_sd: dict = field(default_factory=lambda: {"u_as": 0.3, "u_nd": 0.3, "u_ns": 0.4,
                                                   "K": 0.1})
     law_gamma_scale: float = 15.0
@@ -119,8 +122,9 @@ class DesignRule:
         check_number(self.power_floor, "power_floor", low=0.0)
         check_number(self.range_weights, "range_weights", low=0.0)
         check_number(self.saturated_gap, "saturated_gap", low=0.0, high=180.0)
-        for factor in self.lobe_factors:
-            check_number(factor, "lobe_factors", low=0.0, low_open=True)
+        for knob in ("lobe_factors", "diffuse_factors"):
+            for factor in getattr(self, knob):
+                check_number(factor, knob, low=0.0, low_open=True)
         for name, sd in self.law_sd.items():
             check_number(sd, f"law_sd[{name!r}]", low=0.0)
 
@@ -339,24 +343,11 @@ def build_prior(model, result: FitResult, meas, gamma_deg, theta_deg,
         dev = (loo - f[None, :]).T
         parts.append(rule.refits * dev * np.sqrt(max(n_meas - 1, 1) / len(loo)))
     names = model.param_names
-    if rule.lobe_factors and "u_ns" in names:
-        k = names.index("u_ns")
-        lo_b, hi_b = model.params[k].lower, model.params[k].upper
-        sig = misfit * scale[n_set:]
-        base = np.sum(((y - fm) / sig) ** 2)
-        alts = []
-        for factor in rule.lobe_factors:
-            q = np.array(values, float)
-            q[k] = np.clip(q[k] * factor, lo_b, hi_b)
-            with np.errstate(all="ignore"):
-                fa = np.nan_to_num(model.predict_deg(q, g, t))
-            am = fa[n_set:]
-            s = float(am @ y / max(float(am @ am), 1e-300))
-            fa = fa * s
-            chi = np.sum(((y - fa[n_set:]) / sig) ** 2)
-            weight = np.exp(-0.5 * max(chi - base, 0.0) / max(n_meas, 1))
-            alts.append(np.sqrt(weight) * (fa - f))
-        parts.append(np.array(alts).T)
+    sig = misfit * scale[n_set:]
+    for index, factors in (("u_ns", rule.lobe_factors), ("u_nd", rule.diffuse_factors)):
+        if factors and index in names:
+            parts.append(_index_alternatives(model, names.index(index), factors, values,
+                                             g, t, f, y, n_set, sig))
     for q in rivals:
         # a fit the readings allow as well as the current one: where the two differ the
         # readings cannot tell (its departure at the readings is left out, so that they
@@ -372,6 +363,29 @@ def build_prior(model, result: FitResult, meas, gamma_deg, theta_deg,
     return Prior(gamma=g, theta=t, features=features, law=law,
                  law_scale=rule.law_gamma_scale, amplitude=misfit * scale, scale=scale,
                  lobe_coord=lobe, rule=rule)
+
+
+def _index_alternatives(model, k, factors, values, g, t, f, y, n_set, sig) -> np.ndarray:
+    """The fit with lobe index ``k`` times each factor (within its bounds), its scale
+    refitted to the readings and weighted by how well it still explains them: where the
+    lobe's width is ill-determined, readings that bracket it are worth taking."""
+    lo_b, hi_b = model.params[k].lower, model.params[k].upper
+    fm = f[n_set:]
+    base = np.sum(((y - fm) / sig) ** 2)
+    n_meas = len(y)
+    alts = []
+    for factor in factors:
+        q = np.array(values, float)
+        q[k] = np.clip(q[k] * factor, lo_b, hi_b)
+        with np.errstate(all="ignore"):
+            fa = np.nan_to_num(model.predict_deg(q, g, t))
+        am = fa[n_set:]
+        s = float(am @ y / max(float(am @ am), 1e-300))
+        fa = fa * s
+        chi = np.sum(((y - fa[n_set:]) / sig) ** 2)
+        weight = np.exp(-0.5 * max(chi - base, 0.0) / max(n_meas, 1))
+        alts.append(np.sqrt(weight) * (fa - f))
+    return np.array(alts).T
 
 
 def _law_terms(model, rule: DesignRule, values, g, t, f, width) -> list:
