@@ -569,3 +569,19 @@ def test_diffuse_factors_bracket_the_diffuse_lobe_as_lobe_factors_do_the_specula
     # explains them and carries no weight; the glossy readings leave it open
     assert np.all(spread["matte"] < 1e-6)
     assert np.all(spread["glossy"] > 1e-2)
+
+
+def test_the_protocols_are_replayed_with_the_instruments_errors():
+    # the paper's protocol read from a noisy instrument is scored on noisy readings, as
+    # the adaptive campaign's are (it was read noiseless before stop 33)
+    dense = _material(MATTE, step=2.0, noise=0.0)
+    clean = replay(dense, ("paper",), n_max=10)
+    noisy = replay(dense, ("paper",), n_max=10, noise=0.2, seed=1)
+    again = replay(dense, ("paper",), n_max=10, noise=0.2, seed=1)
+    r_clean = clean.curves["paper"].r2[12]
+    r_noisy = noisy.curves["paper"].r2[12]
+    assert r_clean > 0.999  # the model's own material, read exactly
+    assert r_noisy < r_clean - 0.002
+    assert again.curves["paper"].r2[12] == r_noisy  # seeded
+    shifted = replay(dense, ("paper",), n_max=10, angle_error_deg=3.0, seed=1)
+    assert shifted.curves["paper"].r2[12] != r_clean

@@ -106,6 +106,24 @@ class DenseInstrument:
                           theta_max=float(s[:, 1].max()), theta_step=step, settings_deg=s,
                           **kwargs)
 
+    def disturb(self, gamma_deg, theta_deg, power, rng: np.random.Generator) -> np.ndarray:
+        """``power``, read at the given settings some other way (a protocol sampled from
+        the table), with this instrument's errors: the receiver's angle error (the table
+        interpolated along theta where the receiver stood) and the relative power noise.
+        Unchanged when the instrument has neither."""
+        out = np.array(power, float, copy=True)
+        if self.angle_error_deg:
+            d = self.dense
+            for i, (gi, ti) in enumerate(zip(np.atleast_1d(gamma_deg),
+                                             np.atleast_1d(theta_deg), strict=True)):
+                sel = np.abs(d.gamma_deg - gi) < 1e-6
+                order = np.argsort(d.theta_deg[sel])
+                stand = ti + rng.uniform(-1, 1) * self.angle_error_deg
+                out[i] = float(np.interp(stand, d.theta_deg[sel][order], d.power[sel][order]))
+        if self.noise:
+            out = out * (1.0 + self.noise * rng.standard_normal(out.size))
+        return out
+
     def read(self, gamma_deg, theta_deg, rng: np.random.Generator) -> np.ndarray:
         """Power at the given settings (degrees), with the instrument's errors."""
         d = self.dense
@@ -274,7 +292,8 @@ def replay_protocol(source: DenseInstrument, kind: str, *, model="two-lobe",
                     seed: int = 0) -> StrategyCurve:
     """The paper's (``kind="paper"``) or the glossy-aware (``"glossy"``) 12-point protocol,
     its power read from the dense table (interpolated along theta where the table did not
-    measure its angles): R^2 at N = 12."""
+    measure its angles) with the instrument's noise and angle error, as the adaptive
+    campaign's readings are: R^2 at N = 12."""
     from ..protocol.evaluate import glossy_protocol_for, paper_protocol_for, sample_protocol
 
     dense = source.dense
@@ -289,6 +308,12 @@ def replay_protocol(source: DenseInstrument, kind: str, *, model="two-lobe",
     except (IrreflectError, FitError) as exc:
         return StrategyCurve(kind, {}, pd.DataFrame(), time.perf_counter() - t0,
                              note=f"not available: {' '.join(str(exc).split())[:160]}")
+    if source.noise or source.angle_error_deg:  # the instrument's errors, as every reading
+        rng = np.random.default_rng([check_seed(seed), 37, ("paper", "glossy").index(kind)])
+        meas = Measurements(gamma_deg=meas.gamma_deg, theta_deg=meas.theta_deg,
+                            power=source.disturb(meas.gamma_deg, meas.theta_deg, meas.power,
+                                                 rng),
+                            sigma=meas.sigma, name=meas.name)
     r2 = _score(model, meas, dense, seed)
     gammas = "/".join(f"{g:g}" for g in proto.settings.get("gammas_deg", proto.gammas))
     return StrategyCurve(kind, {meas.n_points: r2}, meas.to_frame(),
