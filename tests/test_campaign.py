@@ -585,3 +585,19 @@ def test_the_protocols_are_replayed_with_the_instruments_errors():
     assert again.curves["paper"].r2[12] == r_noisy  # seeded
     shifted = replay(dense, ("paper",), n_max=10, angle_error_deg=3.0, seed=1)
     assert shifted.curves["paper"].r2[12] != r_clean
+
+
+def test_interpolating_a_lobe_the_table_does_not_resolve_is_warned(tmp_path):
+    coarse = _material(GLOSSY, step=8.0, name="coarse")
+    fine = _material(GLOSSY, step=0.5, name="fine")
+    assert "replay with --method nearest" in DenseInstrument(
+        coarse, method="interpolate", theta_step=1.0).coarse_peaks()
+    assert DenseInstrument(coarse).coarse_peaks() == ""  # the table's own points
+    assert DenseInstrument(fine, method="interpolate", theta_step=1.0).coarse_peaks() == ""
+    matte = _material(MATTE, step=8.0, name="matte")  # a broad lobe interpolates fine
+    assert DenseInstrument(matte, method="interpolate", theta_step=1.0).coarse_peaks() == ""
+    path = tmp_path / "coarse.csv"
+    coarse.to_frame().to_csv(path, index=False)
+    code, out, err = _run(["campaign", path, "--strategies", "paper", "--method",
+                           "interpolate"])
+    assert code == 0 and "irreflect: warning: coarse: its readings next to the specular" in err

@@ -48,6 +48,9 @@ STRATEGIES = ("adaptive", "paper", "glossy", "random", "hindsight")
 #: The most readings a replayed campaign takes (``next`` reads at most as many).
 MAX_REPLAY_READINGS = 2000
 METHODS = ("nearest", "interpolate")
+#: deg: readings of the dense table farther apart than this next to its peak are too coarse
+#: to interpolate a specular lobe between (:meth:`DenseInstrument.coarse_peaks`)
+COARSE_PEAK_DEG = 2.0
 #: How close to the all-points fit's R^2 a strategy must come (and stay) to count.
 TOLERANCE = 0.01
 
@@ -105,6 +108,42 @@ class DenseInstrument:
         return Instrument(gammas_deg=tuple(d.gammas), theta_min=float(s[:, 1].min()),
                           theta_max=float(s[:, 1].max()), theta_step=step, settings_deg=s,
                           **kwargs)
+
+    def coarse_peaks(self) -> str:
+        """With ``method="interpolate"``: a warning when, at half or more of the angles of
+        incidence, the table's own readings next to its brightest reading (the specular
+        peak) lie more than :data:`COARSE_PEAK_DEG` and two receiver steps from it and
+        below half its power (the lobe narrower than the table's step), so that the readings
+        between them, the lobe's body and flanks, are invented by linear interpolation
+        (a campaign that samples them learns the interpolation, not the material); empty
+        otherwise."""
+        if self.method != "interpolate":
+            return ""
+        d = self.dense
+        step = self.theta_step or 1.0
+        gaps, coarse = [], 0
+        for g in d.gammas:
+            sel = np.abs(d.gamma_deg - g) < 1e-6
+            order = np.argsort(d.theta_deg[sel])
+            th, pw = d.theta_deg[sel][order], d.power[sel][order]
+            if th.size < 3:
+                continue
+            i = int(np.argmax(pw))
+            near = [j for j in (i - 1, i + 1) if 0 <= j < th.size]
+            gap = max(abs(th[j] - th[i]) for j in near)
+            gaps.append(gap)
+            # the lobe falls to less than half its peak within one of the table's steps:
+            # narrower than the table resolves
+            coarse += bool(gap > max(COARSE_PEAK_DEG, 2.0 * step)
+                           and pw[i] > 2.0 * max(pw[j] for j in near))
+        if not gaps or coarse * 2 < len(gaps):
+            return ""
+        return (f"{d.name}: its readings next to the specular peak are "
+                f"{np.median(gaps):.3g} deg apart (median over its angles of incidence), the "
+                f"lobe narrower than that at {coarse} of {len(gaps)}, and "
+                f"--method interpolate reads every {step:g} deg between them by linear "
+                "interpolation: the lobe a replayed campaign samples is invented, and its R^2 "
+                "says little about the material; replay with --method nearest")
 
     def disturb(self, gamma_deg, theta_deg, power, rng: np.random.Generator) -> np.ndarray:
         """``power``, read at the given settings some other way (a protocol sampled from
@@ -190,6 +229,7 @@ class ReplayResult:
     verdicts: dict[int, object] = field(default_factory=dict)
     proposal_seconds: list[float] = field(default_factory=list)
     settings: dict = field(default_factory=dict)
+    warnings: list[str] = field(default_factory=list)
 
     @property
     def target(self) -> float:
@@ -239,6 +279,7 @@ class ReplayResult:
             "verdicts": {str(n): v.to_dict() for n, v in self.verdicts.items()},
             "proposal_seconds": self.proposal_seconds,
             "settings": self.settings,
+            "warnings": self.warnings,
         }
 
 
@@ -427,6 +468,7 @@ def replay(dense, strategies=STRATEGIES, *, n_max: int = 25, model="two-lobe", s
     return ReplayResult(
         dataset=dense.name, n_points=dense.n_points, reference_r2=float(reference.r2),
         curves=curves, verdicts=verdicts, proposal_seconds=times,
+        warnings=[w for w in (source.coarse_peaks(),) if w],
         settings={"n_max": n_max, "model": model_obj.name, "seed": seed, "method": method,
                   "tolerance_deg": tolerance_deg, "theta_step": theta_step, "noise": noise,
                   "angle_error_deg": angle_error_deg, "generations": generations})

@@ -186,6 +186,8 @@ def _campaign(args) -> int:
                         progress=told)
     finally:
         bar.close()
+    for text in result.warnings:
+        print(f"irreflect: warning: {text}", file=sys.stderr)
     if args.out is not None:
         _write_campaign(result, args.out)
     if args.json:
