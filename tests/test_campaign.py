@@ -106,6 +106,25 @@ def test_opening_design_honours_the_gamma_settings():
     assert set(plan["gamma_deg"]) == {-10.0, -70.0}
 
 
+def test_the_verdict_stops_once_the_allowed_angles_of_incidence_are_spent():
+    # 0 deg cannot be set for the specular peak (the source stands there), so the two
+    # allowed angles are 15 and 75 deg and 0 deg stays outside the measured span for good:
+    # the verdict stops on the curve, says what is extrapolated, and never asks for 0 deg
+    tool = Instrument(gammas_deg=(0, 15, 30, 45, 60, 75), theta_step=1, max_gamma_settings=2)
+    read = _answer(GLOSSY, np.random.default_rng(0))
+    campaign = Campaign(tool, seed=0)
+    verdict = None
+    while campaign.n_measured < 20:
+        campaign.add(read(campaign.propose(1)[["gamma_deg", "theta_deg"]]))
+        verdict = campaign.verdict()
+        assert not any("outside the measured span" in r for r in verdict.reasons)
+        if verdict.stop:
+            break
+    assert set(np.abs(campaign.measurements.gamma_deg)) == {15.0, 75.0}
+    assert verdict.stop and campaign.n_measured <= 14
+    assert "extrapolated to |gamma| 0 deg" in verdict.text
+
+
 # ----------------------------------------------------------------------------- adaptive
 def _answer(params, rng, noise=0.01):
     def read(frame):

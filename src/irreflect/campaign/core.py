@@ -681,12 +681,18 @@ class Campaign:
         mags = np.abs(meas.gamma_deg)
         outside = [g for g in self.instrument.gammas
                    if abs(g) > mags.max() + 1e-6 or abs(g) < mags.min() - 1e-6]
-        if outside:
+        limit = self.instrument.max_gamma_settings
+        spent = bool(limit) and len({round(g, 6) for g in meas.gamma_deg}) >= limit
+        if outside and not spent:
             reasons.append("angles of incidence outside the measured span: "
                            + short_list([f"{g:g}" for g in outside], 4))
         why = tuple(reasons) or (
             f"the last {STOP_HOLD + 1} readings moved the predicted curve by {stability:.2%} "
             f"of its variance (below {100 * self.stop_tolerance:.2g}%)",)
+        if outside and spent and not reasons:
+            # the instrument can set no other angle: the stop stands, with what it leaves
+            why += (f"extrapolated to |gamma| {short_list([f'{abs(g):g}' for g in outside], 4)}"
+                    f" deg: the {limit} angles of incidence the instrument allows are set",)
         return Verdict(not reasons, n, (float(r2_lo), float(r2_hi)), stability,
                        tuple(res.ill_determined), tuple(res.at_bound), why)
 
