@@ -415,8 +415,8 @@ def test_next_on_a_header_only_table_writes_the_opening(tmp_path):
     clean = two_lobe_power(np.radians(table["gamma_deg"]), np.radians(table["theta_deg"]),
                            *GLOSSY)
     table.assign(power=clean)[["gamma_deg", "theta_deg", "power"]].to_csv(measured, index=False)
-    code, stdout, err = _run(["next", measured, "--n", "2", "--gammas", "-20", "-40", "-60",
-                              "--json"])
+    code, stdout, err = _run(["next", measured, "--n", "2", "--gammas", "-20,-40", "-60",
+                              "--json"])  # comma- or space-separated alike
     assert code == 0, err
     doc = json.loads(stdout)
     assert doc["n_measured"] == 8 and len(doc["proposals"]) == 2

@@ -16,10 +16,12 @@ from pathlib import Path
 from ..errors import IrreflectError
 from .options import (
     ANGLE,
+    ANGLES,
     NON_NEGATIVE,
     POSITIVE,
     POSITIVE_INT,
     SEED,
+    Flatten,
     add_model_argument,
     int_at_least,
     print_json,
@@ -255,9 +257,9 @@ def _write_campaign(result, out) -> None:
 
 
 def _add_instrument_options(p) -> None:
-    p.add_argument("--gammas", nargs="+", type=ANGLE, metavar="G",
-                   help="the angles of incidence the instrument can set, degrees (<= 0, or "
-                        "magnitudes; default -10 -20 ... -70)")
+    p.add_argument("--gammas", nargs="+", type=ANGLES, action=Flatten, metavar="G",
+                   help="the angles of incidence the instrument can set, degrees, space- or "
+                        "comma-separated (<= 0, or magnitudes; default -10 -20 ... -70)")
     p.add_argument("--theta-min", type=ANGLE, default=-80.0,
                    help="lowest receiver angle (deg, default -80)")
     p.add_argument("--theta-max", type=ANGLE, default=80.0,

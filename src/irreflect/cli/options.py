@@ -4,6 +4,7 @@ arguments, reading a table within the command's budget, JSON on stdout."""
 from __future__ import annotations
 
 import argparse
+import re
 import sys
 
 from .._jsonio import dumps
@@ -12,7 +13,14 @@ from ..validation import check_int, check_number
 
 
 class OneLineParser(argparse.ArgumentParser):
-    """An argument parser whose errors are one line (no usage block), exit code 2."""
+    """An argument parser whose errors are one line (no usage block), exit code 2, and
+    that reads a comma-separated list of negative numbers (``--gammas -20,-40``) as a
+    value, as it reads one negative number, rather than as an unknown option."""
+
+    def __init__(self, *args, **kwargs):
+        super().__init__(*args, **kwargs)
+        # argparse's own pattern (a negative number), extended to comma-separated lists
+        self._negative_number_matcher = re.compile(r"^-(\d+|\d*\.\d+)(,-?(\d+|\d*\.\d+))*$")
 
     def error(self, message):
         self.exit(2, f"irreflect: error: {self.prog}: {message} (see '{self.prog} --help')\n")
@@ -51,6 +59,20 @@ POSITIVE = _argument_type(lambda t: check_number(t, "value", low=0.0, low_open=T
 ANGLE = _argument_type(lambda t: check_number(t, "value", low=-90.0, high=90.0, low_open=True,
                                               high_open=True),
                        "an angle in degrees strictly between -90 and 90")
+#: argparse type: one angle or several, comma-separated ("10,40,70"); with
+#: ``nargs="+", action=Flatten`` the option takes them space- or comma-separated alike
+ANGLES = _argument_type(
+    lambda t: tuple(check_number(a, "value", low=-90.0, high=90.0, low_open=True,
+                                 high_open=True) for a in t.split(",") if a.strip())
+    or check_number(float("nan"), "value"),
+    "angles in degrees strictly between -90 and 90 (space- or comma-separated)")
+
+
+class Flatten(argparse.Action):
+    """Store the values of an ``nargs`` option whose type returns tuples as one flat list."""
+
+    def __call__(self, parser, namespace, values, option_string=None):
+        setattr(namespace, self.dest, [x for v in values for x in v])
 
 
 def add_data_argument(parser: argparse.ArgumentParser, *, nargs=None) -> None:

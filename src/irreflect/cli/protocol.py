@@ -8,12 +8,14 @@ from pathlib import Path
 from ..errors import IrreflectError
 from .options import (
     ANGLE,
+    ANGLES,
     FINITE,
     NON_NEGATIVE,
     NON_NEGATIVE_INT,
     POSITIVE,
     POSITIVE_INT,
     SEED,
+    Flatten,
     int_at_least,
     load_data,
     print_json,
@@ -168,8 +170,8 @@ def register(sub) -> None:
                     "picks from a pilot dense scan (--design-from). Angles in degrees; gamma "
                     "negative on the source side (magnitudes also accepted).")
     src = p.add_mutually_exclusive_group(required=True)
-    src.add_argument("--gammas", nargs="+", type=ANGLE, metavar="G",
-                     help="three angles of incidence in degrees, e.g. -20 -40 -60 (or 20 40 60); "
+    src.add_argument("--gammas", nargs="+", type=ANGLES, action=Flatten, metavar="G",
+                     help="three angles of incidence in degrees, e.g. -20 -40 -60 (or 20,40,60); "
                           "one of --gammas, --design-from, --lobe-from is required")
     src.add_argument("--design-from", metavar="DENSE.csv",
                      help="design from a pilot dense scan of the material (CSV or Parquet; "
