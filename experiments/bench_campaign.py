@@ -22,7 +22,10 @@ matte two-lobe materials on paper-like, goniometer, uneven, sparse and mirror gr
 columns), the diagnosis's hidden-effect tables (the model plus an effect it lacks), and
 ``misfit_glossy`` below: dense RGL-like scans of glossy materials whose specular lobe has a
 heavier halo than cos^n and whose share rises toward grazing incidence faster than
-u cos^v (the two-lobe model misfits them, as it misfits the real films and paints).
+u cos^v (the two-lobe model misfits them, as it misfits the real films and paints);
+``saturating`` (the specular share reaches 1 inside the range) and ``foreign``
+(materials of other literature models: Torrance-Sparrow, Ward, Lafortune, Oren-Nayar,
+Blinn-Phong).
 
 Usage::
 
@@ -135,11 +138,15 @@ def saturating(seed: int):
 def generated(n: int, first: int = 0) -> list[tuple[str, str, int]]:
     """(label, kind, seed) of the generated tables: ``n`` of each family, seeds from
     ``first`` (a new ``first`` gives tables no rule was tuned on)."""
+    from irreflect.synthetic import FOREIGN_MODELS
+
     out = []
     for seed in range(first, first + n):
         out += [(f"glossy-{seed}", "glossy", seed), (f"matte-{seed}", "matte", seed),
                 (f"wild-{seed}", "wild", seed), (f"misfit-glossy-{seed}", "misfit", seed),
-                (f"saturating-{seed}", "saturating", seed)]
+                (f"saturating-{seed}", "saturating", seed),
+                (f"foreign-{FOREIGN_MODELS[seed % len(FOREIGN_MODELS)]}-{seed}", "foreign",
+                 seed)]
     effects = ("incidence_reflectance", "offspecular_peak", "specular_halo", "angle_offset",
                "retroreflection", "bump")
     for seed in range(first, first + max(1, n // 2)):
@@ -159,6 +166,10 @@ def load(kind: str, seed: int):
         return misfit_glossy(seed)
     if kind == "saturating":
         return saturating(seed)
+    if kind == "foreign":
+        from irreflect.synthetic import foreign_material
+
+        return foreign_material(seed).measurements
     if kind.startswith("hidden:"):
         from irreflect.diagnose.hidden import hidden_case
 
@@ -330,6 +341,9 @@ def main(argv=None) -> int:
     parser.add_argument("--rule", nargs="+", metavar="KNOB=VALUE",
                         help="change knobs of the adaptive rule (irreflect.campaign.DesignRule), "
                              "e.g. range_weights=false misfit_min=0.06")
+    parser.add_argument("--families", default=None,
+                        help="comma-separated generated families to run (glossy, matte, wild, "
+                             "misfit, saturating, foreign, hidden; default: all)")
     parser.add_argument("--real-only", action="store_true")
     parser.add_argument("--generated-only", action="store_true")
     parser.add_argument("--data-dir", default=None,
@@ -395,9 +409,17 @@ def main(argv=None) -> int:
         else:
             for p in sorted(root.rglob("*.csv")):
                 jobs_r.append((p.stem, "file", str(p), args.generations, args.n_max, rule))
+    wanted = None
+    if args.families:
+        wanted = {f.strip() for f in args.families.split(",") if f.strip()}
+        known = {"glossy", "matte", "wild", "misfit", "saturating", "foreign", "hidden"}
+        if not wanted or not wanted <= known:
+            parser.error(f"--families: expected a comma-separated list of "
+                         f"{', '.join(sorted(known))}; found '{args.families}'")
     if not args.real_only:
         jobs_g = [(label, kind, seed, min(args.generations, 50), args.n_max, rule)
-                  for label, kind, seed in generated(args.generated, args.first_seed)]
+                  for label, kind, seed in generated(args.generated, args.first_seed)
+                  if wanted is None or kind.split(":")[0] in wanted]
     t0 = time.perf_counter()
     print(f"{len(jobs_r)} real and {len(jobs_g)} generated tables, {args.workers} workers, "
           f"{args.n_max} readings per campaign", flush=True)

@@ -620,3 +620,28 @@ def test_interpolating_a_lobe_the_table_does_not_resolve_is_warned(tmp_path):
     code, out, err = _run(["campaign", path, "--strategies", "paper", "--method",
                            "interpolate"])
     assert code == 0 and "irreflect: warning: coarse: its readings next to the specular" in err
+
+
+def test_a_stop_on_a_model_that_misfits_its_readings_says_so():
+    # a Lafortune material (a sharp forward lobe that drifts off the mirror, a broad one
+    # leaning back) that no two-lobe fit describes (R^2 0.77 on all points at best): the
+    # campaign's fit settles at the bounds of its coefficients and explains its own
+    # readings to R^2 0.85; its stop must not read as a good material file
+    from irreflect.synthetic import foreign_material
+
+    table = foreign_material(107)
+    assert table.model == "lafortune"
+    source = DenseInstrument(table.measurements)
+    curve, verdicts, _ = replay_adaptive(source, 16, seed=0)
+    stop = min(n for n, v in verdicts.items() if v.stop)
+    verdict = verdicts[stop]
+    assert curve.r2[stop] < 0.5  # far below the all-points fit: what the text must flag
+    assert "the model explains the readings only to R^2" in verdict.text
+    assert "irreflect diagnose" in verdict.text
+    assert verdict.at_bound and "at a bound of its range: " in verdict.text
+    assert verdict.r2_band[1] < 0.95  # the band says it too
+    # a material the model describes stops without the warning
+    glossy = DenseInstrument(_material(GLOSSY, step=2.0, name="gloss"))
+    _, verdicts, _ = replay_adaptive(glossy, 16, seed=0)
+    stops = [v for v in verdicts.values() if v.stop]
+    assert stops and not any("explains the readings only" in v.text for v in stops)

@@ -75,6 +75,9 @@ FIT_OPTIONS = FitOptions(polish=False)
 #: is replaced by the continuation of the previous fit when that does not
 #: (:meth:`Campaign._choose_continuation`).
 OVERSHOOT = 1.5
+#: a stop on a fit whose R^2 on its own readings is below this says the model may lack an
+#: effect (every real set's campaign fit is at 0.916 or above from 10 readings on)
+MISFIT_R2 = 0.9
 CONTINUATION_OPTIONS = FitOptions(polish=False, n_screen=1, n_keep=1, n_data_starts=0,
                                   n_random_starts=0, n_hops=0, max_rounds=1, retry=False)
 #: The range's settings that weigh the readings (see :func:`range_weights`) are thinned to
@@ -180,6 +183,8 @@ class Verdict:
                          f"{self.r2_band[1]:.4f}")
         if self.ill_determined:
             parts.append(f"ill-determined: {', '.join(self.ill_determined)}")
+        if self.at_bound:
+            parts.append(f"at a bound of its range: {', '.join(self.at_bound)}")
         if self.reasons:
             parts.append("; ".join(self.reasons))
         return f"{head}: " + "; ".join(parts)
@@ -689,6 +694,13 @@ class Campaign:
         why = tuple(reasons) or (
             f"the last {STOP_HOLD + 1} readings moved the predicted curve by {stability:.2%} "
             f"of its variance (below {100 * self.stop_tolerance:.2g}%)",)
+        if not reasons and np.isfinite(res.r2) and res.r2 < MISFIT_R2:
+            # the curve holds, but on a fit that explains its own readings poorly: more
+            # readings will not mend the model (a foreign Lafortune material stopped at
+            # R^2 0.30 against all points with R^2 0.85 on its readings)
+            why += (f"the model explains the readings only to R^2 {res.r2:.3f}: it may "
+                    "lack an effect of this material (irreflect diagnose on the readings "
+                    "names it)",)
         if outside and spent and not reasons:
             # the instrument can set no other angle: the stop stands, with what it leaves
             why += (f"extrapolated to |gamma| {short_list([f'{abs(g):g}' for g in outside], 4)}"
