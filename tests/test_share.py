@@ -186,3 +186,36 @@ def test_a_saturated_fit_says_where_and_is_searched_again():
     assert sat.size
     assert any("saturates" in r for r in retry_reasons(result))
     assert "saturates" in result.retried
+
+
+@pytest.mark.parametrize("engine", ["numpy", "compiled"])
+def test_the_designs_linearise_the_saturating_model(engine):
+    # the campaign's prior, the D-optimal selector and the diagnosis's discriminating
+    # readings linearise the model with prediction_and_jacobian: the curve predict gives
+    # (before stop 33 they took the separable basis, whose diffuse term turns negative
+    # where the share passes 1: -5e4 at 70 deg on a campaign's fit)
+    from irreflect.fitting import prediction_and_jacobian
+
+    model = get_model("two-lobe")
+    p = np.array([6.12e-3, -7.03, 0.05, -12.0, 1575.3, 2.52, 1.52])  # share 11 at 70 deg
+    g = np.radians(np.repeat([-10.0, -61.0, -70.0], 5))
+    t = np.radians(np.tile([-2.0, 0.0, 2.0, 61.0, 70.0], 3))
+    f, jac = prediction_and_jacobian(model, p, g, t, engine=engine)
+    np.testing.assert_allclose(f, model.predict(p, g, t), rtol=1e-9, atol=1e-12)
+    z, alpha = model.from_natural(p[None])
+    raw, _ = model.basis(Geometry.of(g[None], t[None]), z, False)
+    assert (raw[0] @ alpha[0]).min() < -1e3  # what the separable basis said
+    # its Jacobian is the derivative of that curve (central differences in z and alpha)
+    x = np.concatenate([z[0], alpha[0]])
+    n_z = model.n_nonlinear
+
+    def curve(x):
+        return model.predict(model.to_natural(x[None, :n_z], x[None, n_z:])[0], g, t)
+
+    for k in range(x.size):
+        h = 1e-6 * max(abs(x[k]), 1e-3)
+        step = np.zeros_like(x)
+        step[k] = h
+        numeric = (curve(x + step) - curve(x - step)) / (2 * h)
+        np.testing.assert_allclose(jac[:, k], numeric, rtol=1e-4,
+                                   atol=1e-6 * np.max(np.abs(f)))

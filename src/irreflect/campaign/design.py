@@ -42,7 +42,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..errors import FitWarning
-from ..fitting import FitResult, fit_subsets
+from ..fitting import FitResult, fit_subsets, prediction_and_jacobian
 from ..protocol.core import lobe_half_width_deg
 from ..validation import check_number
 
@@ -204,17 +204,18 @@ def _nearest_free(settings, gamma, theta, taken, sep):
 # ----------------------------------------------------------------------------- the prior
 def _jacobian(model, values, gamma_deg, theta_deg):
     """Prediction and its Jacobian in the model's internal coordinates (shape z, linear
-    scales alpha), ``(n,)`` and ``(n, P + L)``."""
-    from ..models import Geometry
-
-    z, alpha = model.from_natural(np.asarray(values, float)[None])
-    geom = Geometry.of(np.radians(gamma_deg)[None], np.radians(theta_deg)[None])
+    scales alpha), ``(n,)`` and ``(n, P + L)``: the curve :meth:`predict` gives (a
+    saturating specular share's saturated rows included; before stop 33 the design took
+    the separable basis, whose diffuse term turns negative where the share passes 1)."""
+    values = np.asarray(values, float)
+    _, alpha = model.from_natural(values[None])
     with np.errstate(all="ignore"):
-        basis, dbasis = model.basis(geom, z, True)
-    f = basis[0] @ alpha[0]
-    jz = np.einsum("nlp,l->np", dbasis[0], alpha[0])
-    ja = basis[0] * alpha[0]  # d / d ln alpha
-    ja = np.where(alpha[0] > 0, ja, basis[0] * max(float(np.max(alpha[0])), 1e-300) * 1e-3)
+        f, jac = prediction_and_jacobian(model, values, np.radians(gamma_deg),
+                                         np.radians(theta_deg))
+    p = model.n_nonlinear
+    jz, basis = jac[:, :p], jac[:, p:]
+    ja = basis * alpha[0]  # d / d ln alpha
+    ja = np.where(alpha[0] > 0, ja, basis * max(float(np.max(alpha[0])), 1e-300) * 1e-3)
     return np.nan_to_num(f), np.nan_to_num(np.concatenate([jz, ja], axis=1))
 
 

@@ -38,7 +38,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..models.base import Geometry
+from ..fitting import prediction_and_jacobian
 
 #: candidate settings: receiver step (deg) and the usual angles of incidence (magnitudes)
 THETA_STEP = 1.0
@@ -71,14 +71,10 @@ def candidate_settings(gamma_deg, theta_deg):
 def _prediction_and_jacobian(result, gamma_deg, theta_deg):
     """Predicted power and its derivative with respect to the model's internal
     coordinates (nonlinear and linear) at the given settings (degrees)."""
-    model = result.model_object
-    z, alpha = model.from_natural(np.asarray(result.values, float)[None])
-    geom = Geometry.of(np.radians(np.asarray(gamma_deg, float))[None],
-                       np.radians(np.asarray(theta_deg, float))[None])
-    basis, dbasis = model.basis(geom, z, True)
-    power = basis[0] @ alpha[0]
-    jz = np.einsum("nlp,l->np", dbasis[0], alpha[0])
-    return power, np.column_stack([jz, basis[0]])
+    with np.errstate(all="ignore"):
+        return prediction_and_jacobian(result.model_object, result.values,
+                                       np.radians(np.asarray(gamma_deg, float)),
+                                       np.radians(np.asarray(theta_deg, float)))
 
 
 class _Pair:

@@ -46,6 +46,7 @@ from .api import (
     retry_reasons,
 )
 from .engine import ENGINE, ENGINES, uses_kernel
+from .finish import prediction_and_jacobian
 from .local import STOP_FTOL, STOP_MAXITER, STOP_NONFINITE, STOP_POLISHED, STOP_STUCK, STOP_XTOL
 from .options import (
     RETRY_SEARCH,
@@ -64,6 +65,7 @@ __all__ = [
     "RETRY_R2", "RETRY_SEARCH", "RETRY_SMALL_TABLE_SEARCH", "SMALL_TABLE_POINTS",
     "SMALL_TABLE_SEARCH", "STOP_FTOL", "STOP_MAXITER", "STOP_NONFINITE", "STOP_POLISHED",
     "STOP_STUCK", "STOP_XTOL", "FitOptions", "FitResult", "SubsetFits", "check_fit_data", "default_keep",
-    "default_screen", "fit", "fit_subsets", "judge", "points_at_incidence", "retry_reasons",
+    "default_screen", "fit", "fit_subsets", "judge", "points_at_incidence",
+    "prediction_and_jacobian", "retry_reasons",
     "screen_samples", "uses_kernel", "warm",
 ]

@@ -52,6 +52,20 @@ def _fitted_and_jacobian(model, z, alpha, gamma, theta, weights, engine=None, kg
     return basis[0] @ alpha, np.concatenate([jz, basis[0]], axis=1) * np.sqrt(weights)[:, None]
 
 
+def prediction_and_jacobian(model, values, gamma_rad, theta_rad, engine=None):
+    """The model's curve at natural ``values`` and its Jacobian in the internal
+    coordinates ``(z, alpha)``, ``(n,)`` and ``(n, P + L)``, at angles in radians: the
+    curve the fitter fits and :meth:`~irreflect.models.ReflectionModel.predict` gives,
+    with a saturating specular share's saturated rows (their derivative the unsaturated
+    side's at a threshold). What the designs (the campaign's prior, the D-optimal
+    selector, the diagnosis's discriminating readings) linearise the model with."""
+    z, alpha = model.from_natural(np.atleast_2d(np.asarray(values, float)))
+    gamma = np.asarray(gamma_rad, float).ravel()
+    theta = np.asarray(theta_rad, float).ravel()
+    return _fitted_and_jacobian(model, z[0], alpha[0], gamma, theta, np.ones(gamma.size),
+                                engine)
+
+
 def _saturation_level(alpha, strict: bool = False) -> float:
     """The largest threshold ``tau`` the share at ``alpha`` has passed: rows with
     ``1 / cos^v_as(gamma) <= u`` saturate, so the share at normal incidence ``u``

@@ -28,7 +28,7 @@ from pymoo.operators.selection.tournament import TournamentSelection
 from pymoo.termination.max_gen import MaximumGenerationTermination
 
 from ..errors import IrreflectError, unknown_name
-from ..models import Geometry
+from ..fitting import prediction_and_jacobian
 from .checkpoint import load_checkpoint, restore, save_checkpoint
 from .problem import (
     MaskDuplicateElimination,
@@ -188,11 +188,9 @@ def _jacobian(model, params, gamma_rad, theta_rad, sigma):
     pilot parameters, weighted by 1/sigma; D-optimality does not depend on the
     parametrisation (a reparametrisation multiplies every det by the same factor)."""
 
-    z, alpha = model.from_natural(np.atleast_2d(params))
     with np.errstate(all="ignore"):
-        basis, dbasis = model.basis(Geometry.of(gamma_rad[None], theta_rad[None]), z, True)
-    jz = np.einsum("mnlp,ml->mnp", dbasis, alpha)[0]
-    jac = np.concatenate([jz, basis[0]], axis=1)
+        _, jac = prediction_and_jacobian(model, params, gamma_rad, theta_rad)
+    jac = np.array(jac, float)
     if sigma is not None:
         jac = jac / sigma[:, None]
     jac[~np.isfinite(jac)] = 0.0
