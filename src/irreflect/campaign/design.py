@@ -110,7 +110,7 @@ class DesignRule:
     range_weights: float = 1.0
     continuation: bool = True
     power_weights: float = 1.0
-    power_cap: float = 10.0
+    power_cap: float = 5.0
     power_floor: float = 0.0
     power_refit: bool = True
     saturated_gap: float = 30.0
