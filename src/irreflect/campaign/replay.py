@@ -176,21 +176,17 @@ class DenseInstrument:
             th, pw = d.theta_deg[sel], d.power[sel]
             order = np.argsort(th)
             th, pw = th[order], pw[order]
-            stand = ti + (rng.uniform(-1, 1) * self.angle_error_deg if self.angle_error_deg
-                          else 0.0)
             gap = float(np.min(np.abs(th - ti)))
             if self.method == "nearest" and gap > self.tolerance_deg + 1e-9:
                 raise IrreflectError(
                     f"({gi:g}, {ti:g}) is {gap:.3g} deg from the nearest reading of {d.name} "
                     f"at that angle of incidence, more than the tolerance "
                     f"{self.tolerance_deg:g} deg")
-            if self.method == "nearest" and not self.angle_error_deg:
+            if self.method == "nearest":
                 out[i] = pw[int(np.argmin(np.abs(th - ti)))]
             else:
-                out[i] = float(np.interp(stand, th, pw))
-        if self.noise:
-            out = out * (1.0 + self.noise * rng.standard_normal(out.size))
-        return out
+                out[i] = float(np.interp(ti, th, pw))
+        return self.disturb(g, t, out, rng)
 
 
 @dataclass
