@@ -109,6 +109,14 @@ class DenseInstrument:
                           theta_max=float(s[:, 1].max()), theta_step=step, settings_deg=s,
                           **kwargs)
 
+    def _row(self, gamma: float) -> tuple[np.ndarray, np.ndarray]:
+        """The table's readings at one angle of incidence, ``(theta, power)`` sorted by
+        theta (empty where it has none)."""
+        d = self.dense
+        sel = np.abs(d.gamma_deg - gamma) < 1e-6
+        order = np.argsort(d.theta_deg[sel])
+        return d.theta_deg[sel][order], d.power[sel][order]
+
     def coarse_peaks(self) -> str:
         """With ``method="interpolate"``: a warning when, at half or more of the angles of
         incidence, the table's own readings next to its brightest reading (the specular
@@ -123,9 +131,7 @@ class DenseInstrument:
         step = self.theta_step or 1.0
         gaps, coarse = [], 0
         for g in d.gammas:
-            sel = np.abs(d.gamma_deg - g) < 1e-6
-            order = np.argsort(d.theta_deg[sel])
-            th, pw = d.theta_deg[sel][order], d.power[sel][order]
+            th, pw = self._row(g)
             if th.size < 3:
                 continue
             i = int(np.argmax(pw))
@@ -152,13 +158,10 @@ class DenseInstrument:
         Unchanged when the instrument has neither."""
         out = np.array(power, float, copy=True)
         if self.angle_error_deg:
-            d = self.dense
             for i, (gi, ti) in enumerate(zip(np.atleast_1d(gamma_deg),
                                              np.atleast_1d(theta_deg), strict=True)):
-                sel = np.abs(d.gamma_deg - gi) < 1e-6
-                order = np.argsort(d.theta_deg[sel])
                 stand = ti + rng.uniform(-1, 1) * self.angle_error_deg
-                out[i] = float(np.interp(stand, d.theta_deg[sel][order], d.power[sel][order]))
+                out[i] = float(np.interp(stand, *self._row(gi)))
         if self.noise:
             out = out * (1.0 + self.noise * rng.standard_normal(out.size))
         return out
@@ -170,12 +173,9 @@ class DenseInstrument:
         t = np.atleast_1d(np.asarray(theta_deg, float))
         out = np.empty(g.size)
         for i, (gi, ti) in enumerate(zip(g, t, strict=True)):
-            sel = np.abs(d.gamma_deg - gi) < 1e-6
-            if not sel.any():
+            th, pw = self._row(gi)
+            if not th.size:
                 raise IrreflectError(f"{d.name} has no angle of incidence {gi:g} deg")
-            th, pw = d.theta_deg[sel], d.power[sel]
-            order = np.argsort(th)
-            th, pw = th[order], pw[order]
             gap = float(np.min(np.abs(th - ti)))
             if self.method == "nearest" and gap > self.tolerance_deg + 1e-9:
                 raise IrreflectError(

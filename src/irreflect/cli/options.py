@@ -61,11 +61,16 @@ ANGLE = _argument_type(lambda t: check_number(t, "value", low=-90.0, high=90.0, 
                        "an angle in degrees strictly between -90 and 90")
 #: argparse type: one angle or several, comma-separated ("10,40,70"); with
 #: ``nargs="+", action=Flatten`` the option takes them space- or comma-separated alike
+def _angles(text: str) -> tuple[float, ...]:
+    parts = [a for a in text.split(",") if a.strip()]
+    if not parts:
+        raise ValueError(text)
+    return tuple(check_number(a, "value", low=-90.0, high=90.0, low_open=True,
+                              high_open=True) for a in parts)
+
+
 ANGLES = _argument_type(
-    lambda t: tuple(check_number(a, "value", low=-90.0, high=90.0, low_open=True,
-                                 high_open=True) for a in t.split(",") if a.strip())
-    or check_number(float("nan"), "value"),
-    "angles in degrees strictly between -90 and 90 (space- or comma-separated)")
+    _angles, "angles in degrees strictly between -90 and 90 (space- or comma-separated)")
 
 
 class Flatten(argparse.Action):
