@@ -100,6 +100,37 @@ def test_opening_design_spans_the_angles_of_incidence_and_finds_the_mirrors():
     assert len(opening_design(tool, 20)) > 8
 
 
+def test_an_opening_reading_the_receiver_cannot_place_is_not_called_what_it_missed(tmp_path):
+    """A receiver range that misses the mirror direction: the nearest setting is not called
+    "the specular peak", nor a far-side reading "source side"; `next` warns that the peak
+    will be extrapolated (the labels were the plan's, whatever the instrument allowed)."""
+    tool = Instrument(gammas_deg=(-30,), theta_min=50, theta_max=60)
+    assert tool.mirror_misses() == (-30.0,)
+    plan = Campaign(tool).propose(8)
+    assert not plan["why"].str.contains("specular peak|source side$").any(), plan["why"]
+    first = plan.iloc[0]
+    assert (first["theta_deg"], first["why"]) == (50.0, "opening design: mirror direction: out "
+                                                  "of the receiver's range, so the nearest free "
+                                                  "setting, 20 deg beyond the mirror direction")
+    # where the plan's setting is possible its reason stays
+    wide = Campaign(Instrument(gammas_deg=(-10, -40, -70), theta_min=-30, theta_max=40,
+                               theta_step=5)).propose(8)
+    assert Instrument(gammas_deg=(-10, -40, -70), theta_min=-30, theta_max=40,
+                      theta_step=5).mirror_misses() == (-70.0,)
+    said = {(r.gamma_deg, r.theta_deg): r.why for r in wide.itertuples()}
+    assert said[(-40.0, 40.0)].endswith("mirror direction: the specular peak")
+    assert said[(-10.0, -30.0)].endswith("diffuse lobe, source side")
+    assert "5 deg short of the mirror" in said[(-40.0, 35.0)]  # "far side" could not be
+    measured = tmp_path / "m.csv"
+    measured.write_text("gamma_deg,theta_deg,power\n")
+    code, _, err = _run(["next", measured, "--gammas", "10,40,70", "--theta-min", "-30",
+                         "--theta-max", "40", "--theta-step", "5"])
+    assert code == 0 and err.count("warning") == 1
+    assert "does not reach the mirror direction (theta = -gamma) at gamma -70 deg" in err
+    code, _, err = _run(["next", measured, "--gammas", "10,40"])
+    assert code == 0 and "warning" not in err
+
+
 def test_opening_design_honours_the_gamma_settings():
     tool = Instrument(gammas_deg=(-10, -20, -30, -40, -50, -60, -70), max_gamma_settings=2)
     plan = Campaign(tool).propose(8)

@@ -81,8 +81,10 @@ def test_subset_fits_agree_between_the_engines():
         a = fit_subsets(*args, masks, engine="compiled", **light)
         b = fit_subsets(*args, masks, engine="numpy", **light)
         rel_batched += list(np.abs(a.cost / b.cost - 1))
-        a = fit_subsets(*args, masks[:6], engine="compiled", exhaustive=True)
-        b = fit_subsets(*args, masks[:6], engine="numpy", exhaustive=True)
+        # four exhaustive fits per seed (six until stop 34: the numpy engine's took 16 of the
+        # test's 20 s; all 18 agreed then, as all 12 must but one now)
+        a = fit_subsets(*args, masks[:4], engine="compiled", exhaustive=True)
+        b = fit_subsets(*args, masks[:4], engine="numpy", exhaustive=True)
         rel_exhaustive += list(np.abs(a.cost / b.cost - 1))
     # the same search: the same optimum but where rounding sends a light (15-iteration)
     # search down another path. The numpy engine's rounding depends on the OpenBLAS kernel

@@ -148,7 +148,8 @@ def opening_design(instrument, n: int) -> list[tuple[float, float, str]]:
     settings = instrument.settings()
     gammas = instrument.gammas
     limit = instrument.max_gamma_settings or len(gammas)
-    reach = [g for g in gammas if _reachable(settings, g, -g, instrument)]
+    missed = instrument.mirror_misses()
+    reach = [g for g in gammas if g not in missed]
     pool = reach if reach else list(gammas)
     lo, hi = pool[0], pool[-1]
     mid = pool[int(np.argmin([abs(abs(g) - (abs(lo) + abs(hi)) / 2) for g in pool]))]
@@ -158,37 +159,53 @@ def opening_design(instrument, n: int) -> list[tuple[float, float, str]]:
     mid = chosen[len(chosen) // 2]
     tmin, tmax = instrument.theta_min, instrument.theta_max
     probe = max(1.0, 1.5 * instrument.theta_step)
-    plan = [(g, -g, "mirror direction: the specular peak") for g in chosen]
+    plan = [(g, -g, "mirror", "mirror direction: the specular peak") for g in chosen]
     plan += [
-        (lo, max(tmin, -lo - 50.0), "diffuse lobe, source side"),
-        (hi, 0.0, "diffuse lobe near the normal, grazing incidence"),
-        (hi, -hi - probe, "the specular lobe's body, {off} deg from the mirror toward the "
-                          "normal: starts bracketing its width"),
-        (mid, min(tmax, -mid + 35.0), "far side beyond the specular lobe"),
-        (lo, -lo + probe, "the specular lobe's body, {off} deg from the mirror toward "
-                          "grazing: starts bracketing its width"),
-        (hi, max(tmin, hi - 10.0), "diffuse lobe, source side at grazing incidence"),
-        (mid, max(tmin, mid - 20.0), "diffuse lobe, source side"),
-        (lo, min(tmax, -lo + 25.0), "far side beyond the specular lobe"),
-        (hi, min(tmax, -hi + 12.0), "far side beyond the specular lobe at grazing incidence"),
+        (lo, max(tmin, -lo - 50.0), "source", "diffuse lobe, source side"),
+        (hi, 0.0, "normal", "diffuse lobe near the normal, grazing incidence"),
+        (hi, -hi - probe, "toward normal", "the specular lobe's body, {off} deg from the "
+                                           "mirror toward the normal: starts bracketing its "
+                                           "width"),
+        (mid, min(tmax, -mid + 35.0), "far", "far side beyond the specular lobe"),
+        (lo, -lo + probe, "toward grazing", "the specular lobe's body, {off} deg from the "
+                                            "mirror toward grazing: starts bracketing its "
+                                            "width"),
+        (hi, max(tmin, hi - 10.0), "source", "diffuse lobe, source side at grazing incidence"),
+        (mid, max(tmin, mid - 20.0), "source", "diffuse lobe, source side"),
+        (lo, min(tmax, -lo + 25.0), "far", "far side beyond the specular lobe"),
+        (hi, min(tmax, -hi + 12.0), "far", "far side beyond the specular lobe at grazing "
+                                           "incidence"),
     ]
+    tol = instrument.reach_tolerance
     out, taken = [], []
-    for g, t, why in plan:
+    for g, t, kind, why in plan:
         idx = _nearest_free(settings, g, t, taken, instrument.min_separation)
         if idx is None:
             continue
         taken.append(idx)
         g_, t_ = float(settings[idx, 0]), float(settings[idx, 1])
-        out.append((g_, t_, why.replace("{off}", f"{abs(g_ + t_):.3g}")))
+        out.append((g_, t_, _said(why, kind, g_, t_, tol)))
         if len(out) == n:
             break
     return out
 
 
-def _reachable(settings, gamma, theta, instrument) -> bool:
-    sel = np.abs(settings[:, 0] - gamma) < 1e-6
-    return bool(sel.any() and np.min(np.abs(settings[sel, 1] - theta)) <= max(
-        2.0 * instrument.theta_step, 2.0))
+def _said(why: str, kind: str, gamma: float, theta: float, tol: float) -> str:
+    """What an opening reading measures: the plan's reason when the setting the instrument
+    allows is where the plan meant it (the mirror within ``tol``, the source side at theta
+    < 0, the normal within 15 deg, the lobe's body on the named side of the mirror, the far
+    side beyond it), else what the setting is: a receiver range that misses the mirror
+    direction must not have its nearest setting called the specular peak."""
+    off = theta + gamma  # signed: > 0 beyond the mirror (toward grazing)
+    where = {"mirror": abs(off) <= tol, "source": theta < 0.0, "normal": abs(theta) <= 15.0,
+             "toward normal": off < 0.0, "toward grazing": off > 0.0,
+             "far": off > tol}[kind]
+    if where:
+        return why.replace("{off}", f"{abs(off):.3g}")
+    intent = why.split(":")[0].replace(", {off} deg from the mirror", "").replace(
+        " {off} deg from the mirror", "")
+    return (f"{intent}: out of the receiver's range, so the nearest free setting, "
+            f"{abs(off):.3g} deg {'beyond' if off > 0 else 'short of'} the mirror direction")
 
 
 def _nearest_free(settings, gamma, theta, taken, sep):

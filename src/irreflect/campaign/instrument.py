@@ -166,6 +166,24 @@ class Instrument:
         order = np.lexsort((s[:, 1], np.abs(s[:, 0])))
         return s[order] + 0.0
 
+    @property
+    def reach_tolerance(self) -> float:
+        """deg: a setting this close to a direction measures it (two receiver steps, at
+        least 2 deg)."""
+        return max(2.0 * self.theta_step, 2.0)
+
+    def mirror_misses(self) -> tuple[float, ...]:
+        """The angles of incidence whose mirror direction (theta = -gamma, the specular
+        peak) no setting reaches within :attr:`reach_tolerance`: the specular lobe's peak
+        there can only be extrapolated."""
+        s = self.settings()
+        out = []
+        for g in self.gammas:
+            t = s[np.abs(s[:, 0] - g) < 1e-6, 1]
+            if not t.size or np.min(np.abs(t + g)) > self.reach_tolerance:
+                out.append(float(g))
+        return tuple(out)
+
     def describe(self) -> str:
         """One line: what the instrument can do."""
         g = ", ".join(f"{x:g}" for x in self.gammas)

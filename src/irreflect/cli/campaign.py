@@ -107,13 +107,22 @@ def _next(args) -> int:
         table["power"] = ""
         with atomic_path(args.out, "--out") as tmp:
             table.to_csv(tmp, index=False, float_format="%.6g")
+    missed = tool.mirror_misses()
+    warned = ([f"the receiver range {tool.theta_min:g}..{tool.theta_max:g} deg does not reach "
+               f"the mirror direction (theta = -gamma) at gamma "
+               f"{', '.join(f'{g:g}' for g in missed)} deg: the specular peak there will be "
+               "extrapolated, not measured; widen --theta-min/--theta-max or drop those "
+               "angles from --gammas"] if missed else [])
+    for text in warned:
+        print(f"irreflect: warning: {text}", file=sys.stderr)
     if args.json:
         doc = {"dataset": name, "n_measured": campaign.n_measured,
                "instrument": tool.describe(), "model": model.name, "seed": args.seed,
                "proposals": [{"gamma_deg": float(r.gamma_deg), "theta_deg": float(r.theta_deg),
                               "why": r.why, "new_gamma": bool(r.new_gamma),
                               "gain": float(r.gain)} for r in proposals.itertuples()],
-               "verdict": verdict.to_dict(), "out": args.out, "save": args.save}
+               "verdict": verdict.to_dict(), "warnings": warned, "out": args.out,
+               "save": args.save}
         print_json(doc)
         return 0
     if not args.gammas:
