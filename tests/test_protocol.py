@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import itertools
 import json
+import warnings
 
 import numpy as np
 import pandas as pd
@@ -231,6 +232,27 @@ def test_csv_json_markdown_exports(tmp_path):
         assert back.purpose == proto.in_measurement_order().purpose
     back = read_protocol(tmp_path / "p.json")
     assert back.theta_min == -70 and back.kind == "paper"
+
+
+def test_a_protocol_file_in_the_mirrored_frame_is_read_as_the_paper_frame(tmp_path):
+    """Its gammas >= 0 and its mirror points at theta = -gamma (the source on the positive
+    side): read with theta's sign turned too, with a note, as a dense table in that frame
+    is; read as magnitudes, every mirror point would land on the source direction."""
+    from irreflect.data import DataNotice
+
+    proto = paper_protocol([-20, -40, -60])
+    frame = pd.DataFrame({"gamma_deg": -proto.gamma_deg, "theta_deg": -proto.theta_deg,
+                          "purpose": proto.purpose})
+    frame.to_csv(tmp_path / "mirrored.csv", index=False)
+    with pytest.warns(DataNotice, match="read as the paper's frame mirrored"):
+        back = read_protocol(tmp_path / "mirrored.csv")
+    assert sorted(points(back)) == sorted(points(proto))
+    # magnitudes with the mirror on the positive side stay magnitudes, without a note
+    frame.assign(theta_deg=proto.theta_deg).to_csv(tmp_path / "magnitudes.csv", index=False)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", DataNotice)
+        assert sorted(points(read_protocol(tmp_path / "magnitudes.csv"))) == sorted(
+            points(proto))
 
 
 def test_filled_in_csv_fits_directly(tmp_path, capsys):

@@ -458,7 +458,23 @@ def protocol_from_frame(df: pd.DataFrame, source: str = "protocol", *,
             )
         out[col] = values
     gamma = normalise_gammas(out["gamma_deg"], what=f"{source}: gamma_deg values")
-    theta = np.array([_clean(t) for t in out["theta_deg"]])
+    if "purpose" in cols:
+        purpose = tuple(str(p) if isinstance(p, str) and p.strip() else "custom"
+                        for p in df[cols["purpose"]])
+    else:
+        purpose = ("custom",) * len(df)
+    raw_theta = out["theta_deg"]
+    if _mirrored_frame(out["gamma_deg"], raw_theta, purpose):
+        import warnings
+
+        from ..data import DataNotice
+
+        raw_theta = -raw_theta
+        warnings.warn(f"{source}: all gamma_deg >= 0 and its mirror points stand at theta = "
+                      "-gamma: read as the paper's frame mirrored (gamma and theta both "
+                      "change sign, the mirror direction stays theta = -gamma)", DataNotice,
+                      stacklevel=2)
+    theta = np.array([_clean(t) for t in raw_theta])
     key = pd.DataFrame({"g": gamma, "t": theta})
     if key.duplicated().any():
         i = int(np.nonzero(key.duplicated().to_numpy())[0][0])
@@ -466,16 +482,24 @@ def protocol_from_frame(df: pd.DataFrame, source: str = "protocol", *,
             f"{source}: point ({gamma[i]:g}, {theta[i]:g}) appears twice (data row {i + 1}): "
             "a protocol lists each setting once"
         )
-    if "purpose" in cols:
-        purpose = tuple(str(p) if isinstance(p, str) and p.strip() else "custom"
-                        for p in df[cols["purpose"]])
-    else:
-        purpose = ("custom",) * len(df)
     return Protocol(
         gamma_deg=gamma, theta_deg=theta, purpose=purpose,
         requested_theta_deg=np.full(gamma.size, np.nan), adjustment=("",) * gamma.size,
         kind="file", rule=f"read from {source}", order="given", name=name or "protocol",
     )
+
+
+def _mirrored_frame(gamma, theta, purpose) -> bool:
+    """A protocol file in the paper's frame mirrored (the source on the positive side): all
+    its gammas >= 0 and every ``mirror`` point at theta = -gamma in the file's own signs
+    (read as magnitudes they would stand at theta = +gamma, on the source direction; a
+    dense table is recognised by where its readings peak, a protocol by its mirror points)."""
+    gamma, theta = np.asarray(gamma, float), np.asarray(theta, float)
+    mirror = np.array([p == "mirror" for p in purpose]) & (gamma >= 1.0)
+    if np.any(gamma < 0) or not mirror.any():
+        return False
+    return bool(np.all(np.abs(theta[mirror] + gamma[mirror])
+                       < np.abs(theta[mirror] - gamma[mirror])))
 
 
 # ----------------------------------------------------------------------------- glossy materials
