@@ -154,6 +154,23 @@ def test_standard_errors_match_a_monte_carlo_of_the_noise():
     assert np.all((ratio > 1 / 1.6) & (ratio < 1.6)), ratio
 
 
+def test_a_coefficient_fitted_exactly_at_zero_is_determined():
+    """Noise-free readings of a share and indices constant in gamma (every v = 0): the fit
+    recovers them to 1e-16, and 0 +- 4e-17 is determined, though its standard error is
+    above |value| (what flagged it before stop 34); a noisy table's loose exponent is still
+    flagged."""
+    g = np.repeat([-10.0, -25, -40, -55, -70], 141)
+    t = np.tile(np.linspace(-70, 70, 141), 5)
+    truth = (0.4, 0.0, 1.0, 0.0, 40.0, 0.0, 0.5)
+    clean = two_lobe_power(np.radians(g), np.radians(t), *truth)
+    res = fit(Measurements(gamma_deg=g, theta_deg=t, power=clean))
+    np.testing.assert_allclose(res.values, truth, atol=1e-9)
+    assert res.ill_determined == () and not any("ill-determined" in w for w in res.warnings)
+    noisy = fit(Measurements(gamma_deg=g, theta_deg=t, power=clean + np.random.default_rng(
+        0).normal(0, 0.05, clean.size)))
+    assert "v_as" in noisy.ill_determined
+
+
 def test_fit_error_when_no_start_is_finite():
     def nan_basis(geom, z, derivatives=True):
         shape = (z.shape[0], geom.gamma.shape[1], 1)
