@@ -194,6 +194,26 @@ def test_extrapolation_is_named_with_the_angles_to_add(grazing):
     no_maker(v.text())
 
 
+def test_a_model_that_misses_the_material_is_named_before_the_points():
+    """A retroreflector (its peak toward the source, which the two-lobe model has no term
+    for): the all-points fit explains it to R^2 0.1, and the paper's protocol's failure is
+    put down first to the model, with diagnose as the remedy, not only to its points."""
+    g = np.repeat([-20.0, -40.0, -60.0], 141)
+    t = np.tile(np.linspace(-70, 70, 141), 3)
+    retro = Measurements(gamma_deg=g, theta_deg=t, name="retro",
+                         power=0.2 * np.cos(np.radians(t)) + np.exp(-((t - g) / 6.0) ** 2))
+    v = evaluate_protocol(paper_protocol([-20, -40, -60]), retro).verdict
+    assert not v.passed and v.causes[0].kind == "model-misfit", v.text()
+    r2_a = v.judgement.reference_r2
+    assert r2_a < 0.5 and f"explains them only to R^2 {r2_a:.3f}" in v.causes[0].text
+    assert any("irreflect diagnose" in r for r in v.remedies)
+    # a material the model describes gets no such cause, though the protocol fails on it
+    ok = evaluate_protocol(paper_protocol([-20, -40, -60]), table(
+        [0.3, 0.0, 1.0, 0.5, 15.0, 0.5, 1.0], (20, 40, 60), every_5_deg)).verdict
+    assert ok.judgement.reference_r2 > 0.9
+    assert all(c.kind != "model-misfit" for c in ok.causes)
+
+
 def test_ill_determined_coefficients_are_named_when_the_points_do_not_pin_the_model(tmp_path,
                                                                                   capsys):
     """Every point on the source side: the forward specular lobe is never measured, so its

@@ -8,6 +8,12 @@ from __future__ import annotations
 
 import numpy as np
 
+#: Below this R^2 a model misses a table's shape: a campaign that stops on such a fit, and
+#: a protocol judged against an all-points fit this poor, say so and name
+#: ``irreflect diagnose`` (every real set's two-lobe fit is at 0.94 or above; a
+#: retroreflector's at 0.09).
+MISFIT_R2 = 0.9
+
 
 def r2(measured, predicted) -> float | np.ndarray:
     """Coefficient of determination ``1 - SS_res / SS_tot`` along the last axis."""

@@ -75,9 +75,9 @@ FIT_OPTIONS = FitOptions(polish=False)
 #: is replaced by the continuation of the previous fit when that does not
 #: (:meth:`Campaign._choose_continuation`).
 OVERSHOOT = 1.5
-#: a stop on a fit whose R^2 on its own readings is below this says the model may lack an
-#: effect (every real set's campaign fit is at 0.928 or above from 10 readings on)
-MISFIT_R2 = 0.9
+#: a stop on a fit whose R^2 on its own readings is below :data:`irreflect.metrics.MISFIT_R2`
+#: says the model may lack an effect (every real set's campaign fit is at 0.928 or above
+#: from 10 readings on)
 CONTINUATION_OPTIONS = FitOptions(polish=False, n_screen=1, n_keep=1, n_data_starts=0,
                                   n_random_starts=0, n_hops=0, max_rounds=1, retry=False)
 #: The range's settings that weigh the readings (see :func:`range_weights`) are thinned to
@@ -694,7 +694,7 @@ class Campaign:
         why = tuple(reasons) or (
             f"the last {STOP_HOLD + 1} readings moved the predicted curve by {stability:.2%} "
             f"of its variance (below {100 * self.stop_tolerance:.2g}%)",)
-        if not reasons and np.isfinite(res.r2) and res.r2 < MISFIT_R2:
+        if not reasons and np.isfinite(res.r2) and res.r2 < metrics.MISFIT_R2:
             # the curve holds, but on a fit that explains its own readings poorly: more
             # readings will not mend the model (a foreign Lafortune material, all-points
             # R^2 0.77, stops at 0.57 against all points and 0.56 on its readings)

@@ -203,7 +203,7 @@ class Cause:
     """One cause of a protocol's shortfall, found from the evidence."""
 
     kind: str  # extrapolation, unresolved-lobe, lobe-misfit, ill-determined, degrees-of-freedom,
-    #            evaluation-gap, unidentified
+    #            evaluation-gap, unidentified, model-misfit
     text: str
     share: float = float("nan")  # of the protocol model's extra squared error
     remedy: str = ""
@@ -369,6 +369,8 @@ def assess(dense, protocol_fit, reference, points, *, what: str = "the protocol"
     focus = None if j.drop > j.pass_margin or not np.isfinite(worst_g) else [worst_g]
     causes = _causes(dense, protocol_fit, reference, pts, pred_p, pred_a, n_distinct, k, what,
                      ill, focus=focus)
+    if np.isfinite(r2_a) and r2_a < metrics.MISFIT_R2:
+        causes.insert(0, _model_misfit(dense, r2_a))
     remedies = [c.remedy for c in causes if c.remedy]
     remedies.append(adaptive_remedy(dense))
     return ProtocolVerdict(j, what, n_distinct, k, tuple(causes), tuple(dict.fromkeys(remedies)),
@@ -504,6 +506,23 @@ def _causes(dense, fit_p, reference, pts, pred_p, pred_a, n_distinct, k, what, i
     order = {"degrees-of-freedom": -1.0}
     causes.sort(key=lambda c: order.get(c.kind, -(c.share if np.isfinite(c.share) else 0.0)))
     return causes
+
+
+def _model_misfit(dense, r2_a: float) -> Cause:
+    """The model itself misses the material: its fit on every point of the dense scan
+    explains it below :data:`irreflect.metrics.MISFIT_R2`. No choice of points mends that,
+    and the protocol is judged against a curve that does not describe the material (a
+    retroreflector's all-points two-lobe fit: R^2 0.09, and the paper's protocol's failure
+    was put down to ill-determined coefficients)."""
+    return Cause(
+        "model-misfit",
+        f"the model misses this material's shape: fitted on all {dense.n_points} points it "
+        f"explains them only to R^2 {r2_a:.3f} (below {metrics.MISFIT_R2:g}), so no choice "
+        "of points can make it right, and the protocol is judged against a curve that does "
+        "not describe the material",
+        float("nan"),
+        "find what the model lacks: `irreflect diagnose` on the dense table names a missing "
+        "effect, `irreflect compare` tries the other models")
 
 
 def _extrapolation(sp: _ErrorSplit, pred_p, what) -> Cause:
