@@ -204,7 +204,8 @@ def _said(why: str, kind: str, gamma: float, theta: float, tol: float) -> str:
         return why.replace("{off}", f"{abs(off):.3g}")
     intent = why.split(":")[0].replace(", {off} deg from the mirror", "").replace(
         " {off} deg from the mirror", "")
-    return (f"{intent}: out of the receiver's range, so the nearest free setting, "
+    return (f"{intent}: not available (out of the receiver's range or taken), so the "
+            f"nearest free setting, "
             f"{abs(off):.3g} deg {'beyond' if off > 0 else 'short of'} the mirror direction")
 
 
