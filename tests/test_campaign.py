@@ -126,9 +126,13 @@ def test_an_opening_reading_the_receiver_cannot_place_is_not_called_what_it_miss
     code, _, err = _run(["next", measured, "--gammas", "10,40,70", "--theta-min", "-30",
                          "--theta-max", "40", "--theta-step", "5"])
     assert code == 0 and err.count("warning") == 1
-    assert "does not reach the mirror direction (theta = -gamma) at gamma -70 deg" in err
+    assert ("the specular peak (theta = -gamma) cannot be measured at gamma -70 deg (beyond "
+            "the receiver range -30..40 deg" in err)
     code, _, err = _run(["next", measured, "--gammas", "10,40"])
     assert code == 0 and "warning" not in err
+    # at normal incidence the mirror is the source direction: the clearance blocks it
+    code, _, err = _run(["next", measured, "--gammas", "0,20", "--theta-min", "-30"])
+    assert code == 0 and "at gamma 0 deg (within 5 deg of the source direction" in err
 
 
 def test_opening_design_honours_the_gamma_settings():

@@ -107,12 +107,7 @@ def _next(args) -> int:
         table["power"] = ""
         with atomic_path(args.out, "--out") as tmp:
             table.to_csv(tmp, index=False, float_format="%.6g")
-    missed = tool.mirror_misses()
-    warned = ([f"the receiver range {tool.theta_min:g}..{tool.theta_max:g} deg does not reach "
-               f"the mirror direction (theta = -gamma) at gamma "
-               f"{', '.join(f'{g:g}' for g in missed)} deg: the specular peak there will be "
-               "extrapolated, not measured; widen --theta-min/--theta-max or drop those "
-               "angles from --gammas"] if missed else [])
+    warned = _mirror_warnings(tool)
     for text in warned:
         print(f"irreflect: warning: {text}", file=sys.stderr)
     if args.json:
@@ -145,6 +140,29 @@ def _next(args) -> int:
         print(f"wrote {args.save} (the campaign's fit of {campaign.n_measured} readings: a "
               "material file for 'irreflect room' scenes)")
     return 0
+
+
+def _mirror_warnings(tool) -> list[str]:
+    """A warning when the instrument cannot measure the specular peak (theta = -gamma) at
+    some of its angles of incidence, with the reason for each: beyond the receiver's range
+    (widen it) or within the source clearance (at normal incidence the mirror is the
+    source direction)."""
+    missed = tool.mirror_misses()
+    if not missed:
+        return []
+    out_of_range = [g for g in missed if not tool.theta_min <= -g <= tool.theta_max]
+    blocked = [g for g in missed if g not in out_of_range]
+    parts = []
+    if out_of_range:
+        parts.append(f"{', '.join(f'{g:g}' for g in out_of_range)} deg (beyond the receiver "
+                     f"range {tool.theta_min:g}..{tool.theta_max:g} deg: widen --theta-min/"
+                     "--theta-max to measure it)")
+    if blocked:
+        parts.append(f"{', '.join(f'{g:g}' for g in blocked)} deg (within "
+                     f"{tool.source_clearance:g} deg of the source direction, "
+                     "--source-clearance)")
+    return ["the specular peak (theta = -gamma) cannot be measured at gamma "
+            + " and ".join(parts) + ": the fit extrapolates it there"]
 
 
 def _cmd_campaign(args) -> int:
