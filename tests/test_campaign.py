@@ -700,3 +700,10 @@ def test_a_stop_on_a_model_that_misfits_its_readings_says_so():
     assert verdict.at_bound and "at a bound of its range: " in verdict.text
     # (a material the model describes stops without it:
     # test_the_verdict_continues_until_the_curve_holds_then_stops)
+
+
+def test_a_replayed_r2_far_below_zero_is_printed_in_exponent_form():
+    from irreflect.cli.campaign import _r2
+
+    assert (_r2(0.98765), _r2(-1349228816089424128.0), _r2(-51500.0)) == (
+        "0.9877", "-1.35e+18", "-5.15e+04")

@@ -228,6 +228,12 @@ def _campaign(args) -> int:
     return 0
 
 
+def _r2(v: float) -> str:
+    """R^2 to four decimals, or in exponent form once a replayed fit's is far below zero
+    (a random campaign's fit extrapolating: -1.35e+18, not -1349228816089424128.0000)."""
+    return f"{v:.4f}" if v > -1e4 else f"{v:.3g}"
+
+
 def format_replay(result) -> str:
     """The printed replay: the strategies' N to reach the target, then R^2 per N."""
     lines = [f"{result.dataset}: {result.n_points} points; all-points fit R^2 "
@@ -238,14 +244,14 @@ def format_replay(result) -> str:
         at12 = c.r2.get(12)
         text = (f"reaches the target at N = {reached} and keeps it" if reached is not None
                 else "never keeps the target" if c.r2 else "not available")
-        extra = "" if at12 is None else f"; R^2 {at12:.4f} at N = 12"
+        extra = "" if at12 is None else f"; R^2 {_r2(at12)} at N = 12"
         note = f"  ({c.note})" if c.note else ""
         lines.append(f"  {name:<{width}}  {text}{extra}{note}")
     if result.verdicts:
         stop = result.stop_n
         lines.append("  adaptive verdict: " + (f"stop at N = {stop}" if stop else
                                                  "never said stop")
-                     + (f", R^2 {result.curves['adaptive'].r2.get(stop, float('nan')):.4f} "
+                     + (f", R^2 {_r2(result.curves['adaptive'].r2.get(stop, float('nan')))} "
                         "there" if stop else ""))
     if result.proposal_seconds:
         t = sorted(result.proposal_seconds)
@@ -264,7 +270,7 @@ def format_replay(result) -> str:
             elif v != v:
                 cells.append(f"{'':>10}")
             else:
-                cells.append(f"{v:>10.4f}" if v > -1e4 else f"{v:>10.3g}")
+                cells.append(f"{_r2(v):>10}")
         lines.append("  " + f"{int(row[0]):>3}  " + "  ".join(cells))
     return "\n".join(lines)
 
