@@ -321,6 +321,11 @@ def _negative_noise(power) -> float | None:
     return rms
 
 
+#: How a table (or a protocol file) in the paper's frame mirrored is read.
+MIRRORED_FRAME = ("read as the paper's frame mirrored (gamma and theta both change sign, the "
+                  "mirror direction stays theta = -gamma)")
+
+
 def _frame(gamma, theta, power, positive: bool, partial: bool, source):
     """The paper's frame of a table's angles and the notes on it: gammas all >= 0 read as
     magnitudes, or as the paper's frame mirrored when the readings peak at theta = -gamma
@@ -334,9 +339,7 @@ def _frame(gamma, theta, power, positive: bool, partial: bool, source):
             # mirrored (source on the positive side), so theta turns with gamma
             gamma, theta = -gamma, -theta
             out.append(f"{source}: all gamma_deg >= 0 and the readings peak at theta = "
-                      "-gamma at every angle of incidence: read as the paper's frame "
-                      "mirrored (gamma and theta both change sign, the mirror direction "
-                      "stays theta = -gamma)")
+                      f"-gamma at every angle of incidence: {MIRRORED_FRAME}")
         else:
             gamma = -gamma
             out.append(f"{source}: all gamma_deg >= 0, read as magnitudes (gamma = "

@@ -9,11 +9,13 @@ then read as ``gamma = -|gamma|``. Mixing signs is refused as ambiguous.
 
 from __future__ import annotations
 
+import warnings
 from dataclasses import dataclass, field, replace
 
 import numpy as np
 import pandas as pd
 
+from ..data import MIRRORED_FRAME, DataNotice
 from ..errors import IrreflectError, unknown_name
 from ..validation import short_list
 
@@ -465,15 +467,9 @@ def protocol_from_frame(df: pd.DataFrame, source: str = "protocol", *,
         purpose = ("custom",) * len(df)
     raw_theta = out["theta_deg"]
     if _mirrored_frame(out["gamma_deg"], raw_theta, purpose):
-        import warnings
-
-        from ..data import DataNotice
-
         raw_theta = -raw_theta
         warnings.warn(f"{source}: all gamma_deg >= 0 and its mirror points stand at theta = "
-                      "-gamma: read as the paper's frame mirrored (gamma and theta both "
-                      "change sign, the mirror direction stays theta = -gamma)", DataNotice,
-                      stacklevel=2)
+                      f"-gamma: {MIRRORED_FRAME}", DataNotice, stacklevel=2)
     theta = np.array([_clean(t) for t in raw_theta])
     key = pd.DataFrame({"g": gamma, "t": theta})
     if key.duplicated().any():
