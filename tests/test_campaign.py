@@ -707,3 +707,15 @@ def test_a_replayed_r2_far_below_zero_is_printed_in_exponent_form():
 
     assert (_r2(0.98765), _r2(-1349228816089424128.0), _r2(-51500.0)) == (
         "0.9877", "-1.35e+18", "-5.15e+04")
+
+
+def test_next_notes_readings_at_angles_the_instrument_does_not_list(tmp_path):
+    measured = tmp_path / "m.csv"
+    g = np.repeat([-20.0, -40.0, -60.0], 4)
+    t = np.tile([-30.0, 0.0, 25.0, 50.0], 3)
+    pd.DataFrame({"gamma_deg": g, "theta_deg": t, "power": two_lobe_power(
+        np.radians(g), np.radians(t), *GLOSSY)}).to_csv(measured, index=False)
+    code, _, err = _run(["next", measured, "--gammas", "20,40", "--json"])
+    assert code == 0 and "note: readings at gamma -60 deg, which --gammas does not list" in err
+    code, stdout, err = _run(["next", measured, "--gammas", "20,40,60", "--json"])
+    assert code == 0 and "note" not in err and json.loads(stdout)["notes"] == []

@@ -110,14 +110,17 @@ def _next(args) -> int:
     warned = _mirror_warnings(tool)
     for text in warned:
         print(f"irreflect: warning: {text}", file=sys.stderr)
+    noted = _foreign_gammas(tool, campaign.measurements)
+    for text in noted:
+        print(f"irreflect: note: {text}", file=sys.stderr)
     if args.json:
         doc = {"dataset": name, "n_measured": campaign.n_measured,
                "instrument": tool.describe(), "model": model.name, "seed": args.seed,
                "proposals": [{"gamma_deg": float(r.gamma_deg), "theta_deg": float(r.theta_deg),
                               "why": r.why, "new_gamma": bool(r.new_gamma),
                               "gain": float(r.gain)} for r in proposals.itertuples()],
-               "verdict": verdict.to_dict(), "warnings": warned, "out": args.out,
-               "save": args.save}
+               "verdict": verdict.to_dict(), "warnings": warned, "notes": noted,
+               "out": args.out, "save": args.save}
         print_json(doc)
         return 0
     if not args.gammas:
@@ -163,6 +166,21 @@ def _mirror_warnings(tool) -> list[str]:
                      "--source-clearance)")
     return ["the specular peak (theta = -gamma) cannot be measured at gamma "
             + " and ".join(parts) + ": the fit extrapolates it there"]
+
+
+def _foreign_gammas(tool, readings) -> list[str]:
+    """A note when readings stand at angles of incidence the instrument does not list
+    (--gammas): they are fitted, but proposals and the verdict's range are the
+    instrument's."""
+    if readings is None or not readings.n_points:
+        return []
+    listed = {round(float(g), 6) for g in tool.gammas}
+    other = sorted({round(float(g), 6) for g in readings.gamma_deg} - listed, key=abs)
+    if not other:
+        return []
+    return [f"readings at gamma {', '.join(f'{g:g}' for g in other)} deg, which --gammas does "
+            "not list: they are fitted, but the proposals and the verdict's predicted R^2 "
+            "cover only the listed angles; add them to --gammas to include them"]
 
 
 def _cmd_campaign(args) -> int:
