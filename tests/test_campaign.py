@@ -719,3 +719,19 @@ def test_next_notes_readings_at_angles_the_instrument_does_not_list(tmp_path):
     assert code == 0 and "note: readings at gamma -60 deg, which --gammas does not list" in err
     code, stdout, err = _run(["next", measured, "--gammas", "20,40,60", "--json"])
     assert code == 0 and "note" not in err and json.loads(stdout)["notes"] == []
+
+
+def test_a_dense_table_without_the_specular_peak_is_warned(tmp_path):
+    # a scan that skipped the mirror direction at gamma -40 (no reading within 10 deg of
+    # theta = 40): every strategy extrapolates the peak there, and nothing scores it
+    full = _material(GLOSSY, step=2.0)
+    assert DenseInstrument(full).mirror_gaps() == ""
+    keep = ~((full.gamma_deg == -40.0) & (np.abs(full.theta_deg - 40.0) < 10.0))
+    gap = full.subset(keep)
+    text = DenseInstrument(gap).mirror_gaps()
+    assert "at gamma -40 deg: every strategy's fit extrapolates the peak" in text, text
+    assert "-10," not in text and "-70" not in text  # the other rows have their peaks
+    path = tmp_path / "gap.csv"
+    gap.to_frame().to_csv(path, index=False)
+    code, out, err = _run(["campaign", path, "--strategies", "paper"])
+    assert code == 0 and "irreflect: warning: the table has no reading within 4 deg" in err

@@ -56,16 +56,18 @@ def test_effect_outside_the_catalogue_leaves_unexplained_structure(effect):
     """Clearly visible outside effects (excess chi2 >= 150) on tables that give their
     noise: every one is left unexplained, no catalogue name given. Without a sigma column
     a ripple a few receiver steps long also inflates the difference-based noise estimate,
-    whose uncertainty the tests then carry (F tests): most are still flagged."""
+    whose uncertainty the tests then carry (F tests): most are still flagged (seeds 0-4
+    without sigma: ripple 4 of 5, bump 5 of 5 at stop 35). Three seeds each here: the
+    rates over many are experiments/diagnose_rates.py's."""
     with_sigma = [diagnose(hidden_case(effect, seed, min_excess_chi2=150,
                                        sigma_column=True).measurements, seed=seed)
-                  for seed in range(5)]
+                  for seed in range(3)]
     assert all(d.verdict == UNEXPLAINED and not d.effects for d in with_sigma), \
         [(d.verdict, [e.name for e in d.effects]) for d in with_sigma]
     verdicts = [diagnose(hidden_case(effect, seed, min_excess_chi2=150,
                                      sigma_column=False).measurements, seed=seed).verdict
-                for seed in range(5)]
-    assert sum(v == UNEXPLAINED for v in verdicts) >= 3, verdicts
+                for seed in range(3)]
+    assert sum(v == UNEXPLAINED for v in verdicts) >= 2, verdicts
 
 
 def test_ripple_location_is_reported():

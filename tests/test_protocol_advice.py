@@ -212,6 +212,19 @@ def test_a_model_that_misses_the_material_is_named_before_the_points():
         [0.3, 0.0, 1.0, 0.5, 15.0, 0.5, 1.0], (20, 40, 60), every_5_deg)).verdict
     assert ok.judgement.reference_r2 > 0.9
     assert all(c.kind != "model-misfit" for c in ok.causes)
+    # a protocol that matches the all-points fit exactly (here: every point) passes, with
+    # the misfit as a caveat: it matches a curve that does not describe the material
+    every = fit(retro)
+    pts = pd.DataFrame({"gamma_deg": retro.gamma_deg, "theta_deg": retro.theta_deg})
+    p = advice.assess(retro, every, every, pts)
+    assert p.passed and [c.kind for c in p.causes] == ["model-misfit"], p.text()
+    assert "\n  caveat: the model misses this material's shape" in p.text()
+    assert any("irreflect diagnose" in r for r in p.remedies)
+    good = table([0.3, 0.0, 1.0, 0.5, 15.0, 0.5, 1.0], (20, 40, 60), every_5_deg)
+    good_fit = fit(good)
+    q = advice.assess(good, good_fit, good_fit, pd.DataFrame(
+        {"gamma_deg": good.gamma_deg, "theta_deg": good.theta_deg}))
+    assert q.passed and q.causes == () and "caveat" not in q.text()
 
 
 def test_ill_determined_coefficients_are_named_when_the_points_do_not_pin_the_model(tmp_path,

@@ -109,6 +109,19 @@ class DenseInstrument:
                           theta_max=float(s[:, 1].max()), theta_step=step, settings_deg=s,
                           **kwargs)
 
+    def mirror_gaps(self) -> str:
+        """A warning when the table has no reading near the specular peak (theta = -gamma,
+        within the instrument's reach tolerance) at some angles of incidence: every
+        strategy's fit extrapolates the peak there, and no R^2 scores it; empty otherwise."""
+        tool = self.instrument()
+        missed = tool.mirror_misses()
+        if not missed:
+            return ""
+        return (f"the table has no reading within {tool.reach_tolerance:.3g} deg of the "
+                f"specular peak (theta = -gamma) at gamma {', '.join(f'{g:g}' for g in missed)}"
+                " deg: every strategy's fit extrapolates the peak there, and no R^2 below "
+                "scores it (measure the mirror direction there to judge the lobe)")
+
     def _row(self, gamma: float) -> tuple[np.ndarray, np.ndarray]:
         """The table's readings at one angle of incidence, ``(theta, power)`` sorted by
         theta (empty where it has none)."""
@@ -464,7 +477,7 @@ def replay(dense, strategies=STRATEGIES, *, n_max: int = 25, model="two-lobe", s
     return ReplayResult(
         dataset=dense.name, n_points=dense.n_points, reference_r2=float(reference.r2),
         curves=curves, verdicts=verdicts, proposal_seconds=times,
-        warnings=[w for w in (source.coarse_peaks(),) if w],
+        warnings=[w for w in (source.coarse_peaks(), source.mirror_gaps()) if w],
         settings={"n_max": n_max, "model": model_obj.name, "seed": seed, "method": method,
                   "tolerance_deg": tolerance_deg, "theta_step": theta_step, "noise": noise,
                   "angle_error_deg": angle_error_deg, "generations": generations})

@@ -42,7 +42,9 @@ few degrees of freedom is named from the count; failing all that, the protocol f
 verdict. The remedy offered is the adaptive campaign (``irreflect next``), plus what a
 cause itself asks for (the angles of incidence to add, the receiver step near the
 mirror); never a command that makes a protocol, since one of those made the protocol
-judged here.
+judged here. A protocol that passes against an all-points fit below
+:data:`irreflect.metrics.MISFIT_R2` carries the model-misfit cause as a caveat: it matches a
+curve that does not describe the material.
 """
 
 from __future__ import annotations
@@ -258,7 +260,8 @@ class ProtocolVerdict:
     def lines(self) -> list[str]:
         """The verdict line, then one line per cause and per remedy."""
         out = [self.line()]
-        out += [f"  cause: {c.text}" for c in self.causes]
+        word = "caveat" if self.passed else "cause"  # a pass names no cause of a shortfall
+        out += [f"  {word}: {c.text}" for c in self.causes]
         out += [f"  remedy: {r}" for r in self.remedies]
         return out
 
@@ -268,7 +271,8 @@ class ProtocolVerdict:
     def summary(self) -> str:
         """One sentence: the status, the numbers, the causes."""
         head = self.line().split(": ", 1)[1]
-        return head + "".join(f"; cause: {c.text}" for c in self.causes)
+        word = "caveat" if self.passed else "cause"
+        return head + "".join(f"; {word}: {c.text}" for c in self.causes)
 
     def to_dict(self) -> dict:
         j = self.judgement
@@ -361,15 +365,19 @@ def assess(dense, protocol_fit, reference, points, *, what: str = "the protocol"
     j = judge(r2, r2_a, n_points=n_distinct, n_params=k, noise_fraction=frac,
               polar_excess=worst, polar_gamma=worst_g)
     ref_polar = float(polar_a.get(worst_g, np.nan)) if np.isfinite(worst_g) else float("nan")
+    misfit = bool(np.isfinite(r2_a) and r2_a < metrics.MISFIT_R2)
     if j.status == "pass":
-        return ProtocolVerdict(j, what, n_distinct, k, polar_reference=ref_polar,
+        # a pass against a curve that does not describe the material says little: say so
+        caveat = (_model_misfit(dense, r2_a),) if misfit else ()
+        return ProtocolVerdict(j, what, n_distinct, k, caveat,
+                               tuple(c.remedy for c in caveat), polar_reference=ref_polar,
                                extra={"noise_fraction": frac})
     # the shortfall is the drop of R^2, or (when only the polar-area error says so) the
     # one angle of incidence where the protocol's model misses the reflected power
     focus = None if j.drop > j.pass_margin or not np.isfinite(worst_g) else [worst_g]
     causes = _causes(dense, protocol_fit, reference, pts, pred_p, pred_a, n_distinct, k, what,
                      ill, focus=focus)
-    if np.isfinite(r2_a) and r2_a < metrics.MISFIT_R2:
+    if misfit:
         causes.insert(0, _model_misfit(dense, r2_a))
     remedies = [c.remedy for c in causes if c.remedy]
     remedies.append(adaptive_remedy(dense))
