@@ -163,52 +163,60 @@ def opening_design(instrument, n: int) -> list[tuple[float, float, str]]:
     mid = chosen[len(chosen) // 2]
     tmin, tmax = instrument.theta_min, instrument.theta_max
     probe = max(1.0, 1.5 * instrument.theta_step)
-    plan = [(g, -g, "mirror", "mirror direction: the specular peak") for g in chosen]
+    # (gamma, theta, where the setting must stand, what it measures in short, in full)
+    body = "the specular lobe's body"
+    plan = [(g, -g, "mirror", "mirror direction", "mirror direction: the specular peak")
+            for g in chosen]
     plan += [
-        (lo, max(tmin, -lo - 50.0), "source", "diffuse lobe, source side"),
-        (hi, 0.0, "normal", "diffuse lobe near the normal, grazing incidence"),
-        (hi, -hi - probe, "toward normal", "the specular lobe's body, {off} deg from the "
-                                           "mirror toward the normal: starts bracketing its "
-                                           "width"),
-        (mid, min(tmax, -mid + 35.0), "far", "far side beyond the specular lobe"),
-        (lo, -lo + probe, "toward grazing", "the specular lobe's body, {off} deg from the "
-                                            "mirror toward grazing: starts bracketing its "
-                                            "width"),
-        (hi, max(tmin, hi - 10.0), "source", "diffuse lobe, source side at grazing incidence"),
-        (mid, max(tmin, mid - 20.0), "source", "diffuse lobe, source side"),
-        (lo, min(tmax, -lo + 25.0), "far", "far side beyond the specular lobe"),
-        (hi, min(tmax, -hi + 12.0), "far", "far side beyond the specular lobe at grazing "
-                                           "incidence"),
+        (lo, max(tmin, -lo - 50.0), "source", "diffuse lobe, source side",
+         "diffuse lobe, source side"),
+        (hi, 0.0, "normal", "diffuse lobe near the normal, grazing incidence",
+         "diffuse lobe near the normal, grazing incidence"),
+        (hi, -hi - probe, "toward normal", f"{body} toward the normal",
+         f"{body}, {{off}} deg from the mirror toward the normal: starts bracketing its "
+         "width"),
+        (mid, min(tmax, -mid + 35.0), "far", "far side beyond the specular lobe",
+         "far side beyond the specular lobe"),
+        (lo, -lo + probe, "toward grazing", f"{body} toward grazing",
+         f"{body}, {{off}} deg from the mirror toward grazing: starts bracketing its width"),
+        (hi, max(tmin, hi - 10.0), "source", "diffuse lobe, source side at grazing incidence",
+         "diffuse lobe, source side at grazing incidence"),
+        (mid, max(tmin, mid - 20.0), "source", "diffuse lobe, source side",
+         "diffuse lobe, source side"),
+        (lo, min(tmax, -lo + 25.0), "far", "far side beyond the specular lobe",
+         "far side beyond the specular lobe"),
+        (hi, min(tmax, -hi + 12.0), "far",
+         "far side beyond the specular lobe at grazing incidence",
+         "far side beyond the specular lobe at grazing incidence"),
     ]
     tol = instrument.reach_tolerance
     out, taken = [], []
-    for g, t, kind, why in plan:
+    for g, t, kind, short, why in plan:
         idx = _nearest_free(settings, g, t, taken, instrument.min_separation)
         if idx is None:
             continue
         taken.append(idx)
         g_, t_ = float(settings[idx, 0]), float(settings[idx, 1])
-        out.append((g_, t_, _said(why, kind, g_, t_, tol)))
+        out.append((g_, t_, _said(why, short, kind, g_, t_, tol)))
         if len(out) == n:
             break
     return out
 
 
-def _said(why: str, kind: str, gamma: float, theta: float, tol: float) -> str:
-    """What an opening reading measures: the plan's reason when the setting the instrument
-    allows is where the plan meant it (the mirror within ``tol``, the source side at theta
-    < 0, the normal within 15 deg, the lobe's body on the named side of the mirror, the far
-    side beyond it), else what the setting is: a receiver range that misses the mirror
-    direction must not have its nearest setting called the specular peak."""
+def _said(why: str, short: str, kind: str, gamma: float, theta: float, tol: float) -> str:
+    """What an opening reading measures: the plan's reason ``why`` when the setting the
+    instrument allows is where the plan meant it (the mirror within ``tol``, the source side
+    at theta < 0, the normal within 15 deg, the lobe's body on the named side of the mirror,
+    the far side beyond it), else the plan's intent (``short``) and where the setting is: a
+    receiver range that misses the mirror direction must not have its nearest setting
+    called the specular peak."""
     off = theta + gamma  # signed: > 0 beyond the mirror (toward grazing)
     where = {"mirror": abs(off) <= tol, "source": theta < 0.0, "normal": abs(theta) <= 15.0,
              "toward normal": off < 0.0, "toward grazing": off > 0.0,
              "far": off > tol}[kind]
     if where:
         return why.replace("{off}", f"{abs(off):.3g}")
-    intent = why.split(":")[0].replace(", {off} deg from the mirror", "").replace(
-        " {off} deg from the mirror", "")
-    return (f"{intent}: not available (out of the receiver's range or taken), so the "
+    return (f"{short}: not available (out of the receiver's range or taken), so the "
             f"nearest free setting, "
             f"{abs(off):.3g} deg {'beyond' if off > 0 else 'short of'} the mirror direction")
 
