@@ -227,6 +227,22 @@ def test_a_model_that_misses_the_material_is_named_before_the_points():
     assert q.passed and q.causes == () and "caveat" not in q.text()
 
 
+def test_evaluate_protocol_prints_the_caveat_of_a_pass_on_a_misfit(tmp_path, capsys):
+    g = np.repeat([-20.0, -40.0, -60.0], 71)
+    t = np.tile(np.linspace(-70, 70, 71), 3)
+    retro = pd.DataFrame({"gamma_deg": g, "theta_deg": t,
+                          "power": 0.2 * np.cos(np.radians(t)) + np.exp(-((t - g) / 6.0) ** 2)})
+    data, proto = tmp_path / "retro.csv", tmp_path / "every.csv"
+    retro.to_csv(data, index=False)
+    retro[["gamma_deg", "theta_deg"]].to_csv(proto, index=False)  # every point: it passes
+    assert main(["evaluate-protocol", str(proto), str(data)]) == 0
+    out = capsys.readouterr().out
+    lines = out.splitlines()
+    at = next(i for i, x in enumerate(lines) if x.startswith("verdict: pass: "))
+    assert lines[at + 1].startswith("  caveat: the model misses this material's shape"), out
+    assert lines[at + 2].startswith("  remedy: find what the model lacks: `irreflect diagnose`")
+
+
 def test_ill_determined_coefficients_are_named_when_the_points_do_not_pin_the_model(tmp_path,
                                                                                   capsys):
     """Every point on the source side: the forward specular lobe is never measured, so its

@@ -31,8 +31,12 @@ RULE_TEXT = (
 
 
 def _kinds(ev) -> str:
-    """The kinds of an evaluation's causes ("" when it passes)."""
-    return ", ".join(c.kind for c in ev.verdict.causes) if ev.verdict is not None else ""
+    """The kinds of an evaluation's causes ("" when it passes; a pass against an all-points
+    fit that misses the material says "caveat: model-misfit")."""
+    if ev.verdict is None or not ev.verdict.causes:
+        return ""
+    kinds = ", ".join(c.kind for c in ev.verdict.causes)
+    return f"caveat: {kinds}" if ev.verdict.passed else kinds
 
 
 def _first_cause(ev) -> str:
