@@ -72,6 +72,7 @@ def test_instrument_settings_follow_its_limits():
     (dict(gammas_deg=(-20,), theta_min=-10, theta_max=10, theta_step=30), "wider than"),
     (dict(gammas_deg=(-20,), max_gamma_settings=0), "max_gamma_settings"),
     (dict(gammas_deg=(0,), theta_min=-2, theta_max=2, source_clearance=5), "no reading"),
+    (dict(gammas_deg=(-20,), resolution=-1), "resolution"),
 ])
 def test_instrument_refuses_bad_limits_in_one_line(kwargs, fragment):
     with pytest.raises(IrreflectError, match=fragment) as info:
@@ -735,3 +736,45 @@ def test_a_dense_table_without_the_specular_peak_is_warned(tmp_path):
     gap.to_frame().to_csv(path, index=False)
     code, out, err = _run(["campaign", path, "--strategies", "paper"])
     assert code == 0 and "irreflect: warning: the table has no reading within 4 deg" in err
+
+
+def test_the_receivers_resolution_spaces_the_readings_and_flags_a_lobe_it_cannot_resolve(
+        tmp_path):
+    # a receiver that averages over 4 deg: readings at least 2 deg apart, the opening's lobe
+    # probes 4 deg from the mirror, and the glossy lobe (full width at half maximum about
+    # 3 deg) is flagged once it is fitted; a 2-deg receiver resolves it
+    kw = dict(gammas_deg=(-10, -20, -30, -40, -50, -60, -70), theta_min=-80, theta_max=80,
+              theta_step=0.5)
+    coarse, fine, point = (Instrument(**kw, resolution=4.0), Instrument(**kw, resolution=2.0),
+                           Instrument(**kw))
+    assert coarse.min_separation == 2.0 and point.min_separation == 0.25
+    assert "resolution 4 deg" in coarse.describe() and "resolution" not in point.describe()
+    probes = [(g, t) for g, t, why in opening_design(coarse, 8) if "lobe's body" in why]
+    assert len(probes) == 2 and all(abs(abs(g + t) - 4.0) < 1e-9 for g, t in probes)
+    probes = [(g, t) for g, t, why in opening_design(point, 8) if "lobe's body" in why]
+    assert all(abs(abs(g + t) - 1.0) < 1e-9 for g, t in probes)
+    dense = _material(GLOSSY, step=1.0, noise=0.0)
+    near = np.abs(dense.gamma_deg + dense.theta_deg) <= 6.0
+    readings = dense.subset(near | (np.arange(dense.n_points) % 9 == 0)).to_frame()
+    texts = {}
+    for name, tool in (("coarse", coarse), ("fine", fine), ("point", point)):
+        c = Campaign(tool, readings)
+        assert c.fit is not None and c.fit.r2 > 0.99
+        texts[name] = c.unresolved_lobe()
+    assert texts["coarse"].startswith("the fitted specular lobe is narrower than the "
+                                      "receiver resolves at gamma -10, -20, -30, -40, -50, "
+                                      "-60, -70 deg")
+    assert "against a resolution of 4 deg" in texts["coarse"]
+    assert texts["fine"] == "" and texts["point"] == ""
+    path = tmp_path / "readings.csv"
+    readings.to_csv(path, index=False)
+    code, out, err = _run(["next", path, "--gammas", "10,20,30,40,50,60,70",
+                           "--theta-step", "0.5", "--resolution", "4", "--json"])
+    assert code == 0, err
+    doc = json.loads(out)
+    assert "resolution 4 deg" in doc["instrument"]
+    assert any(w.startswith("the fitted specular lobe is narrower") for w in doc["warnings"])
+    taken = np.column_stack([readings["gamma_deg"], readings["theta_deg"]])
+    for p in doc["proposals"]:  # no proposal within half the resolution of a reading
+        same = np.abs(taken[:, 0] - p["gamma_deg"]) < 1e-9
+        assert np.min(np.abs(taken[same, 1] - p["theta_deg"]), initial=99.0) >= 2.0 - 1e-9

@@ -610,6 +610,18 @@ class Campaign:
         return rows
 
     # ------------------------------------------------------------------ verdict
+    def unresolved_lobe(self) -> str:
+        """The instrument's warning (:meth:`Instrument.unresolved`) when the current fit's
+        specular lobe is narrower than the receiver's resolution at some of the measured
+        angles of incidence; empty otherwise, or before the first fit."""
+        fit_ = self.fit
+        if fit_ is None or not self.instrument.resolution:
+            return ""
+        gammas = np.unique(np.round(self.measurements.gamma_deg, 6))
+        width = specular_half_width(self.model, fit_.values, gammas)
+        return self.instrument.unresolved(dict(zip(gammas.tolist(), width.tolist(),
+                                                   strict=True)))
+
     def verdict(self) -> Verdict:
         """Whether to stop: see :class:`Verdict`. Stops when the readings pin the predicted
         curve down: the fits on the first n - 1, ..., n - 1 - :data:`STOP_HOLD` readings

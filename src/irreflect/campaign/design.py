@@ -144,8 +144,9 @@ def opening_design(instrument, n: int) -> list[tuple[float, float, str]]:
     whose mirror direction it can reach, and the one nearest their middle; fewer if it
     has fewer or ``max_gamma_settings`` says so), so that no later fit extrapolates in
     gamma; at each the mirror direction (the specular peak: its height, and whether there
-    is a lobe at all); a reading on the lobe's body a degree (or 1.5 receiver steps) from the
-    mirror at the largest and the smallest angle, which starts bracketing the lobe's width;
+    is a lobe at all); a reading on the lobe's body a degree (or 1.5 receiver steps, or the
+    receiver's resolution, whichever is largest) from the mirror at the largest and the
+    smallest angle, which starts bracketing the lobe's width;
     and the diffuse lobe away from the mirror: on the source side, near the normal at
     grazing incidence, and on the far side beyond the lobe.
     """
@@ -162,7 +163,7 @@ def opening_design(instrument, n: int) -> list[tuple[float, float, str]]:
     lo, hi = chosen[0], chosen[-1]
     mid = chosen[len(chosen) // 2]
     tmin, tmax = instrument.theta_min, instrument.theta_max
-    probe = max(1.0, 1.5 * instrument.theta_step)
+    probe = max(1.0, 1.5 * instrument.theta_step, instrument.resolution)
     # (gamma, theta, where the setting must stand, what it measures in short, in full)
     body = "the specular lobe's body"
     plan = [(g, -g, "mirror", "mirror direction", "mirror direction: the specular peak")

@@ -1,8 +1,8 @@
 """What a goniometer can do: the settings a campaign may propose.
 
 An :class:`Instrument` lists the angles of incidence the source arm can be set to, the
-receiver's range and step, the smallest separation between two receiver angles that count
-as different readings, how close the receiver may come to the source direction, and the
+receiver's range, step and angular resolution, the smallest separation between two receiver
+angles that count as different readings, how close the receiver may come to the source direction, and the
 cost of changing the angle of incidence (the slow step of most goniometers). Its
 :meth:`~Instrument.settings` are every (gamma, theta) reading it can take; they are both the
 candidates of a proposal and, by default, the range over which the predicted curve must be
@@ -46,7 +46,7 @@ class Instrument:
         The receiver's step: it stands at ``theta_min + k * theta_step``.
     min_separation : float
         Two readings at one angle of incidence closer than this are the same reading
-        (default: half the step).
+        (default: half the step, or half the resolution when that is larger).
     source_clearance : float
         The receiver cannot stand within this many degrees of the source direction
         ``theta = gamma`` (the arms collide; 0: no limit).
@@ -55,6 +55,11 @@ class Instrument:
         expected gain is divided by ``1 + cost`` when it needs a new setting.
     max_gamma_settings : int, optional
         At most this many distinct angles of incidence over the whole campaign.
+    resolution : float
+        The receiver's angular resolution: the full width of the receiver angles a reading
+        averages over (its acceptance; 0: a point receiver). Readings closer than half of it
+        are not proposed, the opening's lobe probes stand at least this far from the mirror,
+        and a specular lobe narrower than it is warned of (:meth:`unresolved`).
     settings_deg : (n, 2) array, optional
         An explicit list of (gamma, theta) settings (a dense table used as the
         instrument); then ``theta_step`` only sets the default separation.
@@ -68,6 +73,7 @@ class Instrument:
     source_clearance: float = 5.0
     gamma_change_cost: float = 0.0
     max_gamma_settings: int | None = None
+    resolution: float = 0.0
     settings_deg: np.ndarray | None = field(default=None, repr=False, compare=False)
 
     def __post_init__(self):
@@ -106,7 +112,8 @@ class Instrument:
                 f"{n_gammas} angle(s) of incidence is more settings than an instrument may "
                 f"list ({MAX_INSTRUMENT_SETTINGS:,}): pass --theta-step "
                 f"{math.ceil(smallest * 1000) / 1000:g} or more")
-        sep = step / 2.0 if self.min_separation is None else check_number(
+        resolution = check_number(self.resolution, "resolution", low=0.0, high=90.0)
+        sep = max(step, resolution) / 2.0 if self.min_separation is None else check_number(
             self.min_separation, "min_separation", low=0.0)
         clearance = check_number(self.source_clearance, "source_clearance", low=0.0,
                                  high=90.0)
@@ -119,7 +126,7 @@ class Instrument:
                                  f"{self.max_gamma_settings!r}")
         for name, value in (("theta_min", lo), ("theta_max", hi), ("theta_step", step),
                             ("min_separation", sep), ("source_clearance", clearance),
-                            ("gamma_change_cost", cost)):
+                            ("gamma_change_cost", cost), ("resolution", resolution)):
             object.__setattr__(self, name, float(value))
         if self.settings_deg is not None:
             s = np.asarray(self.settings_deg, float).reshape(-1, 2)
@@ -184,12 +191,32 @@ class Instrument:
                 out.append(float(g))
         return tuple(out)
 
+    def unresolved(self, half_widths: dict[float, float]) -> str:
+        """A warning when a specular lobe is narrower than the receiver resolves: its full
+        width at half maximum (twice ``half_widths[gamma]``, deg) below :attr:`resolution`
+        at some angles of incidence; empty otherwise (or with a point receiver)."""
+        if not self.resolution:
+            return ""
+        narrow = {g: h for g, h in half_widths.items() if 2.0 * h < self.resolution}
+        if not narrow:
+            return ""
+        where = ", ".join(f"{g:g}" for g in sorted(narrow, key=abs))
+        width = min(2.0 * h for h in narrow.values())
+        return (f"the fitted specular lobe is narrower than the receiver resolves at gamma "
+                f"{where} deg (full width at half maximum down to {width:.2g} deg, against a "
+                f"resolution of {self.resolution:g} deg): each reading there averages the "
+                "lobe over the receiver's acceptance, so the lobe's peak and width come from a "
+                "model that treats the readings as points; measure it with a narrower "
+                "aperture to pin them down")
+
     def describe(self) -> str:
         """One line: what the instrument can do."""
         g = ", ".join(f"{x:g}" for x in self.gammas)
         parts = [f"angles of incidence {g} deg",
                  f"receiver {self.theta_min:g}..{self.theta_max:g} deg"
                  + ("" if self.settings_deg is not None else f" every {self.theta_step:g} deg")]
+        if self.resolution:
+            parts.append(f"resolution {self.resolution:g} deg")
         if self.source_clearance:
             parts.append(f"at least {self.source_clearance:g} deg from the source")
         if self.max_gamma_settings:

@@ -49,7 +49,7 @@ def _instrument(args):
                       theta_step=args.theta_step, min_separation=args.min_separation,
                       source_clearance=args.source_clearance,
                       gamma_change_cost=args.gamma_cost,
-                      max_gamma_settings=args.gamma_settings)
+                      max_gamma_settings=args.gamma_settings, resolution=args.resolution)
 
 
 def _cmd_next(args) -> int:
@@ -107,7 +107,7 @@ def _next(args) -> int:
         table["power"] = ""
         with atomic_path(args.out, "--out") as tmp:
             table.to_csv(tmp, index=False, float_format="%.6g")
-    warned = _mirror_warnings(tool)
+    warned = _mirror_warnings(tool) + [w for w in (campaign.unresolved_lobe(),) if w]
     for text in warned:
         print(f"irreflect: warning: {text}", file=sys.stderr)
     noted = _foreign_gammas(tool, campaign.measurements)
@@ -318,9 +318,15 @@ def _add_instrument_options(p) -> None:
     p.add_argument("--theta-step", type=POSITIVE, default=1.0,
                    help="the receiver's step: it stands at theta-min + k * step (deg, "
                         "default 1)")
+    p.add_argument("--resolution", type=NON_NEGATIVE, default=0.0, metavar="DEG",
+                   help="the receiver's angular resolution: the full width of the receiver "
+                        "angles one reading averages over (deg, default 0: a point "
+                        "receiver); no two readings closer than half of it, and a warning "
+                        "when the fitted specular lobe is narrower")
     p.add_argument("--min-separation", type=NON_NEGATIVE, default=None,
                    help="two readings of one angle of incidence closer than this are the "
-                        "same (deg, default half the step)")
+                        "same (deg, default half the step or half the resolution, whichever "
+                        "is larger)")
     p.add_argument("--source-clearance", type=NON_NEGATIVE, default=5.0,
                    help="the receiver cannot stand within this many degrees of the source "
                         "direction theta = gamma (deg, default 5)")
