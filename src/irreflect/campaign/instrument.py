@@ -112,7 +112,8 @@ class Instrument:
                 f"{n_gammas} angle(s) of incidence is more settings than an instrument may "
                 f"list ({MAX_INSTRUMENT_SETTINGS:,}): pass --theta-step "
                 f"{math.ceil(smallest * 1000) / 1000:g} or more")
-        resolution = check_number(self.resolution, "resolution", low=0.0, high=90.0)
+        resolution = check_number(self.resolution, "resolution (--resolution)", low=0.0,
+                                  high=90.0)
         sep = max(step, resolution) / 2.0 if self.min_separation is None else check_number(
             self.min_separation, "min_separation", low=0.0)
         clearance = check_number(self.source_clearance, "source_clearance", low=0.0,
