@@ -33,6 +33,7 @@ from ..data import Measurements, read_measurements, validate_table
 from ..errors import DataError, FitError, FitWarning, IrreflectError
 from ..fitting import FitOptions, FitResult, fit, judge
 from ..models import get_model
+from ..models.aperture import with_aperture
 from ..models.paper import specular_share
 from ..validation import check_int, check_seed, short_list
 from .design import (
@@ -80,6 +81,9 @@ OVERSHOOT = 1.5
 #: from 10 readings on)
 CONTINUATION_OPTIONS = FitOptions(polish=False, n_screen=1, n_keep=1, n_data_starts=0,
                                   n_random_starts=0, n_hops=0, max_rounds=1, retry=False)
+#: The fit of readings from a receiver of finite resolution (the model averaged over it):
+#: local searches from the point model's global optimum and the previous fit.
+APERTURE_OPTIONS = dataclasses.replace(CONTINUATION_OPTIONS, n_keep=2)
 #: The range's settings that weigh the readings (see :func:`range_weights`) are thinned to
 #: at most this many.
 MAX_RANGE_POINTS = 20_000
@@ -236,7 +240,10 @@ class Campaign:
         if not isinstance(instrument, Instrument):
             raise IrreflectError(f"expected an Instrument; found {type(instrument).__name__}")
         self.instrument = instrument
-        self.model = get_model(model)
+        # a receiver of finite resolution reads the model averaged over its acceptance; the
+        # coefficients stay the material's (irreflect.models.aperture)
+        self.point_model = get_model(model)
+        self.model = with_aperture(self.point_model, instrument.resolution)
         self.seed = check_seed(seed)
         self.rule = rule
         self.stop_tolerance = float(stop_tolerance)
@@ -445,8 +452,20 @@ class Campaign:
                                 power=meas.power, sigma=sigma, name=meas.name)
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", FitWarning)
-            res = fit(weighted, self.model, FIT_OPTIONS, seed=self.seed,
-                      extra_starts=extra_starts)
+            if self.model is self.point_model:
+                res = fit(weighted, self.model, FIT_OPTIONS, seed=self.seed,
+                          extra_starts=extra_starts)
+            else:
+                # the receiver's average has no compiled kernel: the global search runs on
+                # the point model (compiled), and one local search from its optimum (and
+                # the previous fit) fits the average (numpy)
+                point = fit(weighted, self.point_model, FIT_OPTIONS, seed=self.seed,
+                            extra_starts=extra_starts)
+                z0 = self.model.from_natural(np.asarray(point.values, float)[None])[0]
+                starts = z0 if extra_starts is None else np.vstack(
+                    [z0, np.atleast_2d(extra_starts)])
+                res = fit(weighted, self.model, APERTURE_OPTIONS, seed=self.seed,
+                          extra_starts=starts)
         return _relative(res, self.model, meas), weighted
 
     @property

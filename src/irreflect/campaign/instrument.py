@@ -57,9 +57,11 @@ class Instrument:
         At most this many distinct angles of incidence over the whole campaign.
     resolution : float
         The receiver's angular resolution: the full width of the receiver angles a reading
-        averages over (its acceptance; 0: a point receiver). Readings closer than half of it
-        are not proposed, the opening's lobe probes stand at least this far from the mirror,
-        and a specular lobe narrower than it is warned of (:meth:`unresolved`).
+        averages over (its acceptance; 0: a point receiver). The campaign fits its readings
+        as the model averaged over it (:func:`irreflect.models.aperture.with_aperture`; the
+        coefficients are the material's), readings closer than half of it are not proposed,
+        the opening's lobe probes stand at least this far from the mirror, and a specular
+        lobe narrower than it is warned of (:meth:`unresolved`).
     settings_deg : (n, 2) array, optional
         An explicit list of (gamma, theta) settings (a dense table used as the
         instrument); then ``theta_step`` only sets the default separation.
@@ -205,10 +207,10 @@ class Instrument:
         width = min(2.0 * h for h in narrow.values())
         return (f"the fitted specular lobe is narrower than the receiver resolves at gamma "
                 f"{where} deg (full width at half maximum down to {width:.2g} deg, against a "
-                f"resolution of {self.resolution:g} deg): each reading there averages the "
-                "lobe over the receiver's acceptance, so the lobe's peak and width come from a "
-                "model that treats the readings as points; measure it with a narrower "
-                "aperture to pin them down")
+                f"resolution of {self.resolution:g} deg): the fit models each reading as the "
+                "lobe averaged over the receiver's acceptance, so the lobe's peak and width "
+                "rest on the model's lobe shape, not on readings that resolve it; measure it "
+                "with a narrower aperture to check them")
 
     def describe(self) -> str:
         """One line: what the instrument can do."""

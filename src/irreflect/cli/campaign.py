@@ -100,7 +100,11 @@ def _next(args) -> int:
         save_material(campaign.fit, args.save, data_file=args.measured,
                       notes=f"adaptive campaign (irreflect next), {verdict.text}; the "
                             "readings weighted by the share of the instrument's range each "
-                            "stands for")
+                            "stands for" + (
+                                f"; fitted as the model averaged over the receiver's "
+                                f"{tool.resolution:g} deg resolution (the coefficients are the "
+                                "material's, as a point receiver would see it)"
+                                if tool.resolution else ""))
     if args.out is not None:
         table = proposals[["gamma_deg", "theta_deg", "why"]].copy()
         table["new_gamma"] = proposals["new_gamma"].map({True: "yes", False: "no"})
