@@ -471,7 +471,9 @@ class Campaign:
     @property
     def fit(self) -> FitResult | None:
         """The model fitted to the readings so far (None before there are enough, or when
-        no fit beats a constant)."""
+        no fit beats a constant). With a receiver of finite resolution its coefficients are
+        the material's, and its ``predict`` gives what that receiver reads (the average);
+        ``get_model(fit.model).predict_deg(fit.values, ...)`` gives the material's curve."""
         return self._current().fit
 
     # ------------------------------------------------------------------ proposals

@@ -1,9 +1,10 @@
 """What a goniometer can do: the settings a campaign may propose.
 
 An :class:`Instrument` lists the angles of incidence the source arm can be set to, the
-receiver's range, step and angular resolution, the smallest separation between two receiver
-angles that count as different readings, how close the receiver may come to the source direction, and the
-cost of changing the angle of incidence (the slow step of most goniometers). Its
+receiver's range, step and angular resolution, the smallest separation between two
+receiver angles that count as different readings, how close the receiver may come to the
+source direction, and the cost of changing the angle of incidence (the slow step of most
+goniometers). Its
 :meth:`~Instrument.settings` are every (gamma, theta) reading it can take; they are both the
 candidates of a proposal and, by default, the range over which the predicted curve must be
 right (the "range the user cares about").

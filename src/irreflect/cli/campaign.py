@@ -325,8 +325,9 @@ def _add_instrument_options(p) -> None:
     p.add_argument("--resolution", type=NON_NEGATIVE, default=0.0, metavar="DEG",
                    help="the receiver's angular resolution: the full width of the receiver "
                         "angles one reading averages over (deg, default 0: a point "
-                        "receiver); no two readings closer than half of it, and a warning "
-                        "when the fitted specular lobe is narrower")
+                        "receiver): the readings are fitted as that average (the "
+                        "coefficients are the material's), no two are closer than half of "
+                        "it, and a lobe narrower than it is warned of")
     p.add_argument("--min-separation", type=NON_NEGATIVE, default=None,
                    help="two readings of one angle of incidence closer than this are the "
                         "same (deg, default half the step or half the resolution, whichever "
