@@ -794,6 +794,25 @@ def test_readings_of_a_wide_receiver_are_fitted_as_its_average_and_give_the_mate
     assert point[4] < 0.7 * GLOSSY[4] and point[6] < 0.8 * GLOSSY[6]  # u_ns and K
 
 
+def test_fit_takes_the_receivers_resolution_as_next_does(tmp_path):
+    # `irreflect fit --resolution` and `next --resolution` answer alike on a wide receiver's
+    # readings; without it, fit gives the blurred lobe; the material file says how
+    path = tmp_path / "wide.csv"
+    _receiver_readings(GLOSSY, 4.0).to_csv(path, index=False)
+    code, out, err = _run(["fit", path, "--resolution", "4", "--json",
+                           "--save", tmp_path / "m.json"])
+    assert code == 0, err
+    params = json.loads(out)["params"]
+    assert params["u_ns"] == pytest.approx(GLOSSY[4], rel=2e-3)
+    assert params["K"] == pytest.approx(GLOSSY[6], rel=2e-3)
+    saved = json.loads((tmp_path / "m.json").read_text())
+    assert saved["model"] == "two-lobe" and "averaged over the receiver's 4 deg" in saved["notes"]
+    code, out, _ = _run(["fit", path, "--json"])
+    assert code == 0 and json.loads(out)["params"]["u_ns"] < 0.7 * GLOSSY[4]
+    code, _, err = _run(["fit", path, "--model", "phong@10", "--resolution", "4"])
+    assert code != 0 and "drop '@G' or --resolution" in err and "\n" not in err.strip()
+
+
 def _receiver_readings(params, width):
     """Readings of a two-lobe material by a receiver ``width`` deg wide (0: a point): every
     degree within 6 deg of each mirror and 9 receiver angles across -80..80 deg, at gamma

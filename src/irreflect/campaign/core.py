@@ -31,7 +31,7 @@ import pandas as pd
 from .. import metrics
 from ..data import Measurements, read_measurements, validate_table
 from ..errors import DataError, FitError, FitWarning, IrreflectError
-from ..fitting import FitOptions, FitResult, fit, judge
+from ..fitting import FitOptions, FitResult, fit, fit_averaged, judge
 from ..models import get_model
 from ..models.aperture import with_aperture
 from ..models.paper import specular_share
@@ -81,9 +81,6 @@ OVERSHOOT = 1.5
 #: from 10 readings on)
 CONTINUATION_OPTIONS = FitOptions(polish=False, n_screen=1, n_keep=1, n_data_starts=0,
                                   n_random_starts=0, n_hops=0, max_rounds=1, retry=False)
-#: The fit of readings from a receiver of finite resolution (the model averaged over it):
-#: local searches from the point model's global optimum and the previous fit.
-APERTURE_OPTIONS = dataclasses.replace(CONTINUATION_OPTIONS, n_keep=2)
 #: The range's settings that weigh the readings (see :func:`range_weights`) are thinned to
 #: at most this many.
 MAX_RANGE_POINTS = 20_000
@@ -452,20 +449,10 @@ class Campaign:
                                 power=meas.power, sigma=sigma, name=meas.name)
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", FitWarning)
-            if self.model is self.point_model:
-                res = fit(weighted, self.model, FIT_OPTIONS, seed=self.seed,
-                          extra_starts=extra_starts)
-            else:
-                # the receiver's average has no compiled kernel: the global search runs on
-                # the point model (compiled), and one local search from its optimum (and
-                # the previous fit) fits the average (numpy)
-                point = fit(weighted, self.point_model, FIT_OPTIONS, seed=self.seed,
-                            extra_starts=extra_starts)
-                z0 = self.model.from_natural(np.asarray(point.values, float)[None])[0]
-                starts = z0 if extra_starts is None else np.vstack(
-                    [z0, np.atleast_2d(extra_starts)])
-                res = fit(weighted, self.model, APERTURE_OPTIONS, seed=self.seed,
-                          extra_starts=starts)
+            # with a receiver of finite resolution, the model averaged over it (the global
+            # search on the point model, then local searches of the average)
+            res = fit_averaged(weighted, self.point_model, self.instrument.resolution,
+                               FIT_OPTIONS, seed=self.seed, extra_starts=extra_starts)
         return _relative(res, self.model, meas), weighted
 
     @property

@@ -4,17 +4,32 @@ from __future__ import annotations
 
 import contextlib
 
-from .options import POSITIVE, SEED, add_data_argument, add_model_argument, load_data, print_json
+from .options import (
+    NON_NEGATIVE,
+    POSITIVE,
+    SEED,
+    add_data_argument,
+    add_model_argument,
+    load_data,
+    print_json,
+)
 from .options import single_fit_engine as _engine
 
 
 def _cmd_fit(args) -> int:
     from .._atomic import claim_output
-    from ..fitting import fit
+    from ..fitting import fit, fit_averaged
     from ..models import parse_spec
 
     model = args.model
-    parse_spec(model).model()  # the name checked before any work ('phong@10' included)
+    spec = parse_spec(model)
+    spec.model()  # the name checked before any work ('phong@10' included)
+    if args.resolution and spec.at_gamma_deg is not None:
+        from ..errors import IrreflectError
+
+        raise IrreflectError(f"--resolution with model '{model}': a fit at one angle of "
+                             "incidence ('@G') takes the readings as points; drop '@G' or "
+                             "--resolution")
     if args.save is None and (args.reflectance is not None or args.wavelength is not None
                               or args.notes is not None):
         from ..errors import IrreflectError
@@ -29,12 +44,21 @@ def _cmd_fit(args) -> int:
              if args.save is not None else contextlib.nullcontext())
     with claim:  # the material file's path is checked and locked before any work
         meas = load_data(args)
-        result = fit(meas, model, seed=args.seed, engine=_engine(meas.n_points))
+        if args.resolution:
+            result = fit_averaged(meas, model, args.resolution, seed=args.seed,
+                                  engine=_engine(meas.n_points))
+        else:
+            result = fit(meas, model, seed=args.seed, engine=_engine(meas.n_points))
         if args.save is not None:
             from ..room.materials import save_material
 
+            notes = args.notes
+            if args.resolution:
+                told = (f"fitted as the model averaged over the receiver's {args.resolution:g} "
+                        "deg resolution (the coefficients are the material's)")
+                notes = told if notes is None else f"{notes}; {told}"
             save_material(result, args.save, data_file=args.data, wavelength_nm=args.wavelength,
-                          notes=args.notes, reflectance=args.reflectance)
+                          notes=notes, reflectance=args.reflectance)
     on_all = None
     if result.n_points < meas.n_points:  # 'MODEL@G': fitted on one incidence, judged on all
         from .. import metrics
@@ -103,6 +127,11 @@ def register(sub) -> None:
     p.add_argument("--seed", type=SEED, default=0,
                    help="seed of the random extra starts (default 0)")
     p.add_argument("--json", action="store_true", help="one JSON object on stdout")
+    p.add_argument("--resolution", type=NON_NEGATIVE, default=0.0, metavar="DEG",
+                   help="the receiver's angular resolution: the full width of the receiver "
+                        "angles one reading averages over; the readings are fitted as the "
+                        "model averaged over it, so the coefficients are the material's "
+                        "(deg, default 0: a point receiver)")
     p.add_argument("--save", metavar="MATERIAL.json",
                    help="also write the fit as a material file for room scenes (default: no)")
     p.add_argument("--reflectance", default=None, metavar="RHO|K",

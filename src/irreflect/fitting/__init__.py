@@ -37,11 +37,13 @@ which engine fits         :mod:`.engine`
 from __future__ import annotations
 
 from .api import (
+    AVERAGED_OPTIONS,
     GAMMA_TOL_DEG,
     RETRY_CHI2,
     RETRY_GAIN,
     RETRY_R2,
     fit,
+    fit_averaged,
     points_at_incidence,
     retry_reasons,
 )
@@ -61,11 +63,11 @@ from .subsets import SubsetFits, fit_subsets
 from .warm import warm
 
 __all__ = [
-    "DEFAULT_SCREEN", "ENGINE", "ENGINES", "GAMMA_TOL_DEG", "RETRY_CHI2", "RETRY_GAIN",
+    "AVERAGED_OPTIONS", "DEFAULT_SCREEN", "ENGINE", "ENGINES", "GAMMA_TOL_DEG", "RETRY_CHI2", "RETRY_GAIN",
     "RETRY_R2", "RETRY_SEARCH", "RETRY_SMALL_TABLE_SEARCH", "SMALL_TABLE_POINTS",
     "SMALL_TABLE_SEARCH", "STOP_FTOL", "STOP_MAXITER", "STOP_NONFINITE", "STOP_POLISHED",
     "STOP_STUCK", "STOP_XTOL", "FitOptions", "FitResult", "SubsetFits", "check_fit_data", "default_keep",
-    "default_screen", "fit", "fit_subsets", "judge", "points_at_incidence",
+    "default_screen", "fit", "fit_averaged", "fit_subsets", "judge", "points_at_incidence",
     "prediction_and_jacobian", "retry_reasons",
     "screen_samples", "uses_kernel", "warm",
 ]

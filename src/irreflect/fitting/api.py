@@ -126,6 +126,38 @@ def fit(measurements, model="two-lobe", options: FitOptions | None = None,
     return result
 
 
+#: The local searches that fit a receiver's average (:func:`fit_averaged`) from the point
+#: model's optimum and any ``extra_starts``.
+AVERAGED_OPTIONS = FitOptions(polish=False, n_screen=1, n_keep=2, n_data_starts=0,
+                              n_random_starts=0, n_hops=0, max_rounds=1, retry=False)
+
+
+def fit_averaged(measurements, model="two-lobe", width_deg: float = 0.0,
+                 options: FitOptions | None = None, **settings) -> FitResult:
+    """:func:`fit` for readings of a receiver that averages over ``width_deg`` degrees of
+    receiver angle (its resolution; 0: a point receiver, plain :func:`fit`).
+
+    The model averaged over the receiver (:func:`irreflect.models.aperture.with_aperture`)
+    has no compiled kernel, so the global search runs on the point model (``options`` and
+    ``settings`` as for :func:`fit`), and local searches from its optimum (and any
+    ``extra_starts``) fit the average. The coefficients are the material's, as a point
+    receiver would see it; the result's ``predict`` gives what the receiver reads (its
+    ``model_object`` is the averaged model)."""
+    from ..models.aperture import with_aperture
+
+    point_model = get_model(model)
+    averaged = with_aperture(point_model, width_deg)
+    if averaged is point_model:
+        return fit(measurements, point_model, options, **settings)
+    point = fit(measurements, point_model, options, **settings)
+    opts = _options(options, settings)
+    z0 = point_model.from_natural(np.asarray(point.values, float)[None])[0]
+    starts = z0 if opts.extra_starts is None else np.vstack(
+        [z0, np.atleast_2d(opts.extra_starts)])
+    return fit(measurements, averaged, AVERAGED_OPTIONS, seed=opts.seed,
+               extra_starts=starts)
+
+
 def _options(options: FitOptions | None, settings: dict) -> FitOptions:
     """``options`` (default: FitOptions()) with the keyword ``settings`` applied; an
     unknown keyword is a TypeError, as for any function."""
