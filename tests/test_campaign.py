@@ -802,6 +802,8 @@ def test_fit_takes_the_receivers_resolution_as_next_does(tmp_path):
     code, out, err = _run(["fit", path, "--resolution", "4", "--json",
                            "--save", tmp_path / "m.json"])
     assert code == 0, err
+    # the lobe (full width about 3 deg) is narrower than the 4-deg receiver: said, as next does
+    assert "the fitted specular lobe is narrower than the receiver resolves" in err
     params = json.loads(out)["params"]
     assert params["u_ns"] == pytest.approx(GLOSSY[4], rel=2e-3)
     assert params["K"] == pytest.approx(GLOSSY[6], rel=2e-3)
@@ -809,6 +811,9 @@ def test_fit_takes_the_receivers_resolution_as_next_does(tmp_path):
     assert saved["model"] == "two-lobe" and "averaged over the receiver's 4 deg" in saved["notes"]
     code, out, _ = _run(["fit", path, "--json"])
     assert code == 0 and json.loads(out)["params"]["u_ns"] < 0.7 * GLOSSY[4]
+    code, _, err = _run(["fit", path, "--resolution", "95", "--save", tmp_path / "x.json"])
+    assert code != 0 and "resolution (--resolution, deg) must be" in err
+    assert not (tmp_path / "x.json").exists()
     code, _, err = _run(["fit", path, "--model", "phong@10", "--resolution", "4"])
     assert code != 0 and "drop '@G' or --resolution" in err and "\n" not in err.strip()
 

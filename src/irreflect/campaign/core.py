@@ -31,7 +31,7 @@ import pandas as pd
 from .. import metrics
 from ..data import Measurements, read_measurements, validate_table
 from ..errors import DataError, FitError, FitWarning, IrreflectError
-from ..fitting import FitOptions, FitResult, fit, fit_averaged, judge
+from ..fitting import AVERAGED_OPTIONS, FitOptions, FitResult, fit, fit_averaged, judge
 from ..models import get_model
 from ..models.aperture import with_aperture
 from ..models.paper import specular_share
@@ -79,8 +79,7 @@ OVERSHOOT = 1.5
 #: a stop on a fit whose R^2 on its own readings is below :data:`irreflect.metrics.MISFIT_R2`
 #: says the model may lack an effect (every real set's campaign fit is at 0.928 or above
 #: from 10 readings on)
-CONTINUATION_OPTIONS = FitOptions(polish=False, n_screen=1, n_keep=1, n_data_starts=0,
-                                  n_random_starts=0, n_hops=0, max_rounds=1, retry=False)
+CONTINUATION_OPTIONS = dataclasses.replace(AVERAGED_OPTIONS, n_keep=1)
 #: The range's settings that weigh the readings (see :func:`range_weights`) are thinned to
 #: at most this many.
 MAX_RANGE_POINTS = 20_000

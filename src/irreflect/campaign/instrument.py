@@ -22,6 +22,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..errors import IrreflectError
+from ..models.aperture import unresolved as unresolved_lobe
 from ..validation import check_number
 
 #: Largest number of settings a campaign scores at once (the range and the candidates are
@@ -196,22 +197,8 @@ class Instrument:
         return tuple(out)
 
     def unresolved(self, half_widths: dict[float, float]) -> str:
-        """A warning when a specular lobe is narrower than the receiver resolves: its full
-        width at half maximum (twice ``half_widths[gamma]``, deg) below :attr:`resolution`
-        at some angles of incidence; empty otherwise (or with a point receiver)."""
-        if not self.resolution:
-            return ""
-        narrow = {g: h for g, h in half_widths.items() if 2.0 * h < self.resolution}
-        if not narrow:
-            return ""
-        where = ", ".join(f"{g:g}" for g in sorted(narrow, key=abs))
-        width = min(2.0 * h for h in narrow.values())
-        return (f"the fitted specular lobe is narrower than the receiver resolves at gamma "
-                f"{where} deg (full width at half maximum down to {width:.2g} deg, against a "
-                f"resolution of {self.resolution:g} deg): the fit models each reading as the "
-                "lobe averaged over the receiver's acceptance, so the lobe's peak and width "
-                "rest on the model's lobe shape, not on readings that resolve it; measure it "
-                "with a narrower aperture to check them")
+        """:func:`irreflect.models.aperture.unresolved` at this receiver's resolution."""
+        return unresolved_lobe(half_widths, self.resolution)
 
     def describe(self) -> str:
         """One line: what the instrument can do."""

@@ -59,6 +59,15 @@ def _cmd_fit(args) -> int:
                 notes = told if notes is None else f"{notes}; {told}"
             save_material(result, args.save, data_file=args.data, wavelength_nm=args.wavelength,
                           notes=notes, reflectance=args.reflectance)
+    if args.resolution:
+        import sys
+
+        from ..models.aperture import unresolved
+
+        widths = {-abs(a.gamma_deg): a.lobe_half_width_deg for a in result.verdict().angles}
+        text = unresolved(widths, args.resolution)
+        if text:
+            print(f"irreflect: warning: {meas.name}: {text}", file=sys.stderr)
     on_all = None
     if result.n_points < meas.n_points:  # 'MODEL@G': fitted on one incidence, judged on all
         from .. import metrics

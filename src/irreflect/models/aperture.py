@@ -15,6 +15,7 @@ import dataclasses
 
 import numpy as np
 
+from ..validation import check_number
 from .base import ReflectionModel
 
 #: Quadrature nodes across the receiver's acceptance (Gauss-Legendre: exact for
@@ -26,7 +27,8 @@ APERTURE_NODES = 5
 def with_aperture(model: ReflectionModel, width_deg: float,
                   nodes: int = APERTURE_NODES) -> ReflectionModel:
     """``model`` as read by a receiver averaging over ``width_deg`` degrees (0: ``model``)."""
-    width = float(width_deg)
+    width = check_number(width_deg, "the receiver's resolution (--resolution, deg)",
+                         low=0.0, high=90.0)
     if not width > 0:
         return model
     x, w = np.polynomial.legendre.leggauss(int(nodes))
@@ -48,3 +50,21 @@ def with_aperture(model: ReflectionModel, width_deg: float,
         model, basis=basis, hints=hints,
         formula=f"{model.formula}, averaged over a receiver {width:g} deg wide")
 
+
+def unresolved(half_widths: dict[float, float], width_deg: float) -> str:
+    """A warning when a fitted specular lobe is narrower than a receiver ``width_deg`` wide
+    resolves: its full width at half maximum (twice ``half_widths[gamma]``, deg) below the
+    width at some angles of incidence; empty otherwise (or with a point receiver)."""
+    if not width_deg:
+        return ""
+    narrow = {g: h for g, h in half_widths.items() if np.isfinite(h) and 2.0 * h < width_deg}
+    if not narrow:
+        return ""
+    where = ", ".join(f"{g:g}" for g in sorted(narrow, key=abs))
+    width = min(2.0 * h for h in narrow.values())
+    return (f"the fitted specular lobe is narrower than the receiver resolves at gamma "
+            f"{where} deg (full width at half maximum down to {width:.2g} deg, against a "
+            f"resolution of {width_deg:g} deg): the fit models each reading as the lobe "
+            "averaged over the receiver's acceptance, so the lobe's peak and width rest on the "
+            "model's lobe shape, not on readings that resolve it; measure it with a narrower "
+            "aperture to check them")
