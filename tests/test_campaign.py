@@ -438,6 +438,81 @@ def test_readings_of_zero_power_or_negative_noise_are_taken(tmp_path):
     assert code != 0 and "power must be >= 0 up to noise" in err
 
 
+def test_readings_negative_beyond_noise_are_refused_in_one_line(tmp_path):
+    # a reading below -25 % of a larger positive one is a sign or offset error, as are
+    # mostly negative readings; a lone negative reading with nothing larger is kept above
+    from irreflect.data import validate_table
+
+    cols = ["gamma_deg", "theta_deg", "power"]
+    rows = [(-30.0, 30.0, 1.0), (-30.0, 0.0, 0.1), (-60.0, 60.0, 0.8), (-60.0, 0.0, -0.3)]
+    with pytest.raises(DataError, match=r"found -0.3 .*beyond 25% of the largest reading"):
+        validate_table(pd.DataFrame(rows, columns=cols), partial=True)
+    rows[-1] = (-60.0, 0.0, -0.2)  # within 25 % of the peak: noise around a dark reading
+    assert validate_table(pd.DataFrame(rows, columns=cols), partial=True).n_points == 4
+    flipped = [(g, t, -p) for g, t, p in rows]
+    with pytest.raises(DataError, match="3 of the 4 nonzero readings are negative"):
+        validate_table(pd.DataFrame(flipped, columns=cols), partial=True)
+    measured = tmp_path / "measured.csv"
+    pd.DataFrame(flipped, columns=cols).to_csv(measured, index=False)
+    code, stdout, err = _run(["next", measured, "--gammas", "-30", "-60"])
+    assert code == 2 and stdout == "" and err.count("\n") == 1
+    assert "nonzero readings are negative" in err
+
+
+def test_a_coarse_receiver_step_says_the_mirror_is_not_reached(tmp_path):
+    measured = tmp_path / "measured.csv"
+    measured.write_text("gamma_deg,theta_deg,power\n")
+    code, stdout, err = _run(["next", measured, "--n", "8", "--theta-step", "20"])
+    assert code == 0, err
+    # the default gammas -10..-70: on a 20-deg grid the mirrors of -10, -30, -50, -70 are
+    # 10 deg from the nearest setting
+    assert "10 deg from it at gamma -10, -30, -50, -70" in err
+    labels = [line for line in stdout.splitlines() if "design: mirror direction" in line]
+    assert labels and all("the setting nearest it, 10 deg" in line or
+                          "the specular peak" in line for line in labels)
+    assert any("gamma     -10  theta        0" in line and "nearest it" in line
+               for line in labels)
+    code, stdout, err = _run(["next", measured, "--n", "8", "--theta-step", "1"])
+    assert code == 0 and "nearest setting to the specular peak" not in err
+    assert "the setting nearest it" not in stdout
+
+
+def test_next_notes_readings_the_instrument_cannot_take(tmp_path):
+    measured = tmp_path / "measured.csv"
+    rows = [(g, t, 1.0 + 0.01 * abs(t)) for g in (-20.0, -40.0) for t in (-50.0, 0.0, 30.0)]
+    pd.DataFrame(rows, columns=["gamma_deg", "theta_deg", "power"]).to_csv(measured,
+                                                                          index=False)
+    code, _, err = _run(["next", measured, "--gammas", "-20", "-40", "--theta-min", "-40",
+                         "--theta-max", "40", "--gamma-settings", "1"])
+    assert code == 0, err
+    assert "2 reading(s) at theta beyond the receiver range -40..40 deg" in err
+    assert "already use 2 angles of incidence, more than --gamma-settings 1" in err
+    code, _, err = _run(["next", measured, "--gammas", "-20", "-40"])
+    assert code == 0 and "beyond the receiver range" not in err and "already use" not in err
+
+
+def test_a_separation_wider_than_the_receiver_range_is_refused():
+    with pytest.raises(IrreflectError, match=r"min_separation .* 200 deg is wider than the "
+                                             r"receiver's range \(-60..60 deg, 120 deg\)"):
+        Instrument(gammas_deg=(-30,), theta_min=-60, theta_max=60, min_separation=200)
+    assert Instrument(gammas_deg=(-30,), theta_min=-60, theta_max=60,
+                      min_separation=120).min_separation == 120
+
+
+def test_an_interpolated_replay_warns_of_a_table_with_no_reading_near_the_mirror():
+    # readings every 5 deg, but none within 15 deg of the mirror at -20 and -60: the
+    # interpolation along theta reaches every setting, but the specular peak there is the
+    # interpolation's, not a measurement
+    rows = [(g, t, 1.0 + 0.01 * t) for g in (-20.0, -40.0, -60.0)
+            for t in np.arange(-80.0, 81.0, 5.0) if g == -40.0 or abs(t + g) > 15.0]
+    dense = Measurements(*map(np.array, zip(*rows, strict=True)), name="sparse")
+    for method in ("interpolate", "nearest"):
+        warning = DenseInstrument(dense, method=method).mirror_gaps()
+        assert "at gamma -20, -60 deg" in warning, (method, warning)
+    full = _material(GLOSSY, step=2.0)
+    assert DenseInstrument(full, method="interpolate").mirror_gaps() == ""
+
+
 # ----------------------------------------------------------------------------- commands
 def test_next_on_a_header_only_table_writes_the_opening(tmp_path):
     measured = tmp_path / "measured.csv"

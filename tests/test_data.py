@@ -61,6 +61,8 @@ def test_write_then_read_is_lossless(tmp_path, suffix):
         ("gamma_deg,theta_deg,power\n-10,0,1\n-10,5,-0.5\n", r"power must be >= 0 up to noise; found -0.5.*or give the noise as a sigma column \(negative power down to -4 sigma is kept; without it, down to -2% of the largest power\)"),
         ("gamma_deg,theta_deg,power,sigma\n-10,0,1,0.01\n-10,5,-0.5,0.1\n", r"found -0.5 at data row 2 \(line 3\), below the noise allowance -0.4: check the detector offset or the sign of the column$"),
         ("gamma_deg,theta_deg,power\n", r"no rows"),
+        ("gamma_deg,theta_deg,power,material\n-10,0,1,A\n-10,5,2,B\n-10,9,2,A\n",
+         r"the material column names 2 materials \(A, B\).*one table per material$"),
     ],
 )
 def test_validation_errors_are_one_line_and_say_how_to_fix(tmp_path, text, pattern):

@@ -4,6 +4,8 @@ the goniometer Monte Carlo, designed protocols, the CLI and the report section."
 
 from __future__ import annotations
 
+import contextlib
+import io
 import itertools
 import json
 import warnings
@@ -383,6 +385,49 @@ def test_monte_carlo_spread_grows_with_the_angle_error(terrazzo_fit):
     assert large.r2_spread > 2 * small.r2_spread
     assert np.all(large.relative_spread > small.relative_spread)
     assert np.median(large.r2) < np.median(small.r2) < runs[0.0].r2_nominal
+
+
+def test_a_coefficient_pinned_at_its_bound_is_flagged_not_called_determined():
+    # its spread is 0 because the fit runs to the edge of its range, which a spread alone
+    # would read as perfectly determined (v_nd at -12 in 80 % of the trials)
+    from irreflect.models import get_model
+    from irreflect.protocol.robustness import _bound_reasons
+
+    model = get_model("two-lobe")
+    k = model.param_names.index("v_nd")
+    rng = np.random.default_rng(0)
+    samples = np.tile(np.array([0.3, -0.5, 1.2, 0.3, 200.0, 0.4, 1.0]), (10, 1))
+    samples += 0.01 * rng.standard_normal(samples.shape)
+    samples[:8, k] = model.params[k].lower
+    reasons = _bound_reasons(model, samples, [])
+    assert reasons == ["v_nd: at its bound -12 in 80% of the trials (the fit runs to the "
+                       "edge of its range: these angles do not pin it)"]
+    samples[:4, k] = -1.0  # 40 %: not pinned
+    assert _bound_reasons(model, samples, []) == []
+    # a coefficient already named by another reason is not named twice
+    samples[:8, k] = model.params[k].lower
+    assert _bound_reasons(model, samples, ["v_nd: uncertainty 600% of its value"]) == []
+
+
+def test_a_paper_point_at_the_source_direction_is_noted():
+    # at normal incidence the mirror direction is the source direction: a receiver there
+    # stands in the beam
+    near = paper_protocol([0, -10, -20])
+    assert any("gamma 0: the mirror point theta 0 is within 5 deg of the source direction"
+               in note for note in near.notes)
+    assert not any("source direction" in note for note in paper_protocol([-20, -40, -60]).notes)
+
+
+def test_a_monte_carlo_of_one_trial_is_refused_before_the_work(tmp_path):
+    proto = tmp_path / "proto.csv"
+    paper_protocol([-20, -40, -60]).to_frame().to_csv(proto, index=False)
+    dense = bundled_dir() / "terrazzo.csv"
+    out, err = io.StringIO(), io.StringIO()
+    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+        code = main(["evaluate-protocol", str(proto), str(dense), "--monte-carlo", "1"])
+    assert code == 2 and out.getvalue() == ""
+    assert err.getvalue().strip() == ("irreflect: error: --monte-carlo: expected 0 (none) or "
+                                      "at least 2 trials (a spread needs two); found 1")
 
 
 def test_ill_determined_protocol_is_flagged(terrazzo_fit):

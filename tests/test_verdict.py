@@ -203,3 +203,27 @@ def test_the_fitted_models_never_predict_negative_power(model):
             warnings.simplefilter("ignore", FitWarning)
             result = fit(_narrow_lobe_table(), model)
     assert negative_power(get_model(model), result.params, np.radians(89.5)) is None
+
+
+def test_an_angle_with_one_point_shows_no_polar_area_and_says_why():
+    # a polar area needs two points: the table printed 'nan' there with no word of why
+    meas = load_bundled("terrazzo")
+    gammas = np.unique(meas.gamma_deg)
+    lone = gammas[0]
+    keep = meas.gamma_deg != lone
+    first = int(np.flatnonzero(~keep)[0])
+    keep[first] = True
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", FitWarning)
+        res = fit(meas.subset(keep))
+    text = res.report()
+    row = next(line for line in text.splitlines()
+               if line.split() and line.split()[0] == f"{abs(lone):g}" and "lobe" in line)
+    assert row.split()[1:4] == ["1", "-", "-"]
+    assert "nan" not in text
+    assert "(-: a polar area needs two or more points at that angle of incidence)" in text
+    # every angle with two or more points keeps its numbers, and no footnote is printed then
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", FitWarning)
+        full = fit(meas).report()
+    assert "(-: a polar area" not in full

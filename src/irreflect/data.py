@@ -34,6 +34,12 @@ OPTIONAL = ("sigma", "material")
 #: noise the negative readings themselves show, up to NEGATIVE_NOISE_MAX of the maximum:
 #: :func:`_negative_noise`).
 NEGATIVE_POWER_TOLERANCE = 0.02
+#: A campaign's readings so far (``partial``) may hold a lone reading of noise around
+#: zero (a reading beyond a glossy lobe is 0, and with few readings their peak may be
+#: small), so the allowance is wider than a whole table's: a reading below -this share of a
+#: larger positive reading (and below -4 sigma) is a sign or offset error
+#: (:func:`_check_partial_negative`).
+PARTIAL_NEGATIVE_TOLERANCE = 0.25
 NEGATIVE_NOISE_MAX = 0.05
 #: The largest |power| of a table must lie in this range (squares and sums of squares of
 #: the fit stay finite and above underflow); any unit can be rescaled into it.
@@ -391,6 +397,31 @@ def _check_negative_power(power, sigma, source, rows):
     return None
 
 
+def _check_partial_negative(power, sigma, source, rows) -> None:
+    """Negative readings of a campaign (see :data:`PARTIAL_NEGATIVE_TOLERANCE`): refused
+    when most of at least four nonzero readings are negative, or when a reading lies below
+    -that share of a larger positive reading (and below -4 sigma); a negative reading with
+    no larger positive one beside it may be noise around a small signal, and is kept."""
+    neg = power < 0
+    if not neg.any():
+        return
+    nonzero = int(np.count_nonzero(power))
+    if nonzero >= 4 and 2 * int(neg.sum()) > nonzero:
+        _fail(f"{source}: power must be >= 0 up to noise; {int(neg.sum())} of the "
+              f"{nonzero} nonzero readings are negative: check the detector offset or the "
+              "sign of the column")
+    top = float(np.max(power))
+    limit = np.full(power.shape, PARTIAL_NEGATIVE_TOLERANCE * max(top, 0.0))
+    if sigma is not None:
+        limit = np.maximum(limit, 4.0 * sigma)
+    bad = (power < -limit) & (-power <= top)
+    if bad.any():
+        i = int(np.nonzero(bad)[0][0])
+        _fail(f"{source}: power must be >= 0 up to noise; found {power[i]:g} at {rows(i)}, "
+              f"beyond {PARTIAL_NEGATIVE_TOLERANCE:.0%} of the largest reading ({top:g}): "
+              "check the detector offset or the sign of the column")
+
+
 def validate_table(df: pd.DataFrame, source: str = "table", *,
                    average_duplicates: bool = False, name: str | None = None,
                    partial: bool = False, _row_lines=None) -> Measurements:
@@ -458,12 +489,18 @@ def validate_table(df: pd.DataFrame, source: str = "table", *,
     material = None
     if "material" in df.columns:
         mats = df["material"].dropna().astype(str).unique()
-        material = mats[0] if len(mats) == 1 else (", ".join(mats) if len(mats) else None)
+        if len(mats) > 1:
+            _fail(f"{source}: the material column names {len(mats)} materials "
+                  f"({short_list(list(mats), 4)}): a table holds one material's readings; "
+                  "split it into one table per material")
+        material = mats[0] if len(mats) else None
     gamma, theta, power, sigma, merged = _merge_duplicates(gamma, theta, power, sigma, source,
                                                            rows, average_duplicates)
     if merged:
         notes.append(f"{source}: averaged {merged} duplicated (gamma, theta) row(s)")
         rows = _Rows()  # row numbers no longer match the file
+    if partial:
+        _check_partial_negative(power, sigma, source, rows)
     note = None if partial else _check_negative_power(power, sigma, source, rows)
     if note:
         notes.append(note)

@@ -158,10 +158,13 @@ class FitVerdict:
                                       else "shape not reproduced")
             if a.lobe_resolved and not a.lobe_matters:
                 word += " (no lobe that matters)" if a.ok else ""
-            rows.append(f"{a.gamma_deg:>8g}{a.n_points:>8d}{a.polar_error_at_points_pct:>11.3g}"
-                        f"{a.polar_error_pct:>13.3g}"
+            rows.append(f"{a.gamma_deg:>8g}{a.n_points:>8d}"
+                        f"{_cell(a.polar_error_at_points_pct, 11)}"
+                        f"{_cell(a.polar_error_pct, 13)}"
                         f"{a.specular_share:>8.3g}{a.lobe_half_width_deg:>11.3g}"
                         f"{a.lobe_points_1hw:>9d}{a.lobe_points_2hw:>9d}  {word}")
+        if any(not np.isfinite(a.polar_error_pct) for a in self.angles):
+            rows.append("(-: a polar area needs two or more points at that angle of incidence)")
         return rows
 
     def to_dict(self) -> dict:
@@ -170,6 +173,11 @@ class FitVerdict:
                 "ill_determined": list(self.ill_determined), "converged": self.converged,
                 "saturated_gammas_deg": list(self.saturated_gammas_deg),
                 "angles": [a.to_dict() for a in self.angles]}
+
+
+def _cell(x: float, width: int) -> str:
+    """A table cell: the number, or '-' where there is none."""
+    return f"{x:>{width}.3g}" if np.isfinite(x) else f"{'-':>{width}}"
 
 
 def _num(x: float):

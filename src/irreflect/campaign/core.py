@@ -592,8 +592,9 @@ class Campaign:
             if round(g, 6) not in measured_g:
                 lo, hi = float(np.min(mags)), float(np.max(mags))
                 if abs(g) > hi or abs(g) < lo:
+                    span = f"{lo:g}" if hi - lo < 1e-6 else f"{lo:g}-{hi:g}"
                     why += (f"; a new angle of incidence: the fit would extrapolate from "
-                            f"|gamma| {lo:g}-{hi:g} to {abs(g):g} deg")
+                            f"|gamma| {span} to {abs(g):g} deg")
                 else:
                     why += f"; a new angle of incidence between the measured ones ({abs(g):g} deg)"
             if drop > 0.01:
@@ -692,8 +693,9 @@ class Campaign:
             reasons.append(f"the curve must hold for {STOP_HOLD + 1} readings after the first "
                            "fit")
         elif not stability <= self.stop_tolerance:
+            moved = f"{stability:.2%}" if stability < 10.0 else "more than 1000%"
             reasons.append(f"the last {STOP_HOLD + 1} readings moved the predicted curve by "
-                           f"{min(stability, 9.99):.2%} of its variance (stop below "
+                           f"{moved} of its variance (stop below "
                            f"{100 * self.stop_tolerance:.2g}%)")
 
         gap = self._saturated_gap(state)

@@ -45,6 +45,7 @@ from ..errors import FitWarning
 from ..fitting import FitResult, fit_subsets, prediction_and_jacobian
 from ..protocol.core import lobe_half_width_deg
 from ..validation import check_number
+from .instrument import MIRROR_NEAR_DEG
 
 
 @dataclass(frozen=True)
@@ -215,6 +216,10 @@ def _said(why: str, short: str, kind: str, gamma: float, theta: float, tol: floa
     where = {"mirror": abs(off) <= tol, "source": theta < 0.0, "normal": abs(theta) <= 15.0,
              "toward normal": off < 0.0, "toward grazing": off > 0.0,
              "far": off > tol}[kind]
+    if where and kind == "mirror" and abs(off) > MIRROR_NEAR_DEG + 1e-9:
+        return (f"{short}: the setting nearest it, {abs(off):.3g} deg "
+                f"{'beyond' if off > 0 else 'short of'} it (the receiver's step does not "
+                "reach the specular peak)")
     if where:
         return why.replace("{off}", f"{abs(off):.3g}")
     return (f"{short}: not available (out of the receiver's range or taken), so the "

@@ -33,6 +33,11 @@ MAX_SETTINGS = 900
 #: would list 1.6e11 and exhaust memory before the first proposal).
 MAX_INSTRUMENT_SETTINGS = 1_000_000
 
+#: deg: a setting this close to the mirror direction reads the specular peak; farther (a
+#: coarse receiver step), the opening calls it the setting nearest the mirror, and ``next``
+#: warns that a lobe narrower than the offset goes unmeasured.
+MIRROR_NEAR_DEG = 2.0
+
 
 @dataclass(frozen=True)
 class Instrument:
@@ -102,7 +107,8 @@ class Instrument:
                           high_open=True)
         if not lo < hi:
             raise IrreflectError(f"the receiver range needs theta_min < theta_max; found "
-                                 f"{lo:g} and {hi:g}: swap them")
+                                 f"{lo:g} and {hi:g}: "
+                                 + ("swap them" if lo > hi else "give a range of angles"))
         step = check_number(self.theta_step, "theta_step", low=0.0, low_open=True)
         if step > hi - lo:
             raise IrreflectError(f"the receiver step {step:g} deg is wider than its range "
@@ -120,6 +126,11 @@ class Instrument:
                                   high=90.0)
         sep = max(step, resolution) / 2.0 if self.min_separation is None else check_number(
             self.min_separation, "min_separation", low=0.0)
+        if sep > hi - lo and hi > lo:
+            raise IrreflectError(
+                f"min_separation (--min-separation) {sep:g} deg is wider than the receiver's "
+                f"range ({lo:g}..{hi:g} deg, {hi - lo:g} deg): one reading would rule out "
+                f"every other setting at its angle of incidence; give at most {hi - lo:g}")
         clearance = check_number(self.source_clearance, "source_clearance", low=0.0,
                                  high=90.0)
         cost = check_number(self.gamma_change_cost, "gamma_change_cost", low=0.0)
@@ -195,6 +206,18 @@ class Instrument:
             if not t.size or np.min(np.abs(t + g)) > self.reach_tolerance:
                 out.append(float(g))
         return tuple(out)
+
+    def mirror_offsets(self) -> dict[float, float]:
+        """deg: per angle of incidence whose mirror direction the instrument reaches
+        (:meth:`mirror_misses`), how far its nearest setting stands from it."""
+        s = self.settings()
+        out = {}
+        missed = self.mirror_misses()
+        for g in self.gammas:
+            t = s[np.abs(s[:, 0] - g) < 1e-6, 1]
+            if t.size and g not in missed:
+                out[float(g)] = float(np.min(np.abs(t + g)))
+        return out
 
     def unresolved(self, half_widths: dict[float, float]) -> str:
         """:func:`irreflect.models.aperture.unresolved` at this receiver's resolution."""

@@ -27,6 +27,7 @@ Strategies (:data:`STRATEGIES`):
 
 from __future__ import annotations
 
+import textwrap
 import time
 import warnings
 from dataclasses import dataclass, field
@@ -112,8 +113,10 @@ class DenseInstrument:
     def mirror_gaps(self) -> str:
         """A warning when the table has no reading near the specular peak (theta = -gamma,
         within the instrument's reach tolerance) at some angles of incidence: every
-        strategy's fit extrapolates the peak there, and no R^2 scores it; empty otherwise."""
-        tool = self.instrument()
+        strategy's fit extrapolates the peak there, and no R^2 scores it; empty otherwise.
+        Judged on the table's own readings: with ``method="interpolate"`` a reading between
+        them is the interpolation's, not a measurement of the peak."""
+        tool = Instrument.from_table(self.dense.gamma_deg, self.dense.theta_deg)
         missed = tool.mirror_misses()
         if not missed:
             return ""
@@ -357,7 +360,7 @@ def replay_protocol(source: DenseInstrument, kind: str, *, model="two-lobe",
                                                                     source.tolerance_deg))
     except (IrreflectError, FitError) as exc:
         return StrategyCurve(kind, {}, pd.DataFrame(), time.perf_counter() - t0,
-                             note=f"not available: {' '.join(str(exc).split())[:160]}")
+                             note=f"not available: {textwrap.shorten(str(exc), 400, placeholder=' ...')}")
     if source.noise or source.angle_error_deg:  # the instrument's errors, as every reading
         rng = np.random.default_rng([check_seed(seed), 37, ("paper", "glossy").index(kind)])
         meas = Measurements(gamma_deg=meas.gamma_deg, theta_deg=meas.theta_deg,

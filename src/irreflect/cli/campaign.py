@@ -92,9 +92,14 @@ def _next(args) -> int:
     if args.save is not None:
         if campaign.fit is None:
             need = model.n_params + 1
+            if campaign.n_measured < need:
+                raise IrreflectError(
+                    f"--save: no fit of the readings to save yet ({campaign.n_measured} "
+                    f"readings; the first fit needs {need}): measure the proposed settings "
+                    "first")
             raise IrreflectError(
-                f"--save: no fit of the readings to save yet ({campaign.n_measured} readings; "
-                f"the first fit needs {need}): measure the proposed settings first")
+                f"--save: no fit of the {campaign.n_measured} readings to save: "
+                f"{verdict.reasons[0] if verdict.reasons else 'no usable fit'}")
         from ..room.materials import save_material
 
         save_material(campaign.fit, args.save, data_file=args.measured,
@@ -137,7 +142,9 @@ def _next(args) -> int:
         for r in proposals.itertuples():
             print(f"  gamma {r.gamma_deg:7.4g}  theta {r.theta_deg:8.4g}   {r.why}")
     else:
-        print("no setting left to propose: every setting of the instrument is measured")
+        print("no setting left to propose: every setting of the instrument is measured or "
+              f"within the minimum separation ({tool.min_separation:g} deg) of a reading at "
+              "its angle of incidence")
     print(f"verdict: {verdict.text}")
     if args.out is not None:
         what = "setting" if len(proposals) == 1 else "settings"
@@ -153,10 +160,23 @@ def _mirror_warnings(tool) -> list[str]:
     """A warning when the instrument cannot measure the specular peak (theta = -gamma) at
     some of its angles of incidence, with the reason for each: beyond the receiver's range
     (widen it) or within the source clearance (at normal incidence the mirror is the
-    source direction)."""
+    source direction); and when its nearest setting stands more than
+    :data:`~irreflect.campaign.instrument.MIRROR_NEAR_DEG` from it (a coarse receiver step)."""
+    from ..campaign.instrument import MIRROR_NEAR_DEG
+
+    off = {g: d for g, d in tool.mirror_offsets().items() if d > MIRROR_NEAR_DEG + 1e-9}
+    by_offset: dict[str, list[str]] = {}
+    for g, d in off.items():
+        by_offset.setdefault(f"{d:.3g}", []).append(f"{g:g}")
+    coarse = (["the receiver's nearest setting to the specular peak (theta = -gamma) is "
+               + "; ".join(f"{d} deg from it at gamma {', '.join(gs)}"
+                           for d, gs in by_offset.items())
+               + f": a glossy lobe narrower than that goes unmeasured there (a "
+               f"--theta-step of {MIRROR_NEAR_DEG:g} deg or less near the mirror reaches it)"]
+              if off else [])
     missed = tool.mirror_misses()
     if not missed:
-        return []
+        return coarse
     out_of_range = [g for g in missed if not tool.theta_min <= -g <= tool.theta_max]
     blocked = [g for g in missed if g not in out_of_range]
     parts = []
@@ -169,22 +189,38 @@ def _mirror_warnings(tool) -> list[str]:
                      f"{tool.source_clearance:g} deg of the source direction, "
                      "--source-clearance)")
     return ["the specular peak (theta = -gamma) cannot be measured at gamma "
-            + " and ".join(parts) + ": the fit extrapolates it there"]
+            + " and ".join(parts) + ": the fit extrapolates it there"] + coarse
 
 
 def _foreign_gammas(tool, readings) -> list[str]:
-    """A note when readings stand at angles of incidence the instrument does not list
-    (--gammas): they are fitted, but proposals and the verdict's range are the
-    instrument's."""
+    """A note when readings stand where the instrument does not reach: at angles of
+    incidence it does not list (--gammas) or beyond its receiver range (they are fitted,
+    but proposals and the verdict's range are the instrument's), or at more angles of
+    incidence than --gamma-settings allows."""
+    import numpy as np
+
     if readings is None or not readings.n_points:
         return []
     listed = {round(float(g), 6) for g in tool.gammas}
     other = sorted({round(float(g), 6) for g in readings.gamma_deg} - listed, key=abs)
-    if not other:
-        return []
-    return [f"readings at gamma {', '.join(f'{g:g}' for g in other)} deg, which --gammas does "
-            "not list: they are fitted, but the proposals and the verdict's predicted R^2 "
-            "cover only the listed angles; add them to --gammas to include them"]
+    out = []
+    if other:
+        out.append(f"readings at gamma {', '.join(f'{g:g}' for g in other)} deg, which --gammas "
+                   "does not list: they are fitted, but the proposals and the verdict's "
+                   "predicted R^2 cover only the listed angles; add them to --gammas to "
+                   "include them")
+    t = readings.theta_deg
+    beyond = int(np.sum((t < tool.theta_min - 1e-6) | (t > tool.theta_max + 1e-6)))
+    if beyond:
+        out.append(f"{beyond} reading(s) at theta beyond the receiver range "
+                   f"{tool.theta_min:g}..{tool.theta_max:g} deg: they are fitted, but the "
+                   "verdict's predicted R^2 covers only the range (--theta-min/--theta-max)")
+    used = len({round(float(g), 6) for g in readings.gamma_deg})
+    limit = tool.max_gamma_settings
+    if limit and used > limit:
+        out.append(f"the readings already use {used} angles of incidence, more than "
+                   f"--gamma-settings {limit}: the proposals stay at the measured ones")
+    return out
 
 
 def _cmd_campaign(args) -> int:

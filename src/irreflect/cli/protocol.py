@@ -136,6 +136,9 @@ def _cmd_evaluate(args) -> int:
     from ..validation import check_trials_budget
 
     get_model(args.model)
+    if args.monte_carlo == 1:
+        raise IrreflectError("--monte-carlo: expected 0 (none) or at least 2 trials (a spread "
+                             "needs two); found 1")
     if args.monte_carlo:
         check_trials_budget(args.monte_carlo, "--monte-carlo")
     protocol = read_protocol(args.protocol)
@@ -242,8 +245,8 @@ def _register_evaluate(sub) -> None:
     p.add_argument("--snap", action="store_true",
                    help="use the nearest measured angle instead of interpolating")
     p.add_argument("--monte-carlo", type=NON_NEGATIVE_INT, default=0, metavar="TRIALS",
-                   help="also run a Monte Carlo of goniometer errors with this many trials "
-                        "(default 0: none)")
+                   help="also run a Monte Carlo of goniometer errors with this many trials, "
+                        "at least 2 (default 0: none)")
     p.add_argument("--angle-error", type=NON_NEGATIVE, default=1.0,
                    help="Monte Carlo: half-width of the uniform angle error (deg, default 1)")
     p.add_argument("--power-noise", type=NON_NEGATIVE, default=0.01,

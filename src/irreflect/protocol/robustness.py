@@ -182,6 +182,28 @@ def _structural_reasons(model_obj, g0, t0, power, seed, reasons) -> list[str]:
             for name in nominal.ill_determined if name not in named]
 
 
+def _bound_reasons(model_obj, samples, reasons) -> list[str]:
+    """Coefficients that sit on a bound of their range in at least half of the trials: their
+    spread there is 0 because the fit runs to the edge of the range, not because the
+    protocol's angles pin them (a spread alone would call them determined)."""
+    named = {r.split(":")[0] for r in reasons}
+    out = []
+    for k, p in enumerate(model_obj.params):
+        if p.name in named:
+            continue
+        width = (p.upper - p.lower) if np.isfinite(p.upper - p.lower) else 1.0
+        tol = 1e-6 * max(width, 1.0)
+        for bound in (p.lower, p.upper):
+            if not np.isfinite(bound):
+                continue
+            share = float(np.mean(np.abs(samples[:, k] - bound) <= tol))
+            if share >= 0.5:
+                out.append(f"{p.name}: at its bound {bound:g} in {share:.0%} of the trials (the "
+                           "fit runs to the edge of its range: these angles do not pin it)")
+                break
+    return out
+
+
 def _reference(reference, model, dense, seed):
     """(the reference fit, the model, the points R^2 is measured against) of
     :func:`protocol_robustness`'s ``reference``, ``model`` and ``dense``."""
@@ -305,6 +327,7 @@ def protocol_robustness(protocol, reference, *, model=None, dense=None, n_trials
     reasons = ill_determined(model_obj, scale, spread, corr, relative_limit=relative_limit,
                              correlation_limit=correlation_limit)
     reasons += _structural_reasons(model_obj, g0, t0, nominal_power[0], seed, reasons)
+    reasons += _bound_reasons(model_obj, ok, reasons)
     return RobustnessResult(
         protocol=protocol.name, model=model_obj.name, param_names=model_obj.param_names,
         reference=np.asarray(truth, float), nominal=nominal, samples=samples, r2=r2_trials,
