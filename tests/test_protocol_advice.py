@@ -405,3 +405,30 @@ def test_a_clamped_glossy_point_on_top_of_another_is_replaced(tmp_path):
     assert proto.adjustment[list(proto.theta_deg).index(-68.9)] == "replaced"
     back = read_protocol(write_protocol(proto, tmp_path / "g.csv"))
     assert back.n_points == 12
+
+
+def test_the_remedy_suggests_a_receiver_range_within_the_measured_one():
+    # -64.158 to 64.158 rounded to 4 digits gave -64.16 to 64.16: beyond the table's range
+    from irreflect.protocol.advice import adaptive_remedy
+
+    theta = np.array([-64.158, 0.0, 30.0, 64.158, -64.158, 10.0])
+    gamma = np.array([-15.0, -15.0, -15.0, -15.0, -45.0, -45.0])
+    dense = Measurements(gamma, theta, np.ones(6), name="d")
+    text = adaptive_remedy(dense)
+    assert "--gammas 15 45 --theta-min -64.15 --theta-max 64.15`" in text
+    dense = Measurements(gamma, np.where(np.abs(theta) > 60, np.sign(theta) * 70.0, theta),
+                         np.ones(6), name="d")
+    assert "--theta-min -70 --theta-max 70`" in adaptive_remedy(dense)
+
+
+def test_a_protocol_file_that_is_not_a_table_gets_one_line_without_parser_internals(tmp_path):
+    from irreflect.protocol.export import read_protocol
+
+    path = tmp_path / "proto.md"
+    path.write_text("# notes\ngamma_deg,theta_deg\n-20,20\n-20,30,extra,more\n")
+    with pytest.raises(IrreflectError) as info:
+        read_protocol(path)
+    text = str(info.value)
+    assert "C error" not in text and "\n" not in text
+    assert text.endswith("expected a CSV or JSON file as 'irreflect protocol --out' writes, "
+                         "with columns gamma_deg, theta_deg")

@@ -292,6 +292,19 @@ def _num(x):
     return x if np.isfinite(x) else None
 
 
+def _inward(value: float, direction: int) -> str:
+    """``value`` to 4 significant digits, rounded toward the inside of the range
+    (``direction`` +1: up, for its lower end; -1: down, for its upper end), so that the
+    suggested receiver range stays within the measured one."""
+    text = f"{value:.4g}"
+    if (float(text) - value) * direction >= -1e-12:
+        return text
+    digits = 4 - int(np.floor(np.log10(abs(value)))) - 1 if value else 0
+    step = 10.0 ** -digits
+    rounded = (np.ceil(value / step) if direction > 0 else np.floor(value / step)) * step
+    return f"{rounded:.{max(digits, 0)}f}".rstrip("0").rstrip(".") if digits > 0 else f"{rounded:g}"
+
+
 def adaptive_remedy(dense=None) -> str:
     """The remedy every failing or marginal protocol is offered: the adaptive campaign,
     with the instrument the dense scan was measured on when it is known."""
@@ -299,8 +312,8 @@ def adaptive_remedy(dense=None) -> str:
     if dense is not None:
         mags = sorted({float(abs(g)) for g in np.asarray(dense.gamma_deg, float)})
         inst = (" --gammas " + " ".join(f"{g:g}" for g in mags)
-                + f" --theta-min {float(np.min(dense.theta_deg)):.4g}"
-                + f" --theta-max {float(np.max(dense.theta_deg)):.4g}")
+                + f" --theta-min {_inward(float(np.min(dense.theta_deg)), 1)}"
+                + f" --theta-max {_inward(float(np.max(dense.theta_deg)), -1)}")
     return (f"measure adaptively: `irreflect next MEASURED.csv --n 3{inst}` proposes the next "
             "settings from the points measured so far (MEASURED.csv: gamma_deg, theta_deg, "
             f"power; only the header to start) and says when to stop ({CAMPAIGN_DOC})")

@@ -181,7 +181,10 @@ def read_protocol(path) -> Protocol:
     except (pd.errors.ParserError, pd.errors.EmptyDataError, UnicodeDecodeError,
             ValueError) as exc:
         first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
-        raise IrreflectError(f"{path}: cannot be read as a CSV protocol ({first})") from None
+        first = first.replace("Error tokenizing data. C error: ", "")
+        raise IrreflectError(f"{path}: cannot be read as a CSV protocol ({first}): expected "
+                             "a CSV or JSON file as 'irreflect protocol --out' writes, with "
+                             "columns gamma_deg, theta_deg") from None
     if len(df) > MAX_PROTOCOL_POINTS:
         raise IrreflectError(f"{path}: {len(df)} points is more than a protocol may list "
                              f"({MAX_PROTOCOL_POINTS}): a protocol names the few settings to "
