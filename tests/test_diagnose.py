@@ -478,3 +478,33 @@ def test_a_table_the_base_model_cannot_follow_gets_an_error_that_names_the_offse
     text = str(info.value)
     assert "cannot beat a constant" in text and "+background" in text
     assert "\n" not in text
+
+
+def test_a_first_round_candidate_below_the_share_is_told_so():
+    # the best and only significant first-round candidate, explaining 40 % of the excess,
+    # was labelled "rejected: a better explanation of this size"
+    from types import SimpleNamespace
+
+    from irreflect.diagnose.workflow import _reason
+
+    c = SimpleNamespace(assessment=object(), reason="", p_value=6.5e-8, level=0.01,
+                        share_explained=0.40, parent="")
+    assert _reason(c, False, False, 0.5) == ("significant, but explains 40% of the excess "
+                                             "residual, less than 50%")
+    c.share_explained = 0.7
+    assert _reason(c, False, False, 0.5) == "rejected: a better explanation of this size"
+
+
+def test_a_diagnosis_that_could_test_no_extension_says_so():
+    # 8 points and 7 coefficients: every extension fit fails, and the verdict said "no
+    # missing effect" with no word that nothing was tested
+    meas = load_bundled("terrazzo")
+    keep = np.zeros(meas.n_points, bool)
+    keep[np.linspace(0, meas.n_points - 1, 8).astype(int)] = True
+    import warnings
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        result = diagnose(meas.subset(keep))
+    assert "no candidate extension could be tested: every one failed (fit failed:" in \
+        result.summary

@@ -445,6 +445,9 @@ SCENE_CASES = [
     (("box", 0, "min_m"), [0, 0, 0], None),  # with max_m the room's size: filled below
     (("receiver", 0, "position_m"), [2.5, 2.5, 3.0], "the receiver sits on the ceiling"),
     (("receiver", 1, "position_m"), [2.5, 2.5, 2.9995], "is at emitter 'beacon'"),
+    # 2 mm from a 1 cm^2 receiver the line-of-sight formula gave a gain of 7.96
+    (("receiver", 1, "position_m"), [2.5, 2.5, 2.998], "the far-field line-of-sight formula "
+                                                       "does not hold there"),
     (("receiver", 1, "direction"), [0, 0, -1], "faces into it"),  # on the desk's top
     (("receiver", 1, "name"), "barry_A", "receiver names must be distinct"),
     (("receiver", 1, "name"), "barry A", "give the same file name 'barry_A'"),
@@ -801,3 +804,25 @@ def test_a_material_files_verdict_is_checked_like_every_other_key(tmp_path):
     (tmp_path / "m.json").write_text(json.dumps(doc))
     with pytest.raises(IrreflectError, match=r"verdict.summary must be text"):
         load_material(tmp_path / "m.json", reflectance=0.3)
+
+
+def test_an_output_folder_of_another_command_is_not_replaced(tmp_path):
+    # 'compare --out' into a 'diagnose' folder deleted the diagnosis without a word; a rerun
+    # of the same command still replaces its own output
+    from irreflect._atomic import MANIFEST
+
+    out = tmp_path / "d_out"
+    out.mkdir()
+    (out / "diagnosis.json").write_text("{}\n")
+    (out / MANIFEST).write_text(json.dumps({"written_by": "irreflect", "command": "diagnose",
+                                            "files": ["diagnosis.json"]}))
+    code, stdout, err = _run(["compare", TERRAZZO, "--models", "two-lobe", "--out", out])
+    assert code == 2 and err.count("\n") == 1, err
+    assert "holds the output of 'irreflect diagnose'" in err
+    assert "this 'irreflect compare' run would replace" in err
+    assert (out / "diagnosis.json").read_text() == "{}\n"
+    (out / MANIFEST).write_text(json.dumps({"written_by": "irreflect", "command": "compare",
+                                            "files": ["diagnosis.json"]}))
+    code, _, err = _run(["compare", TERRAZZO, "--models", "two-lobe", "--out", out])
+    assert code == 0, err
+    assert (out / "comparison.json").exists() and not (out / "diagnosis.json").exists()

@@ -5,6 +5,7 @@ swapped links, energy in closed rooms, scenes, files and the CLI."""
 from __future__ import annotations
 
 import json
+import warnings
 from dataclasses import replace
 from pathlib import Path
 
@@ -558,3 +559,42 @@ def test_reproduce_refuses_a_bad_scene_first(tmp_path, capsys):
     assert "missing key" in capsys.readouterr().err
     assert not (tmp_path / "out").exists()
 
+
+
+def test_a_material_file_is_strict_json_and_a_poor_reciprocal_form_is_warned_of(tmp_path):
+    # an n-lobe fit with NaN standard errors was saved as NaN / Infinity (not JSON), and the
+    # room simulated its reciprocal form (in-plane R^2 0.04 against the fitted curve) with no
+    # word
+    import dataclasses
+    import json as _json
+
+    from irreflect import fit
+    from irreflect.data import load_bundled
+    from irreflect.room.materials import MIN_RECIPROCAL_R2, load_material, save_material
+
+    res = fit(load_bundled("terrazzo"))
+    bad = dataclasses.replace(res, stderr=np.full(res.stderr.shape, np.nan))
+    path = tmp_path / "m.json"
+    save_material(bad, path, reflectance=0.3)
+
+    def refuse(name):
+        raise ValueError(name)
+
+    doc = _json.loads(path.read_text(), parse_constant=refuse)
+    assert all(v is None for v in doc["stderr"].values())
+    good = load_material(path)
+    assert not any("explains its in-plane curve only" in w for w in good.warnings)
+    assert good.fidelity["r2_curve"] >= MIN_RECIPROCAL_R2
+    # an n-lobe:2 fit of every ninth terrazzo reading (15 points): a 1.5e5-index lobe and a
+    # scale of 4e155, which no reciprocal form of cos^n lobes follows
+    meas = load_bundled("terrazzo")
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        wild = fit(meas.subset(np.arange(meas.n_points) % 9 == 0), "n-lobe:2", seed=0)
+    save_material(wild, tmp_path / "n2.json", reflectance=0.3)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        mat = load_material(tmp_path / "n2.json")
+    assert mat.fidelity["r2_curve"] < MIN_RECIPROCAL_R2
+    poor = [w for w in mat.warnings if "explains its in-plane curve only" in w]
+    assert len(poor) == 1 and "the multipath from this surface is not the measured" in poor[0]

@@ -28,6 +28,7 @@ an input of the same run.
 from __future__ import annotations
 
 import contextlib
+import contextvars
 import ctypes
 import ctypes.util
 import json
@@ -50,6 +51,10 @@ except ImportError:  # pragma: no cover
 
 #: The manifest every output folder carries (hidden), listing the entries the run wrote.
 MANIFEST = ".irreflect-manifest.json"
+#: The irreflect command this process runs (set by the command line; None from Python): an
+#: output folder another command wrote is not replaced by it (:func:`_check_owned`).
+RUNNING_COMMAND: contextvars.ContextVar[str | None] = contextvars.ContextVar(
+    "irreflect_running_command", default=None)
 _TMP = "irreflect-tmp"
 _OLD = "irreflect-old"
 _LOCK = "irreflect-lock"
@@ -227,10 +232,19 @@ def claim_outputs(*claims):
 
 
 def _check_owned(path: Path, option: str) -> None:
-    """A folder a run may replace: absent, empty, written by irreflect (manifest), or
-    holding only other irreflect output folders (e.g. ``out/select`` before
-    ``reproduce --out out``), which the run keeps."""
-    if not path.is_dir() or (path / MANIFEST).exists():
+    """A folder a run may replace: absent, empty, written by irreflect (manifest) through
+    the same command as the one running (:data:`RUNNING_COMMAND`; another command's output
+    is not this run's to replace), or holding only other irreflect output folders (e.g.
+    ``out/select`` before ``reproduce --out out``), which the run keeps."""
+    if not path.is_dir():
+        return
+    if (path / MANIFEST).exists():
+        other, running = _manifest_command(path), RUNNING_COMMAND.get()
+        if other and running and other != running and other != "irreflect":
+            raise IrreflectError(
+                f"{option} {path}: the folder holds the output of 'irreflect {other}' (its "
+                f"{MANIFEST}), which this 'irreflect {running}' run would replace: choose "
+                "another folder, or delete it")
         return
     entries = [e.name for e in path.iterdir()
                if not (e.is_dir() and (e / MANIFEST).exists())
@@ -346,6 +360,20 @@ def _swap_in(new: Path, path: Path) -> None:
     os.rename(path, old)  # pragma: no cover - systems without renameat2
     os.rename(new, path)  # pragma: no cover
     _remove(old)  # pragma: no cover
+
+
+def _manifest_command(path: Path) -> str:
+    """The command a previous run recorded in its manifest ('' when unreadable)."""
+    manifest = path / MANIFEST
+    try:
+        st = os.lstat(manifest)
+        if not stat.S_ISREG(st.st_mode) or st.st_size > 16 * 2**20:
+            return ""
+        with open(manifest, "rb") as fh:
+            doc = json.loads(fh.read(16 * 2**20).decode("utf-8"))
+        return str(doc.get("command") or "")
+    except (OSError, ValueError, AttributeError, TypeError, RecursionError):
+        return ""
 
 
 def _manifest_entries(path: Path) -> set[str]:

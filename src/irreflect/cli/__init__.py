@@ -76,9 +76,18 @@ def main(argv=None) -> int:
     if not getattr(args, "handler", None):
         parser.print_help(sys.stderr)
         return 2
+    from .._atomic import RUNNING_COMMAND
     from ..validation import forget_memory_options
 
     forget_memory_options()
+    running = RUNNING_COMMAND.set(args.command)
+    try:
+        return _run(args, parser)
+    finally:
+        RUNNING_COMMAND.reset(running)
+
+
+def _run(args, parser) -> int:
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         try:

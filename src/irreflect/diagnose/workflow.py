@@ -937,6 +937,11 @@ def diagnose(measurements, model="two-lobe", *, extensions: Sequence[str] | None
     alt_fits, separating = _separation(search, final, alternatives, meas, target, separate)
     verdict, summary, where = _verdict(steps, effects, alternatives, common, separating,
                                        alpha, base, target, meas)
+    tried = [c for row in rounds[:1] for c in row]
+    if not any(c.assessment is not None for c in tried):
+        why = (f"every one failed ({tried[0].reason})" if tried
+               else "none is left to add to this model")
+        summary += f"; but no candidate extension could be tested: {why}"
     if len(steps) > 1:  # the extended model is a result too: say what is doubtful about it
         for text in steps[-1].fit.warnings:
             warnings.warn(FitWarning(f"{meas.name}, {steps[-1].fit.model}: {text}"),
@@ -976,7 +981,7 @@ def _reason(c: Candidate, named: bool, in_final: bool, min_share: float) -> str:
         return "ambiguous: as good as the named explanation"
     if not c.p_value < c.level:
         return f"not significant at {c.level:.2g}"
-    if c.parent and c.share_explained < min_share:
+    if c.share_explained < min_share:
         return (f"significant, but explains {100 * c.share_explained:.0f}% of the excess "
                 f"residual, less than {100 * min_share:.0f}%")
     return "rejected: a better explanation of this size"

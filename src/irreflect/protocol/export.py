@@ -9,7 +9,6 @@ ignores the ``purpose`` column).
 from __future__ import annotations
 
 import io
-import json
 import math
 from dataclasses import replace
 from pathlib import Path
@@ -19,6 +18,7 @@ import pandas as pd
 from .. import schema as sc
 from .._atomic import atomic_path
 from .._inputs import parse_json, read_bytes
+from .._jsonio import dumps
 from ..errors import IrreflectError, unknown_name
 from ..validation import check_output_path
 from .core import ORDER_RULE, Protocol, protocol_from_frame
@@ -86,7 +86,7 @@ def to_dict(protocol: Protocol) -> dict:
 
 
 def to_json_text(protocol: Protocol) -> str:
-    return json.dumps(to_dict(protocol), indent=2) + "\n"
+    return dumps(to_dict(protocol))
 
 
 def to_markdown(protocol: Protocol) -> str:

@@ -52,7 +52,6 @@ the paper's laws use ``min(1, u_as cos^v_as(gamma))`` for the two-lobe share.
 from __future__ import annotations
 
 import functools
-import json
 import math
 import numbers
 import re
@@ -64,6 +63,7 @@ import numpy as np
 from .. import schema as sc
 from .._atomic import atomic_path
 from .._inputs import parse_json, read_text
+from .._jsonio import dumps
 from ..errors import IrreflectError
 from ..models import get_model
 from ..models.base import cap_share
@@ -476,6 +476,11 @@ def _peaks(mat: Material):
     return lambda g: [t * g for t in tilts]
 
 
+#: A reciprocal form whose in-plane curve explains the fitted curve (or the material's
+#: table) below this R^2 carries a warning: the room simulates a different surface.
+MIN_RECIPROCAL_R2 = 0.9
+
+
 def _reciprocal(paper: Material, K: float) -> Material:
     """The reciprocal form of ``paper`` (a paper-form material, any scale), see the module
     docstring; ``K`` the fit's scale (used when ``paper.scale == "K"``)."""
@@ -533,6 +538,16 @@ def _reciprocal(paper: Material, K: float) -> Material:
                 f"material '{paper.name}': its reciprocal form reaches a diffuse reflectance of "
                 f"{rho:.3g} at most (albedo 1 towards grazing incidence), not "
                 f"{paper.reflectance:g}",)
+    poor = [f"{value:.3g} against {what}" for key, what in
+            (("r2_curve", "the fitted curve"), ("r2_table_reciprocal", "its table"))
+            if (value := fidelity.get(key)) is not None
+            and not (np.isfinite(value) and value >= MIN_RECIPROCAL_R2)]
+    if poor:
+        warnings = warnings + (
+            f"material '{paper.name}': its reciprocal form, the one the room simulates, explains "
+            f"its in-plane curve only to R^2 {' and '.join(poor)} (below {MIN_RECIPROCAL_R2:g}): "
+            "the multipath from this surface is not the measured material's; refit it with "
+            "the two-lobe model or check the fit",)
     amp = _recip.amplitude(terms, coef) * s
     table = np.column_stack([terms.astype(float), amp])
     return replace(paper, kind=KIND_RECIPROCAL, brdf="reciprocal", reflectance=rho,
@@ -821,7 +836,7 @@ def save_material(result, path, *, data_file=None, wavelength_nm=None, notes=Non
     if not np.all(np.isfinite(result.values)):
         raise IrreflectError(f"{path}: the fit has non-finite coefficients; nothing written")
     with atomic_path(path, "--save") as tmp:
-        tmp.write_text(json.dumps(doc, indent=2) + "\n")
+        tmp.write_text(dumps(doc))
     return doc
 
 

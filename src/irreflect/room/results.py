@@ -16,6 +16,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from .._atomic import atomic_directory
+from .._jsonio import finite
 from .kernels import C_LIGHT
 
 if TYPE_CHECKING:
@@ -187,7 +188,8 @@ def write_results(result, out_dir, figures=None) -> list[str]:
             written += [f"{name}.csv", f"{name}.parquet"]
         info = run_info(result)
         info["files"] = FILES
-        (tmp / "run.json").write_text(json.dumps(info, indent=2, default=str) + "\n")
+        (tmp / "run.json").write_text(json.dumps(finite(info), indent=2, default=str,
+                                                 allow_nan=False) + "\n")
         written.append("run.json")
         if figures is not None:
             written += figures(result, summary, singles, tmp)
