@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from conftest import paper_grid
 
-from irreflect import metrics
+from irreflect import fit, metrics
 from irreflect.cli import main
 from irreflect.compare import compare_models, parse_model_list
 from irreflect.data import Measurements, bundled_dir, load_bundled, read_measurements
@@ -277,3 +277,19 @@ def test_compare_cli_defaults_on_a_matte_paint_where_two_models_cannot_fit(real_
         assert "cannot beat a constant" in why
         assert f"{label} left out of the comparison" in captured.err
     assert captured.err.count("left out of the comparison") == len(out["skipped"]) >= 1
+
+
+def test_a_fit_at_one_incidence_warns_under_its_own_label():
+    # 'phong@10' warned as 'phong', beside the all-points 'phong' fit's own warnings
+    import warnings
+
+    th = np.linspace(-70.0, 70.0, 15)
+    g = np.repeat([-10.0, -30.0, -50.0], th.size)
+    t = np.tile(th, 3)
+    meas = Measurements(g, t, np.cos(np.radians(t)) / np.pi, name="lambert")
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        res = fit(meas, "phong@10")
+    texts = [str(w.message) for w in caught]
+    assert res.model == "phong@10" and texts
+    assert all(t.startswith("lambert, phong@10: ") for t in texts), texts

@@ -432,6 +432,28 @@ def test_room_map_names_emitter_and_box_and_gains_are_points_not_bars():
     plt.close("all")
 
 
+@pytest.mark.parametrize("n", [[3, 1], [1, 3], [1, 1]])
+def test_a_room_map_one_receiver_wide_draws_its_receivers(n):
+    # pcolormesh has no cell to shade on a grid one receiver wide: the map was empty
+    doc = tomllib.loads((bundled_dir() / "rooms" / "office.toml").read_text())
+    doc["receiver_grid"][0]["n"] = n
+    doc["simulation"]["rays"] = 100
+    scene = scene_from_dict(doc, str(bundled_dir() / "rooms" / "office.toml"))
+    room = simulate(scene, method="montecarlo", bounces=1, rays=100, seed=0)
+    summary = summary_table(room)
+    ax = plot_map(room, summary, scene.grids[0], "dc_gain_total", scene.emitters[0].name)
+    drawn = [c for c in ax.collections if np.size(c.get_array()) > 0]
+    assert len(drawn) == 1 and np.size(drawn[0].get_array()) == n[0] * n[1]
+    assert np.all(np.isfinite(np.asarray(drawn[0].get_array(), float)))
+    c = drawn[0]
+    if hasattr(c, "get_coordinates"):  # shaded cells: each of some width and height
+        xy = c.get_coordinates()
+        assert np.all(np.diff(xy[..., 0], axis=1) > 0) and np.all(np.diff(xy[..., 1], axis=0) > 0)
+    else:  # markers: each of some size
+        assert np.all(c.get_sizes() > 0)
+    plt.close("all")
+
+
 def test_checks_catch_what_they_are_for():
     """The checks above fail on figures made to break them."""
     fig, ax = plt.subplots()

@@ -453,6 +453,7 @@ SCENE_CASES = [
     (("receiver", 1, "name"), "barry A", "give the same file name 'barry_A'"),
     (("receiver_grid", 0, "n"), [500, 500], "receivers is more than this machine's budget"),
     (("receiver_grid", 0, "n"), [True, 2], "n[1] must be an integer"),
+    (("receiver_grid", 0, "x_m"), [1.0, 1.0], "x_m spans [1, 1], a single point, with"),
     (("simulation", "rays"), 1.5, "rays must be an integer"),
     (("simulation", "method"), "montecarl", "did you mean 'montecarlo'"),
 ]

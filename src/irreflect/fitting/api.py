@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import dataclasses
 import time
+import warnings
 from warnings import warn
 
 import numpy as np
@@ -107,7 +108,15 @@ def fit(measurements, model="two-lobe", options: FitOptions | None = None,
     opts = _checked(opts, spec.model_text if spec is not None else model)
     if spec is not None and spec.at_gamma_deg is not None:  # 'phong@10': one incidence
         sub = points_at_incidence(as_measurements(measurements), spec.at_gamma_deg, str(spec))
-        return dataclasses.replace(fit(sub, spec.model_text, opts), model=str(spec))
+        with warnings.catch_warnings(record=True) as caught:  # said under the label asked for
+            warnings.simplefilter("always")
+            inner = fit(sub, spec.model_text, opts)
+        for w in caught:
+            message = w.message
+            if isinstance(message, FitWarning):
+                message = FitWarning(str(message).replace(f", {inner.model}: ", f", {spec}: ", 1))
+            warn(message, stacklevel=2)
+        return dataclasses.replace(inner, model=str(spec))
     t0 = time.perf_counter()
     meas = as_measurements(measurements)  # a path is read once, for both searches
     try:

@@ -99,7 +99,13 @@ def plot_map(result, summary, grid, column, emitter, ax=None, *, label=None, cma
         lim = np.nanmax(np.abs(values - center)) or 1.0
         kw = {"vmin": center - lim, "vmax": center + lim}
         cmap = "RdBu_r"
-    mesh = ax.pcolormesh(x, y, values, shading="nearest", cmap=cmap, **kw)
+    x, y, values = np.asarray(x), np.asarray(y), np.asarray(values)
+    if np.size(x) > 1 and np.size(y) > 1:
+        mesh = ax.pcolormesh(x, y, values, shading="nearest", cmap=cmap, **kw)
+    else:  # a grid one receiver wide has no cells to shade: its receivers as squares
+        xx, yy = np.meshgrid(x, y)
+        mesh = ax.scatter(xx.ravel(), yy.ravel(), c=values.ravel(), s=90, marker="s",
+                          cmap=cmap, edgecolors="k", linewidths=0.4, **kw)
     ax.figure.colorbar(mesh, ax=ax, label=label or column)
     for em in result.scene.emitters:  # white with a black edge: seen on every colour map
         ax.plot(em.position[0], em.position[1], "*", ms=14, mfc="white", mec="k", mew=1.0,

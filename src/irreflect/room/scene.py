@@ -632,6 +632,10 @@ def _span(ctx, key, name, value, top, n):
                       f"[{lo:g}, {hi:g}]")
     if n == 1:
         return np.array([(lo + hi) / 2])
+    if hi - lo <= _TOL:
+        ctx.fail(key, f"{name} spans [{lo:g}, {hi:g}], a single point, with {n} receivers "
+                      f"along it: they would all stand at one spot; widen {name} or set that "
+                      "axis's count in n to 1")
     return np.linspace(lo, hi, n)
 
 
