@@ -133,6 +133,8 @@ def _cmd_select(args) -> int:
     if args.scheduler is not None:
         check_scheduler_address(args.scheduler)
     flat = len(args.data) == 1 and len(seeds) == 1
+    if not str(args.out).strip():  # Path("") would be the current folder
+        raise IrreflectError("--out must name a folder; found an empty name")
     out = Path(args.out)
     with contextlib.ExitStack() as stack:
         stack.enter_context(claim_output(out, "dir", "--out"))
