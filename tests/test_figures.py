@@ -477,3 +477,19 @@ def test_checks_catch_what_they_are_for():
         test_no_two_panels_of_a_figure_are_alike(("pair", {"pair": fig2}))
     plt.close("all")
     assert matplotlib.get_backend().lower() == "agg"
+
+
+def test_a_log_radius_of_less_than_two_decades_has_three_readable_labels():
+    # matplotlib's log labels overprinted each other ('4x3x10^-1...') on a table whose power
+    # spans less than a decade
+    meas = load_bundled("terrazzo")
+    ax = plot_polar(meas, radius="log")
+    fig = ax.figure
+    fig.canvas.draw()
+    low, high = ax.get_ylim()
+    shown = [(loc, t.get_text()) for loc, t in zip(ax.yaxis.get_majorticklocs(),
+                                                   ax.yaxis.get_majorticklabels(), strict=True)
+             if t.get_text() and low <= loc <= high]
+    assert len(shown) == 3, shown  # three labels inside the radius drawn, not one
+    assert not [t for t in ax.yaxis.get_minorticklabels() if t.get_text()]
+    plt.close("all")

@@ -397,6 +397,19 @@ def _check_negative_power(power, sigma, source, rows):
     return None
 
 
+def _one_material(df: pd.DataFrame, source: str) -> str | None:
+    """The table's material (None without a material column); a table naming two or more
+    is refused: it holds one material's readings."""
+    if "material" not in df.columns:
+        return None
+    mats = df["material"].dropna().astype(str).unique()
+    if len(mats) > 1:
+        _fail(f"{source}: the material column names {len(mats)} materials "
+              f"({short_list(list(mats), 4)}): a table holds one material's readings; "
+              "split it into one table per material")
+    return mats[0] if len(mats) else None
+
+
 def _check_partial_negative(power, sigma, source, rows) -> None:
     """Negative readings of a campaign (see :data:`PARTIAL_NEGATIVE_TOLERANCE`): refused
     when most of at least four nonzero readings are negative, or when a reading lies below
@@ -486,14 +499,7 @@ def validate_table(df: pd.DataFrame, source: str = "table", *,
     if positive or not partial:
         gamma, theta, frame_notes = _frame(gamma, theta, power, positive, partial, source)
         notes += frame_notes
-    material = None
-    if "material" in df.columns:
-        mats = df["material"].dropna().astype(str).unique()
-        if len(mats) > 1:
-            _fail(f"{source}: the material column names {len(mats)} materials "
-                  f"({short_list(list(mats), 4)}): a table holds one material's readings; "
-                  "split it into one table per material")
-        material = mats[0] if len(mats) else None
+    material = _one_material(df, source)
     gamma, theta, power, sigma, merged = _merge_duplicates(gamma, theta, power, sigma, source,
                                                            rows, average_duplicates)
     if merged:

@@ -937,11 +937,7 @@ def diagnose(measurements, model="two-lobe", *, extensions: Sequence[str] | None
     alt_fits, separating = _separation(search, final, alternatives, meas, target, separate)
     verdict, summary, where = _verdict(steps, effects, alternatives, common, separating,
                                        alpha, base, target, meas)
-    tried = [c for row in rounds[:1] for c in row]
-    if not any(c.assessment is not None for c in tried):
-        why = (f"every one failed ({tried[0].reason})" if tried
-               else "none is left to add to this model")
-        summary += f"; but no candidate extension could be tested: {why}"
+    summary += _untested(rounds)
     if len(steps) > 1:  # the extended model is a result too: say what is doubtful about it
         for text in steps[-1].fit.warnings:
             warnings.warn(FitWarning(f"{meas.name}, {steps[-1].fit.model}: {text}"),
@@ -970,6 +966,17 @@ def _separation_target(alpha: float, m: int, noise: NoiseEstimate, power: float 
                                      - power, 1e-6, 1e7))
     crit = stats.chi2.isf(level, 1)
     return float(optimize.brentq(lambda lam: stats.ncx2.sf(crit, 1, lam) - power, 1e-6, 1e7))
+
+
+def _untested(rounds) -> str:
+    """What the summary adds when no candidate extension could be tested (every fit
+    failed, or none is left to add): a verdict on the residual alone."""
+    tried = [c for row in rounds[:1] for c in row]
+    if any(c.assessment is not None for c in tried):
+        return ""
+    why = (f"every one failed ({tried[0].reason})" if tried
+           else "none is left to add to this model")
+    return f"; but no candidate extension could be tested: {why}"
 
 
 def _reason(c: Candidate, named: bool, in_final: bool, min_share: float) -> str:

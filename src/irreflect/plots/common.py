@@ -64,6 +64,24 @@ def _polar_axes(ax=None, fig=None):
     return ax
 
 
+def _set_log_radius(ax, low: float, high: float) -> None:
+    """A logarithmic radius from ``low`` to ``high`` with a few readable labels: at most
+    four decades labelled, no minor-tick labels, and three plain labels when the range
+    spans less than two decades (matplotlib's own labels then overprint each other, or
+    label one tick only)."""
+    ax.set_rscale("log")
+    ax.set_rlim(low, high)
+    ticker = matplotlib.ticker
+    if high / low < 100.0:
+        ticks = np.geomspace(low * 1.05, high / 1.05, 3)
+        ax.yaxis.set_major_locator(ticker.FixedLocator(ticks))
+        ax.yaxis.set_major_formatter(ticker.FormatStrFormatter("%.2g"))
+    else:
+        ax.yaxis.set_major_locator(ticker.LogLocator(base=10.0, numticks=4))
+    ax.yaxis.set_minor_locator(ticker.NullLocator())
+    ax.yaxis.set_minor_formatter(ticker.NullFormatter())
+
+
 class _PolarScale:
     """The radius of polar diagrams: linear from 0, or logarithmic from a floor below the
     smallest positive measured power; values below what can be drawn (negative, or under
@@ -85,8 +103,7 @@ class _PolarScale:
     def apply(self, ax, top: float | None = None) -> None:
         top = max(top or 0.0, self.top)
         if self.log:
-            ax.set_rscale("log")
-            ax.set_rlim(self.floor, top * 1.6)
+            _set_log_radius(ax, self.floor, top * 1.6)
         else:
             ax.set_rlim(0.0, top * 1.08)
 
@@ -236,8 +253,7 @@ def plot_polar_per_gamma(measurements, curves: dict, fig=None, *, title=None, st
                 negative.append(label)
         # a sharp model peak between receivers must not squash the measured curve
         if scale.log:
-            ax.set_rscale("log")
-            ax.set_rlim(scale.floor, top * 1.6)
+            _set_log_radius(ax, scale.floor, top * 1.6)
         else:
             ax.set_rlim(0.0, 1.25 * top)
         ax.set_title(plain(f"gamma = {g:g} deg") + (f"\n{', '.join(negative)}: power < 0"
@@ -249,25 +265,29 @@ def plot_polar_per_gamma(measurements, curves: dict, fig=None, *, title=None, st
                 labels.append(lb)
     heading = (plain(title) + "\n" if title else "") + f"receiver angle theta (deg); " \
         f"{scale.caption()}"
-    fig.suptitle(heading, fontsize=10 if title else 9)
+    # above the figure's top edge (the saved figure's tight box takes it in): the first
+    # row's panel titles stand high above their half discs, up to that edge
+    fig.suptitle(heading, fontsize=10 if title else 9, y=1.0, va="bottom")
     _polar_grid_layout(fig, nrows, heading.count("\n") + 1,
                        max(ax.get_title().count("\n") + 1 for ax in fig.axes),
-                       0.1 if nrows > 1 else 0.16)
+                       0.3 + 0.22 * np.ceil(len(labels) / 4))
     fig.legend(handles, labels, loc="lower center", ncol=min(len(labels), 4), fontsize=8,
                frameon=False)
     return fig
 
 
 def _polar_grid_layout(fig, nrows: int, heading_lines: int, title_lines: int,
-                       legend_share: float) -> None:
+                       legend_inches: float) -> None:
     """The margins ``tight_layout`` would give a grid of polar panels, set directly (in
-    inches: the heading's and the panel titles' lines above, the figure legend's share
-    below): ``tight_layout`` measures every tick label of every polar panel, about 1.7 s
-    of a five-panel figure, and the saved figure's tight bounding box catches anything
-    that still sticks out."""
+    inches: the heading's lines, and the first row's panel titles and 0-deg labels above
+    them; the figure legend's rows below): ``tight_layout`` measures every tick label of
+    every polar panel, about 1.7 s of a five-panel figure, and the saved figure's tight
+    bounding box catches anything that still sticks out. In inches, not shares of the
+    height: a tall grid of many angles of incidence kept a blank band of a tenth of its
+    height below, and its heading sat on the first row's titles."""
     width, height = fig.get_size_inches()
-    top = 0.25 + 0.2 * heading_lines + 0.16 * (title_lines - 1)
-    bottom = legend_share * height + 0.15
+    top = 0.5 + 0.16 * (title_lines - 1)  # the heading stands above the top edge
+    bottom = legend_inches + 0.15
     side = 0.45
     fig.subplots_adjust(left=side / width, right=1.0 - side / width,
                         bottom=bottom / height, top=1.0 - top / height,

@@ -55,8 +55,7 @@ def plot_comparison_polar(comparison: Comparison, models=None, fig=None, *, gamm
         handles, labels = first.get_legend_handles_labels()
         first.get_legend().remove()
         fig.legend(handles, labels, loc="lower center", ncol=min(len(labels), 5),
-                   fontsize=8, frameon=False, bbox_to_anchor=(0.5, -0.02))
-        fig.subplots_adjust(bottom=0.12)
+                   fontsize=8, frameon=False)
     return fig
 
 

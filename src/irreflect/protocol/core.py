@@ -323,6 +323,16 @@ def _paper_arguments(gammas_deg, theta_min, theta_max, offsets, min_separation):
 SOURCE_NEAR_DEG = 5.0
 
 
+def _source_notes(gammas, thetas, purposes) -> list[str]:
+    """A note per point within :data:`SOURCE_NEAR_DEG` of the source direction (theta =
+    gamma): a receiver there stands in the beam."""
+    return [f"gamma {g:g}: the {kind} point theta {t:g} is within {SOURCE_NEAR_DEG:g} deg of "
+            "the source direction (theta = gamma): a receiver there blocks the beam (measure "
+            f"it through a beam splitter, or choose |gamma| >= {SOURCE_NEAR_DEG:g})"
+            for g, t, kind in zip(gammas, thetas, purposes, strict=True)
+            if abs(t - g) < SOURCE_NEAR_DEG]
+
+
 def paper_protocol(gammas_deg, theta_min: float = -70.0, theta_max: float = 70.0, *,
                    mirror_offset: float = 10.0, wide_offset: float = 60.0,
                    central_offset: float = 20.0, min_separation: float | None = None,
@@ -416,12 +426,7 @@ def paper_protocol(gammas_deg, theta_min: float = -70.0, theta_max: float = 70.0
         place(g, mirror, _clean(mirror - wide_offset), "diffuse", taken, True)
         place(g, mirror, _clean(mirror + wide_offset), "diffuse", taken, True)
 
-    for g, t, kind in zip(gamma_out, theta_out, purpose, strict=True):
-        if abs(t - g) < SOURCE_NEAR_DEG:  # the source stands at theta = gamma
-            notes.append(f"gamma {g:g}: the {kind} point theta {t:g} is within "
-                         f"{SOURCE_NEAR_DEG:g} deg of the source direction (theta = gamma): a "
-                         "receiver there blocks the beam (measure it through a beam splitter, "
-                         f"or choose |gamma| >= {SOURCE_NEAR_DEG:g})")
+    notes += _source_notes(gamma_out, theta_out, purpose)
     return Protocol(
         gamma_deg=np.array(gamma_out, float),
         theta_deg=np.array(theta_out, float),
