@@ -212,9 +212,9 @@ def write_outputs(result, methods: dict | None, directory) -> list[Path]:
     ax = plot_pareto(result, methods=methods, legend_below=True,
                      title=f"{meas.name}: Pareto frontier ({result.selector}, seed {result.seed})")
     save_figure(ax.figure, directory / "pareto.png")
-    masks = {f"best {n_opt}": result.best_mask(n_opt)}
+    masks = {"best subset": result.best_mask(n_opt)}
     if result.knee_n != n_opt:
-        masks[f"knee ({result.knee_n})"] = result.best_mask(result.knee_n)
+        masks["knee of the frontier"] = result.best_mask(result.knee_n)
     ax = plot_points(meas, masks, title=f"{meas.name}: chosen points")
     save_figure(ax.figure, directory / "optimal_points.png")
     return [directory / name for name in OUTPUT_FILES]
