@@ -362,33 +362,31 @@ def _swap_in(new: Path, path: Path) -> None:
     _remove(old)  # pragma: no cover
 
 
-def _manifest_command(path: Path) -> str:
-    """The command a previous run recorded in its manifest ('' when unreadable)."""
+def _read_manifest(path: Path) -> dict:
+    """The manifest a previous run left in folder ``path`` ({} when absent or unreadable;
+    read only when it is a regular file of reasonable size: a FIFO planted there must not
+    hang)."""
     manifest = path / MANIFEST
     try:
         st = os.lstat(manifest)
         if not stat.S_ISREG(st.st_mode) or st.st_size > 16 * 2**20:
-            return ""
+            return {}
         with open(manifest, "rb") as fh:
             doc = json.loads(fh.read(16 * 2**20).decode("utf-8"))
-        return str(doc.get("command") or "")
-    except (OSError, ValueError, AttributeError, TypeError, RecursionError):
-        return ""
+        return doc if isinstance(doc, dict) else {}
+    except (OSError, ValueError, TypeError, RecursionError):
+        return {}
+
+
+def _manifest_command(path: Path) -> str:
+    """The command a previous run recorded in its manifest ('' when unreadable)."""
+    return str(_read_manifest(path).get("command") or "")
 
 
 def _manifest_entries(path: Path) -> set[str]:
-    """Top-level names of the entries a previous run recorded in its manifest (read only
-    when it is a regular file of reasonable size: a FIFO planted there must not hang)."""
-    manifest = path / MANIFEST
-    try:
-        st = os.lstat(manifest)
-        if not stat.S_ISREG(st.st_mode) or st.st_size > 16 * 2**20:
-            return set()
-        with open(manifest, "rb") as fh:
-            doc = json.loads(fh.read(16 * 2**20).decode("utf-8"))
-        return {str(f).split("/")[0] for f in doc.get("files", [])}
-    except (OSError, ValueError, AttributeError, TypeError, RecursionError):
-        return set()
+    """Top-level names of the entries a previous run recorded in its manifest."""
+    files = _read_manifest(path).get("files", [])
+    return {str(f).split("/")[0] for f in files} if isinstance(files, list) else set()
 
 
 _RENAME_EXCHANGE = 2

@@ -195,29 +195,28 @@ class Instrument:
         least 2 deg)."""
         return max(2.0 * self.theta_step, 2.0)
 
+    def _mirror_distances(self) -> dict[float, float]:
+        """deg: per angle of incidence, how far its nearest setting stands from the mirror
+        direction (theta = -gamma; infinite without a setting)."""
+        s = self.settings()
+        out = {}
+        for g in self.gammas:
+            t = s[np.abs(s[:, 0] - g) < 1e-6, 1]
+            out[float(g)] = float(np.min(np.abs(t + g))) if t.size else math.inf
+        return out
+
     def mirror_misses(self) -> tuple[float, ...]:
         """The angles of incidence whose mirror direction (theta = -gamma, the specular
         peak) no setting reaches within :attr:`reach_tolerance`: the specular lobe's peak
         there can only be extrapolated."""
-        s = self.settings()
-        out = []
-        for g in self.gammas:
-            t = s[np.abs(s[:, 0] - g) < 1e-6, 1]
-            if not t.size or np.min(np.abs(t + g)) > self.reach_tolerance:
-                out.append(float(g))
-        return tuple(out)
+        return tuple(g for g, d in self._mirror_distances().items()
+                     if d > self.reach_tolerance)
 
     def mirror_offsets(self) -> dict[float, float]:
         """deg: per angle of incidence whose mirror direction the instrument reaches
         (:meth:`mirror_misses`), how far its nearest setting stands from it."""
-        s = self.settings()
-        out = {}
-        missed = self.mirror_misses()
-        for g in self.gammas:
-            t = s[np.abs(s[:, 0] - g) < 1e-6, 1]
-            if t.size and g not in missed:
-                out[float(g)] = float(np.min(np.abs(t + g)))
-        return out
+        return {g: d for g, d in self._mirror_distances().items()
+                if d <= self.reach_tolerance}
 
     def unresolved(self, half_widths: dict[float, float]) -> str:
         """:func:`irreflect.models.aperture.unresolved` at this receiver's resolution."""
