@@ -598,3 +598,21 @@ def test_a_material_file_is_strict_json_and_a_poor_reciprocal_form_is_warned_of(
     assert mat.fidelity["r2_curve"] < MIN_RECIPROCAL_R2
     poor = [w for w in mat.warnings if "explains its in-plane curve only" in w]
     assert len(poor) == 1 and "the multipath from this surface is not the measured" in poor[0]
+
+
+def test_a_modulation_faster_than_the_paths_is_warned_of(capsys):
+    # at 1 THz the room printed a range error of -0.00 cm: phase ranging there cannot tell
+    # ranges apart beyond 0.03 cm, far shorter than the paths
+    import pandas as pd
+
+    from irreflect.cli.room import _warn_wrapped
+
+    rows = {"emitter": ["tx", "tx"], "receiver": ["a", "b"], "mean_delay_ns": [10.8, 9.0],
+            "modulation_hz": [1e8, 1e8]}
+    _warn_wrapped(pd.DataFrame(rows))
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "tx -> a: the mean path delay (10.8 ns) is 1.08 periods" in err
+    assert "unambiguous range (300 cm)" in err and "below 92.6 MHz" in err
+    _warn_wrapped(pd.DataFrame(rows | {"modulation_hz": [5e7, 5e7]}))
+    _warn_wrapped(pd.DataFrame(rows | {"modulation_hz": [0.0, 0.0]}))
+    assert capsys.readouterr().err == ""

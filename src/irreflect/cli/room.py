@@ -47,6 +47,7 @@ def _room(args) -> int:
     summary = result.summary()
     print(_report(result, summary))
     _warn_dark(summary)
+    _warn_wrapped(summary)
     print(f"wrote {out}/: {', '.join(written[:6])}{' ...' if len(written) > 6 else ''} "
           f"({len(written)} files)")
     return 0
@@ -82,6 +83,32 @@ def _warn_dark(summary) -> None:
               f"e.g. {first.emitter} -> {first.receiver} (their delays are NaN): check that "
               "the receivers face the room and are not shut in by boxes, or follow more "
               "--bounces", file=sys.stderr)
+
+
+def _warn_wrapped(summary) -> None:
+    """A modulation so fast that its unambiguous range ``c / f`` is shorter than the paths
+    (their mean delay is over one period): the range error printed is known only modulo
+    ``c / f`` (at 1 THz it read -0.00 cm)."""
+    import sys
+
+    import numpy as np
+
+    from ..room.kernels import C_LIGHT
+
+    mod = summary[(summary.modulation_hz > 0) & (summary.mean_delay_ns > 0)]
+    if not len(mod):
+        return
+    periods = (mod.mean_delay_ns * 1e-9 * mod.modulation_hz).to_numpy()
+    i = int(np.argmax(periods))
+    if not periods[i] > 1.0:
+        return
+    row = mod.iloc[i]
+    print(f"irreflect: warning: {row.emitter} -> {row.receiver}: the mean path delay "
+          f"({row.mean_delay_ns:.3g} ns) is {periods[i]:.3g} periods of the "
+          f"{row.modulation_hz / 1e6:g} MHz modulation: phase ranging's unambiguous range "
+          f"({C_LIGHT / row.modulation_hz * 100:.3g} cm) is shorter than the paths, and the "
+          "range error printed is known only modulo it; a modulation below "
+          f"{1e3 / row.mean_delay_ns:.3g} MHz measures the range here", file=sys.stderr)
 
 
 def _report(result, summary) -> str:
