@@ -191,6 +191,10 @@ def test_cli_readable_report_and_errors(tmp_path, capsys):
     assert main(["diagnose", str(path), "--extensions", "background,halo"]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "unknown extension 'halo'" in err[0]
+    assert main(["diagnose", str(path), "--extensions", "background,background"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err == ["irreflect: error: --extensions lists 'background' twice: list each "
+                   "extension once"]
     assert main(["diagnose", str(path), "--model", "two-lobe+nope"]) == 2
     bad = tmp_path / "file.txt"
     bad.write_text("x")

@@ -70,6 +70,10 @@ def _cmd_diagnose(args: argparse.Namespace) -> int:
                                  "to try them all")
         for name in extensions:
             get_extension(name)
+        twice = sorted({n for n in extensions if extensions.count(n) > 1})
+        if twice:  # as compare --models refuses a model listed twice
+            raise IrreflectError(f"--extensions lists '{twice[0]}' twice: list each "
+                                 "extension once")
     get_model(args.model)
     # outputs are claimed before the table is read: an output never replaces an input
     # (the table, also through a link or a hard link) of the same run
