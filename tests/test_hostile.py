@@ -827,3 +827,23 @@ def test_an_output_folder_of_another_command_is_not_replaced(tmp_path):
     code, _, err = _run(["compare", TERRAZZO, "--models", "two-lobe", "--out", out])
     assert code == 0, err
     assert (out / "comparison.json").exists() and not (out / "diagnosis.json").exists()
+
+
+def test_the_near_field_limit_keeps_the_line_of_sight_gain_below_one(office):
+    # a narrow beam (order 1000) on axis: the limit is where the far-field formula reaches
+    # H = 1 (sqrt((m + 1) A / 2 pi) = 0.126 m for 1 cm^2); just beyond it the simulated
+    # gain stays below 1 (energy: a receiver cannot collect more than the emitter sends)
+    from irreflect.room import scene_from_dict, simulate
+
+    doc = _office_doc()
+    doc["emitter"][0]["lambertian_order"] = 1000
+    doc["receiver"][1]["position_m"] = [2.5, 2.5, 3.0 - 0.13]
+    doc["receiver"][1]["direction"] = [0, 0, 1]
+    scene = scene_from_dict(doc, path=str(office))
+    result = simulate(scene, method="montecarlo", bounces=1, rays=100, seed=0)
+    summary = result.summary()
+    los = float(summary[summary.receiver == "desk"].dc_gain_los.iloc[0])
+    assert 0.9 < los < 1.0, los
+    doc["receiver"][1]["position_m"] = [2.5, 2.5, 3.0 - 0.12]
+    with pytest.raises(IrreflectError, match="closer than 0.126 m"):
+        scene_from_dict(doc, path=str(office))

@@ -119,7 +119,7 @@ def _next(args) -> int:
     warned = _mirror_warnings(tool) + [w for w in (campaign.unresolved_lobe(),) if w]
     for text in warned:
         print(f"irreflect: warning: {text}", file=sys.stderr)
-    noted = _foreign_gammas(tool, campaign.measurements)
+    noted = _reading_notes(tool, campaign.measurements)
     for text in noted:
         print(f"irreflect: note: {text}", file=sys.stderr)
     if args.json:
@@ -192,7 +192,7 @@ def _mirror_warnings(tool) -> list[str]:
             + " and ".join(parts) + ": the fit extrapolates it there"] + coarse
 
 
-def _foreign_gammas(tool, readings) -> list[str]:
+def _reading_notes(tool, readings) -> list[str]:
     """A note when readings stand where the instrument does not reach: at angles of
     incidence it does not list (--gammas) or beyond its receiver range (they are fitted,
     but proposals and the verdict's range are the instrument's), or at more angles of
