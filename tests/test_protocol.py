@@ -18,7 +18,7 @@ from hypothesis import strategies as st
 
 from irreflect import metrics
 from irreflect.cli import main
-from irreflect.data import bundled_dir, load_bundled, read_measurements
+from irreflect.data import Measurements, bundled_dir, load_bundled, read_measurements
 from irreflect.errors import IrreflectError
 from irreflect.fitting import fit
 from irreflect.models import two_lobe_power
@@ -592,3 +592,53 @@ def test_a_two_angle_pilot_is_refused_before_it_is_fitted(monkeypatch):
     monkeypatch.setattr(evaluate, "fit", no_fit)
     with pytest.raises(IrreflectError, match="a glossy protocol needs three angles"):
         evaluate.glossy_protocol_for(wild_material(0).measurements)
+
+
+# ------------------------------------------------- a table without the protocol's settings
+def _sparse_table():
+    """15 readings on the paper's materials at settings far from Table 1's points: no
+    reading within 5 deg of (-60, 70) at gamma -60, none at all at (-20, 70)."""
+    rows = [(-10, -70), (-10, 3), (-10, 40), (-20, -20), (-20, 22), (-30, -60), (-30, 20),
+            (-30, 50), (-40, -10), (-40, 40), (-50, -50), (-50, 35), (-50, 60), (-60, 0),
+            (-60, 58)]
+    g, t = np.array(rows, float).T
+    power = two_lobe_power(np.radians(g), np.radians(t), *TABLE3["terrazzo"])
+    return Measurements(gamma_deg=g, theta_deg=t, power=power, name="sparse15")
+
+
+def test_protocol_points_are_not_scored_at_other_settings():
+    """Tables 2 and 5 once scored the paper's points moved up to 36 deg to another angle of
+    incidence, while the protocol evaluation called the same table not evaluable."""
+    from irreflect.protocol.points import SNAP_LIMIT_DEG, protocol_mask
+    from irreflect.selection import compare_methods
+    meas = _sparse_table()
+    with pytest.raises(IrreflectError, match=r"sparse15 does not measure the angles .*"
+                       r"\(-60, 70\), would move to \(-40, 40\), 36.1 deg away"):
+        protocol_mask(meas)
+    methods = compare_methods(meas, None, seed=0)
+    assert methods["12"]["r2"] is None and "Method 12 not available" in methods["note"]
+    assert methods["A"]["r2"] > 0.999
+    # a table that has every setting within the limit is still scored, moves and all
+    dense = synthetic(TABLE3["terrazzo"], name="dense")
+    shifted = Measurements(gamma_deg=dense.gamma_deg, theta_deg=dense.theta_deg + 2.5,
+                           power=dense.power, name="shifted")
+    mask, snaps = protocol_mask(shifted)
+    moves = [abs(t2 - t) for _, t, _, t2 in snaps]
+    assert mask.sum() == 12 and len(snaps) >= 10 and 2 <= max(moves) <= SNAP_LIMIT_DEG
+    assert SNAP_LIMIT_DEG == 5.0  # the protocol evaluation's default tolerance
+
+
+def test_report_does_not_score_the_protocol_at_other_settings(tmp_path):
+    from irreflect.report.fits import section as fits_section
+    meas = _sparse_table()
+    ctx = ReportContext(datasets={"sparse15": meas}, fits={"sparse15": fit(meas)},
+                        out_dir=tmp_path, quick=True, paper_dir=PAPER_TABLES)
+    section = fits_section(ctx)
+    assert "table2_fit_quality" not in section.tables
+    assert "Table 2 has no row (why: the notes under Table 4)" in section.markdown
+    assert "sparse15: Table 2 has no row: sparse15 does not measure" in section.markdown
+    # the fit checks call the all-points fit NOT trustworthy (its lobe is unresolved): the
+    # findings say so too, rather than "no fit failed" above a table that says it did
+    care = [f.text for f in section.findings if f.severity == 1 and f.dataset == "sparse15"]
+    assert any(t.startswith("the two-lobe fit on all points is NOT trustworthy: specular "
+                            "lobe not resolved") for t in care)

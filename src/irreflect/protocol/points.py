@@ -63,6 +63,34 @@ def snap_points(meas: Measurements, points) -> pd.DataFrame:
     return pd.DataFrame(rows)
 
 
+#: The farthest a protocol point may be moved along theta to a measured point, deg: the
+#: protocol evaluation's default tolerance (:func:`.evaluate.sample_protocol`).
+SNAP_LIMIT_DEG = 5.0
+
+
+def check_snapped(meas: Measurements, snapped: pd.DataFrame,
+                  what: str = "the paper's 12-point protocol") -> None:
+    """Refuse snapped protocol points (:func:`snap_points`) that stand for other settings:
+    a point moved to another angle of incidence, or more than :data:`SNAP_LIMIT_DEG` along
+    theta. The protocol evaluation refuses the same table (it keeps each point's angle of
+    incidence and interpolates within 5 deg), so a score of such points would describe
+    another protocol."""
+    dg = np.abs(snapped["gamma_deg"] - snapped["gamma_requested"]).to_numpy(float)
+    dt = np.abs(snapped["theta_deg"] - snapped["theta_requested"]).to_numpy(float)
+    bad = (dg > 1e-6) | (dt > SNAP_LIMIT_DEG + 1e-9)
+    if not bad.any():
+        return
+    worst = snapped[bad].sort_values("distance_deg").iloc[-1]
+    raise IrreflectError(
+        f"{meas.name} does not measure the angles of {what}: {int(bad.sum())} of its "
+        f"{len(snapped)} points have no measured point at their angle of incidence within "
+        f"{SNAP_LIMIT_DEG:g} deg of their receiver angle (the farthest, "
+        f"({worst.gamma_requested:g}, {worst.theta_requested:g}), would move to "
+        f"({worst.gamma_deg:g}, {worst.theta_deg:g}), {worst.distance_deg:.3g} deg away): not evaluated; "
+        "a table with those angles of incidence and receivers every 10 deg or closer can "
+        "score it")
+
+
 def protocol_points_mask(meas: Measurements, points=None) -> np.ndarray:
     """Boolean mask (n,) of the measured points nearest to ``points`` (default: the paper's
     protocol, see :func:`paper_protocol_points`), each snapped to a distinct measured point
@@ -91,6 +119,7 @@ def protocol_mask(meas: Measurements, points=None):
     """``(mask, snaps)``: the mask of :func:`protocol_points_mask` and the snaps that moved a
     point, as ``(gamma_requested, theta_requested, gamma_deg, theta_deg)`` tuples."""
     snapped = snap_points(meas, paper_protocol_points(meas) if points is None else points)
+    check_snapped(meas, snapped)
     mask = np.zeros(meas.n_points, bool)
     mask[snapped["index"].to_numpy()] = True
     moved = snapped[snapped["distance_deg"] > 0]
@@ -112,6 +141,7 @@ def assess_subset(meas: Measurements, points=None, reference=None, *, subset_fit
     protocol, :func:`paper_protocol_points`).
     """
     snapped = snap_points(meas, paper_protocol_points(meas) if points is None else points)
+    check_snapped(meas, snapped, what)
     mask = np.zeros(meas.n_points, bool)
     mask[snapped["index"].to_numpy()] = True
     with warnings.catch_warnings():  # the verdict reports what these fits' warnings say

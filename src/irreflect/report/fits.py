@@ -10,6 +10,7 @@ import numpy as np
 import pandas as pd
 
 from .. import metrics
+from ..errors import IrreflectError
 from ..fitting import fit
 from ..plots import (
     plot_polar,
@@ -77,7 +78,11 @@ def compute(ctx: ReportContext) -> FitsResults:
     for name, meas in ctx.datasets.items():
         ctx.progress(f"fits: {name}")
         full = ctx.fits[name]
-        mask, snaps = protocol_mask(meas)
+        try:
+            mask, snaps = protocol_mask(meas)
+        except IrreflectError as exc:  # the table lacks the protocol's settings
+            mask, snaps = np.zeros(meas.n_points, bool), []
+            res.notes.append(f"{name}: Table 2 has no row: {exc}")
         twelve = fit(meas.subset(mask), seed=ctx.seed, use_sigma=False) if mask.sum() >= 7 else None
         if twelve is not None:
             _table2_row(res, name, meas, full, twelve, mask, snaps, t2_paper)
@@ -168,9 +173,11 @@ def render(ctx: ReportContext, res: FitsResults) -> Section:
     table2 = pd.DataFrame(res.rows2)
     if len(table2) and table2["R^2 paper"].isna().all():
         table2 = table2.drop(columns=["R^2 paper", "RMSE paper", "MSE paper"])
-    tables = {"table2_fit_quality": table2, "table3_coefficients": pd.DataFrame(res.rows3),
+    tables = {"table3_coefficients": pd.DataFrame(res.rows3),
               "table4_fit_time": pd.DataFrame(res.rows4),
               "fit_checks": pd.DataFrame(res.checks)}
+    if len(table2):
+        tables["table2_fit_quality"] = table2
     markdown = _markdown(ctx, res.rows2, res.verdicts, res.notes, figures)
     figures = {k: v for k, v in figures.items() if not k.startswith("_")}
     return Section("fits", TITLE, markdown, tables, figures, findings=list(res.findings))
@@ -193,6 +200,10 @@ def _fit_checks(ctx: ReportContext):
         if not res.converged:
             findings.append(Finding(1, name, f"the two-lobe fit on all points did not "
                                              f"converge ({res.message})"))
+        elif not verdict.trustworthy:  # the fit checks' table says so: the findings too
+            findings.append(Finding(1, name, "the two-lobe fit on all points is NOT "
+                                             "trustworthy: " + "; ".join(verdict.problems())
+                                             + " (the fit checks of Tables 2-4)"))
     return checks, findings
 
 
@@ -204,7 +215,10 @@ def _markdown(ctx: ReportContext, rows2, verdicts, notes, figures) -> str:
               "The model is fitted on the 12 points of the paper's protocol (Table 1 where the "
               "dataset has its angles, each point snapped to the nearest measured one) and "
               "scored on every point of the dataset, as in the paper; the last column is the "
-              "fit on all points.\n\n{table:table2_fit_quality}\n")
+              "fit on all points.\n\n"
+              + ("{table:table2_fit_quality}\n" if rows2 else
+                 "No dataset of this run measures the protocol's angles, so Table 2 has no "
+                 "row (why: the notes under Table 4).\n"))
     if rows2:
         md.append(_table2_note(pd.DataFrame(rows2), ctx, verdicts))
     md.append("\n### Table 3: model coefficients\n\n{table:table3_coefficients}\n\n"

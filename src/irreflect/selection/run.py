@@ -32,7 +32,12 @@ from ..errors import IrreflectError
 from ..fitting import fit
 from ..models import get_model
 from ..protocol.points import as_points as _as_points
-from ..protocol.points import paper_protocol_points, protocol_points_mask, snap_points  # noqa: F401
+from ..protocol.points import (  # noqa: F401
+    check_snapped,
+    paper_protocol_points,
+    protocol_points_mask,
+    snap_points,
+)
 from ..validation import (
     check_int,
     check_masks,
@@ -463,6 +468,15 @@ def compare_methods(meas: Measurements, result: SelectionResult | None = None,
                        f"{len(_as_points(points))}: Method 12 not available")
         return out
     snapped = snap_points(meas, points)
+    try:
+        check_snapped(meas, snapped, "the paper's protocol" if protocol_points is None
+                      else "the given protocol points")
+    except IrreflectError as exc:  # the table lacks the protocol's settings
+        out["12"] = {"r2": None, "n_points": None}
+        b = out["B"]["r2"]
+        out["order_holds"] = bool(b is None or out["A"]["r2"] >= b - 1e-9)
+        out["note"] = f"Method 12 not available: {exc}"
+        return out
     mask_12 = np.zeros(meas.n_points, bool)
     mask_12[snapped["index"].to_numpy()] = True
     gammas = sorted({float(g) for g in snapped["gamma_requested"]}, key=abs)
