@@ -154,11 +154,39 @@ def test_two_runs_through_a_link_and_its_target_are_locked_out_of_each_other(tmp
     (["diagnose", "{data}", "--extensions", " , "], "--extensions is empty"),
     (["protocol", "--gammas", "-20", "-40", "-60", "--out", ""], "--out must name a file"),
     (["fit", "{data}", "--reflectance", "0.5"], "add --save"),
+    (["compare", "{data}", "--models", "two-lobe,phong,"], "has an empty name between its "
+                                                          "commas"),
+    (["compare", "{data}", "--models", "two-lobe,,phong"], "remove the extra comma"),
+    (["diagnose", "{data}", "--extensions", "background,"], "has an empty name between its "
+                                                           "commas"),
+    (["evaluate-protocol", "{data}", "{data}", "--monte-carlo", "5", "--angle-error", "20"],
+     "--angle-error (deg) must be a finite number >= 0 and <= 10; found 20.0"),
 ])
 def test_empty_or_orphan_options_are_refused_not_ignored(data, tmp_path, argv, words):
     line = _one_error([a.format(data=data) for a in argv])
     assert words in line
     assert sorted(p.name for p in tmp_path.iterdir()) == ["mydata.csv"]
+
+
+@pytest.mark.parametrize("argv, warning", [
+    (["plot", "{data}", "--seed", "3", "--out", "{out}.png"],
+     "--seed has no effect without --fit"),
+    (["plot", "{data}", "--model", "phong", "--seed", "3", "--out", "{out}.png"],
+     "--model and --seed have no effect without --fit"),
+    (["compare", "{data}", "--models", "two-lobe,phong@20", "--phong-at-deg", "40"],
+     "--phong-at-deg has no effect: no model of --models ends in '@'"),
+])
+def test_an_option_without_effect_is_named(data, tmp_path, argv, warning):
+    code, _, err = _run([a.format(data=data, out=tmp_path / "fig") for a in argv])
+    assert code == 0 and f"irreflect: warning: {warning}" in err
+
+
+def test_options_that_take_effect_get_no_such_warning(data, tmp_path):
+    for argv in (["plot", data, "--fit", "--seed", "3", "--out", tmp_path / "a.png"],
+                 ["plot", data, "--out", tmp_path / "b.png"],
+                 ["compare", data, "--models", "two-lobe,phong@", "--phong-at-deg", "40"]):
+        code, _, err = _run(argv)
+        assert code == 0 and "no effect" not in err, err
 
 
 # ----------------------------------------------------------------------------- inputs

@@ -186,7 +186,12 @@ def parse_model_list(text=None, phong_at_deg: float = 10.0) -> list[str]:
     if text is None or not str(text).strip():
         labels = [m.replace("{G}", g_text) for m in DEFAULT_MODELS]
     else:
-        labels = [t.strip() for t in str(text).split(",") if t.strip()]
+        labels = [t.strip() for t in str(text).split(",")]
+        if any(not t for t in labels) and any(labels):
+            raise IrreflectError(
+                f"--models '{text}' has an empty name between its commas (expected names "
+                "separated by single commas, e.g. two-lobe,phong): remove the extra comma")
+        labels = [t for t in labels if t]
     out = []
     for label in labels:
         if label.endswith("@"):

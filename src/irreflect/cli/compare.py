@@ -23,6 +23,11 @@ def _cmd_compare(args) -> int:
         raise IrreflectError("--models is empty: expected a comma-separated list, e.g. "
                              "two-lobe,phong (leave the option out for the default models)")
     parse_model_list(args.models, PAPER_PHONG_DEG if at is None else abs(at))  # names first
+    if at is not None and args.models is not None and not any(
+            t.strip().endswith("@") for t in args.models.split(",")):
+        print("irreflect: warning: --phong-at-deg has no effect: no model of --models ends "
+              "in '@' (it sets the incidence of 'MODEL@'; 'MODEL@G' gives its own)",
+              file=sys.stderr)
     claim = (claim_output(args.out, "dir", "--out") if args.out is not None
              else contextlib.nullcontext())
     with claim:

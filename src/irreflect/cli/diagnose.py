@@ -68,6 +68,10 @@ def _cmd_diagnose(args: argparse.Namespace) -> int:
             raise IrreflectError("--extensions is empty: expected a comma-separated list of "
                                  "extensions (see 'irreflect models'), or leave the option out "
                                  "to try them all")
+        if len(extensions) < len(args.extensions.split(",")):
+            raise IrreflectError(f"--extensions '{args.extensions}' has an empty name between "
+                                 "its commas (expected names separated by single commas, e.g. "
+                                 "background,retroreflection): remove the extra comma")
         for name in extensions:
             get_extension(name)
         twice = sorted({n for n in extensions if extensions.count(n) > 1})

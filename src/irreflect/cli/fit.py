@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import contextlib
+import sys
 
 from .options import (
     NON_NEGATIVE,
@@ -48,7 +49,7 @@ def _cmd_fit(args) -> int:
             result = fit_averaged(meas, model, args.resolution, seed=args.seed,
                                   engine=_engine(meas.n_points))
         else:
-            result = fit(meas, model, seed=args.seed, engine=_engine(meas.n_points))
+            result = fit(meas, model, seed=args.seed or 0, engine=_engine(meas.n_points))
         if args.save is not None:
             from ..room.materials import save_material
 
@@ -101,13 +102,18 @@ def _cmd_plot(args) -> int:
     from ..models import parse_spec
     from ..plots import plot_polar, save_figure
 
-    model = args.model
+    model = args.model or "two-lobe"
     parse_spec(model).model()
+    unused = [o for o, v in (("--model", args.model), ("--seed", args.seed)) if v is not None]
+    if unused and not args.fit:
+        print(f"irreflect: warning: {' and '.join(unused)} {'has' if len(unused) == 1 else 'have'}"
+              " no effect without --fit (the figure then draws the readings only)",
+              file=sys.stderr)
     with claim_output(args.out, "file", "--out", suffixes=(".png", ".svg", ".pdf")):
         meas = load_data(args)
         predict, title = None, meas.name
         if args.fit:
-            result = fit(meas, model, seed=args.seed, engine=_engine(meas.n_points))
+            result = fit(meas, model, seed=args.seed or 0, engine=_engine(meas.n_points))
             predict = result.predict
             title = f"{meas.name}: {result.model} fit, R^2 = {result.r2:.4f}"
         ax = plot_polar(meas, predict, title=title, radius=args.radius)
@@ -155,13 +161,14 @@ def register(sub) -> None:
 
     p = sub.add_parser("plot", help="polar diagram per angle of incidence (Figs. 15-17)")
     add_data_argument(p)
-    add_model_argument(p)
+    add_model_argument(p, what="reflection model, with --fit")
+    p.set_defaults(model=None)  # two-lobe; None tells an unused --model from the default
     p.add_argument("--fit", action="store_true", help="draw the fitted model over the markers")
     p.add_argument("--radius", choices=("auto", "linear", "log"), default="auto",
                    help="radius scale of the power (default auto: logarithmic when the "
                         "largest power is more than 100 times the 10th percentile, as on "
                         "glossy materials, else linear)")
-    p.add_argument("--seed", type=SEED, default=0,
+    p.add_argument("--seed", type=SEED, default=None,
                    help="seed of the fit's random extra starts, with --fit (default 0)")
     p.add_argument("--out", required=True, metavar="FILE.png",
                    help="figure file (.png, .svg or .pdf)")

@@ -133,7 +133,7 @@ def _cmd_evaluate(args) -> int:
     from ..models import get_model
     from ..protocol.evaluate import evaluate_protocol
     from ..protocol.export import read_protocol
-    from ..validation import check_trials_budget
+    from ..validation import check_number, check_trials_budget
 
     get_model(args.model)
     if args.monte_carlo == 1:
@@ -141,6 +141,7 @@ def _cmd_evaluate(args) -> int:
                              "needs two); found 1")
     if args.monte_carlo:
         check_trials_budget(args.monte_carlo, "--monte-carlo")
+        check_number(args.angle_error, "--angle-error (deg)", low=0.0, high=10.0)
     protocol = read_protocol(args.protocol)
     dense = load_data(args, "evaluate-protocol", args.dense)
     ev = evaluate_protocol(protocol, dense, args.model, tolerance_deg=args.tolerance,
@@ -248,7 +249,7 @@ def _register_evaluate(sub) -> None:
                    help="also run a Monte Carlo of goniometer errors with this many trials, "
                         "at least 2 (default 0: none)")
     p.add_argument("--angle-error", type=NON_NEGATIVE, default=1.0,
-                   help="Monte Carlo: half-width of the uniform angle error (deg, default 1)")
+                   help="Monte Carlo: half-width of the uniform angle error (deg, 0-10, default 1)")
     p.add_argument("--power-noise", type=NON_NEGATIVE, default=0.01,
                    help="Monte Carlo: relative power noise, 1-sigma (default 0.01)")
     p.add_argument("--seed", type=SEED, default=0,

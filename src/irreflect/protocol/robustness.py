@@ -273,8 +273,10 @@ def protocol_robustness(protocol, reference, *, model=None, dense=None, n_trials
     """
     n_trials = check_int(n_trials, "n_trials", 2)
     check_trials_budget(n_trials)  # before any fit
-    for name, value in (("angle_error_deg", angle_error_deg), ("power_noise", power_noise),
-                        ("power_noise_abs", power_noise_abs)):
+    # an angle error beyond 10 deg moves a reading to another part of the curve: it is no
+    # longer an error of the setting (the campaign's replay has the same limit)
+    check_number(angle_error_deg, "angle error (deg)", low=0.0, high=10.0)
+    for name, value in (("power_noise", power_noise), ("power_noise_abs", power_noise_abs)):
         check_number(value, name, low=0.0)
     seed = check_seed(seed)
     protocol = as_protocol(protocol)
