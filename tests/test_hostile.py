@@ -875,3 +875,17 @@ def test_the_near_field_limit_keeps_the_line_of_sight_gain_below_one(office):
     doc["receiver"][1]["position_m"] = [2.5, 2.5, 3.0 - 0.12]
     with pytest.raises(IrreflectError, match="closer than 0.126 m"):
         scene_from_dict(doc, path=str(office))
+
+
+def test_a_separating_table_inside_the_output_folder_is_in_its_manifest(data, tmp_path):
+    """diagnose --separate-out inside --out was written after the folder, outside its
+    manifest: a rerun kept it as the user's own file beside the new run's."""
+    out = tmp_path / "diag"
+    argv = ["diagnose", data, "--extensions", "background", "--out", out]
+    code, stdout, _ = _run(argv + ["--separate-out", out / "sep.csv"])
+    assert code == 0 and f"wrote {out / 'sep.csv'}" in stdout
+    manifest = json.loads((out / ".irreflect-manifest.json").read_text())
+    assert "sep.csv" in manifest["files"] and "diagnosis.json" in manifest["files"]
+    assert list(pd.read_csv(out / "sep.csv").columns[:2]) == ["gamma_deg", "theta_deg"]
+    code, _, _ = _run(argv + ["--separate-out", out / "again.csv"])
+    assert code == 0 and (out / "again.csv").is_file() and not (out / "sep.csv").exists()

@@ -97,12 +97,20 @@ def _diagnose(args, extensions) -> int:
                           seed=args.seed, alpha=args.alpha, progress=bar)
     finally:
         bar.close()
-    written = write_outputs(result, meas, args.out) if args.out is not None else []
-    if args.separate_out is not None:
-        from pathlib import Path
+    from pathlib import Path
 
-        from .._atomic import atomic_path
+    from .._atomic import atomic_path
 
+    inside = None  # --separate-out inside --out: written with the folder, in its manifest
+    if args.separate_out is not None and args.out is not None:
+        try:
+            inside = Path(args.separate_out).resolve().relative_to(Path(args.out).resolve())
+        except ValueError:
+            inside = None
+    written = (write_outputs(result, meas, args.out, extra_tables=None if inside is None else
+                             {inside.as_posix(): result.separating_table()})
+               if args.out is not None else [])
+    if args.separate_out is not None and inside is None:
         path = Path(args.separate_out)
         with atomic_path(path, "--separate-out") as tmp:
             result.separating_table().to_csv(tmp, index=False)

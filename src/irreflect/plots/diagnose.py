@@ -109,14 +109,16 @@ def plot_separation(diagnosis, measurements, fig=None, *, max_panels: int = 3):
     return fig
 
 
-def write_outputs(diagnosis, measurements, out_dir) -> list[Path]:
+def write_outputs(diagnosis, measurements, out_dir, extra_tables=None) -> list[Path]:
     """Residual maps before/after (``residuals_before.png``, and ``residuals_after.png``
     when an effect was added: otherwise it would be the same map), the polar fits
     (``polar_fits.png``), when the diagnosis is ambiguous the alternatives at the proposed
     separating measurements (``separation.png``, and ``separating.csv``: the settings as a
     measurement plan, ``gamma_deg, theta_deg, readings, why, separation_sigma``) and
-    ``diagnosis.json``, written into ``out_dir`` all together or not at all. Returns the
-    final paths."""
+    ``diagnosis.json``, written into ``out_dir`` all together or not at all, with
+    ``extra_tables`` (``{path relative to out_dir: DataFrame}``, written as CSV: a
+    ``--separate-out`` inside the folder belongs to its manifest). Returns the final
+    paths."""
     out = Path(out_dir)
     names = []
     maps = (("before", diagnosis.before), ("after", diagnosis.after))
@@ -136,4 +138,9 @@ def write_outputs(diagnosis, measurements, out_dir) -> list[Path]:
             names += ["separation.png", "separating.csv"]
         (tmp / "diagnosis.json").write_text(dumps(diagnosis.to_dict()))
         names.append("diagnosis.json")
+        for rel, table in (extra_tables or {}).items():
+            (tmp / rel).parent.mkdir(parents=True, exist_ok=True)
+            table.to_csv(tmp / rel, index=False)
+            if rel not in names:
+                names.append(rel)
     return [out / n for n in names]
