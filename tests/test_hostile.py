@@ -479,6 +479,7 @@ SCENE_CASES = [
     (("receiver", 1, "direction"), [0, 0, -1], "faces into it"),  # on the desk's top
     (("receiver", 1, "name"), "barry_A", "receiver names must be distinct"),
     (("receiver", 1, "name"), "barry A", "give the same file name 'barry_A'"),
+    (("receiver_grid", 0, "name"), "desk", "grid 'desk' has the name of a receiver"),
     (("receiver_grid", 0, "n"), [500, 500], "receivers is more than this machine's budget"),
     (("receiver_grid", 0, "n"), [True, 2], "n[1] must be an integer"),
     (("receiver_grid", 0, "x_m"), [1.0, 1.0], "x_m spans [1, 1], a single point, with"),

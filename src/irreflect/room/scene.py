@@ -661,6 +661,12 @@ def _check_names(ctx: _Ctx, emitters, receivers, grids) -> None:
                                  f"name '{safe_name(n)}' (figures would overwrite each other): "
                                  "rename one")
             files[stem] = n
+    single = {r.name for r in receivers if r.grid is None}
+    both = sorted(single & {g.name for g in grids})
+    if both:  # the results name both alike: which is which?
+        ctx.fail(("receiver_grid",), f"grid '{both[0]}' has the name of a receiver: a receiver "
+                                     "and a grid must not share a name (rows and figures are "
+                                     "named after both): rename one")
 
 
 def _check_distances(ctx: _Ctx, emitters, receivers) -> None:
