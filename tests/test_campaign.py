@@ -472,9 +472,14 @@ def test_a_coarse_receiver_step_says_the_mirror_is_not_reached(tmp_path):
                           "the specular peak" in line for line in labels)
     assert any("gamma     -10  theta        0" in line and "nearest it" in line
                for line in labels)
+    # the lobe probes stand 1.5 steps (30 deg) out: named the flank, not the lobe's body
+    probes = [line for line in stdout.splitlines() if "starts bracketing" in line]
+    assert len(probes) == 2 and all("the specular lobe's flank, 30 deg from the mirror" in line
+                                    for line in probes)
     code, stdout, err = _run(["next", measured, "--n", "8", "--theta-step", "1"])
     assert code == 0 and "nearest setting to the specular peak" not in err
     assert "the setting nearest it" not in stdout
+    assert stdout.count("the specular lobe's body, 1 deg from the mirror") == 1
 
 
 def test_next_notes_readings_the_instrument_cannot_take(tmp_path):

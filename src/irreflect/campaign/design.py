@@ -166,7 +166,9 @@ def opening_design(instrument, n: int) -> list[tuple[float, float, str]]:
     tmin, tmax = instrument.theta_min, instrument.theta_max
     probe = max(1.0, 1.5 * instrument.theta_step, instrument.resolution)
     # (gamma, theta, where the setting must stand, what it measures in short, in full)
-    body = "the specular lobe's body"
+    # with a coarse receiver step the probe stands far out: named as region() names it
+    body = ("the specular lobe's body" if probe <= 20.0 else
+            "the specular lobe's flank" if probe <= 30.0 else "off the specular lobe")
     plan = [(g, -g, "mirror", "mirror direction", "mirror direction: the specular peak")
             for g in chosen]
     plan += [
