@@ -457,6 +457,14 @@ def test_readings_negative_beyond_noise_are_refused_in_one_line(tmp_path):
     code, stdout, err = _run(["next", measured, "--gammas", "-30", "-60"])
     assert code == 2 and stdout == "" and err.count("\n") == 1
     assert "nonzero readings are negative" in err
+    # a specular peak typed with its sign flipped: below every positive reading, so no
+    # larger one stands beside it, but 8 times the typical reading: refused too
+    peaks = [(-30.0, 30.0, 0.8), (-30.0, 0.0, 0.1), (-30.0, -40.0, 0.08), (-60.0, 0.0, 0.12),
+             (-60.0, -30.0, 0.09), (-45.0, 10.0, 0.11), (-45.0, 45.0, -0.9)]
+    with pytest.raises(DataError, match=r"found -0.9 .*beyond 25% of the largest reading"):
+        validate_table(pd.DataFrame(peaks, columns=cols), partial=True)
+    peaks[-1] = (-45.0, 45.0, 0.9)
+    assert validate_table(pd.DataFrame(peaks, columns=cols), partial=True).n_points == 7
 
 
 def test_a_coarse_receiver_step_says_the_mirror_is_not_reached(tmp_path):
@@ -917,3 +925,78 @@ def _receiver_readings(params, width):
     else:
         table["power"] = two_lobe_power(g, np.radians(t), *params)
     return table
+
+
+def test_readings_at_one_angle_of_incidence_leave_the_laws_in_gamma_ill_determined():
+    """Noise-free readings at one gamma cannot separate u from v in u cos^v(gamma): the
+    weighted fit flags a near-singular covariance, and the campaign's fit (its errors
+    rescaled by residuals of 1e-10) once dropped the flags and called itself trustworthy."""
+    tool = Instrument(gammas_deg=(-30,), theta_min=-80, theta_max=80)
+    params = np.array([0.3, -0.5, 1.2, 0.3, 40.0, 0.4, 1.0])
+    campaign = Campaign(tool, seed=0)
+    for k in (8, 2):  # the opening, then two proposals from the first fit
+        s = campaign.propose(k)
+        power = two_lobe_power(np.radians(s.gamma_deg.to_numpy()),
+                               np.radians(s.theta_deg.to_numpy()), *params)
+        campaign.add(s[["gamma_deg", "theta_deg"]].assign(power=power))
+    fit = campaign.fit
+    assert fit.rmse < 1e-6  # the readings are explained exactly ...
+    assert {"v_as", "v_nd", "v_ns"} <= set(fit.ill_determined)  # ... the laws are not
+    assert not fit.verdict().trustworthy
+
+
+def test_instruments_and_campaigns_that_cannot_work_are_refused_in_one_line():
+    # a resolution wider than the receiver's range leaves 4 distinct readings: the campaign
+    # proposed nothing and said "continue" for ever
+    tool = Instrument(gammas_deg=(-30, -50), theta_min=20, theta_max=40, resolution=30)
+    assert tool.capacity() == 4
+    with pytest.raises(IrreflectError, match=r"at most 4 distinct reading\(s\) .*fewer than "
+                                             r"the 8 a first fit of 'two-lobe' needs"):
+        Campaign(tool)
+    wide = Instrument(gammas_deg=(-30, -50))  # every 1-deg setting is a distinct reading
+    assert wide.capacity() == len(wide.settings()) == 324
+    for bad, words in ((float("nan"), "stop_tolerance must be a finite number > 0"),
+                       (-1, "stop_tolerance must be"), ("x", "stop_tolerance must be")):
+        with pytest.raises(IrreflectError, match=words):
+            Campaign(wide, stop_tolerance=bad)
+    with pytest.raises(IrreflectError, match="rule must be a DesignRule"):
+        Campaign(wide, rule=None)
+    with pytest.raises(IrreflectError, match=r"shape \(n, 2\) .*found shape \(1, 3\)"):
+        Instrument(gammas_deg=(-30,), settings_deg=[[1, 2, 3]])
+    with pytest.raises(IrreflectError, match="found 0 gamma"):
+        Instrument.from_table([], [])
+
+
+def test_an_instrument_from_a_table_of_magnitudes_proposes_in_the_papers_frame():
+    # the gammas were negated but the settings kept +gamma: proposals at +gamma, flagged as
+    # new angles, and settings already measured proposed again
+    table = read_measurements(bundled_dir() / "terrazzo.csv").to_frame()
+    tool = Instrument.from_table(table.gamma_deg.abs(), table.theta_deg)
+    assert (tool.settings()[:, 0] < 0).all()
+    assert set(tool.settings()[:, 0]) == set(tool.gammas_deg)
+    campaign = Campaign(tool, seed=0)
+    first = campaign.propose(8)
+    assert (first.gamma_deg < 0).all()
+    look = table.set_index(["gamma_deg", "theta_deg"]).power
+    campaign.add(first[["gamma_deg", "theta_deg"]].assign(
+        power=[look[(g, t)] for g, t in zip(first.gamma_deg, first.theta_deg, strict=True)]))
+    taken = set(zip(first.gamma_deg, first.theta_deg, strict=True))
+    more = campaign.propose(30)
+    assert not taken & set(zip(more.gamma_deg, more.theta_deg, strict=True))
+    assert not more[more.gamma_deg.isin(first.gamma_deg)].new_gamma.any()
+
+
+def test_a_campaign_held_to_one_angle_of_incidence_stops():
+    # once the instrument has set the one angle it may, the curve elsewhere is extrapolated
+    # and moved for ever (45 readings, "continue"): the verdict now judges where it can read
+    params = np.array([0.3, -0.5, 1.2, 0.3, 40.0, 0.4, 1.0])
+    tool = Instrument(gammas_deg=(-10, -30, -50, -70), max_gamma_settings=1)
+    campaign = Campaign(tool, seed=0)
+    while not campaign.verdict().stop and campaign.n_measured < 20:
+        s = campaign.propose(4)
+        campaign.add(s[["gamma_deg", "theta_deg"]].assign(power=two_lobe_power(
+            np.radians(s.gamma_deg.to_numpy()), np.radians(s.theta_deg.to_numpy()), *params)))
+    verdict = campaign.verdict()
+    assert verdict.stop and campaign.n_measured <= 16
+    assert len(set(campaign.measurements.gamma_deg)) == 1
+    assert "the 1 angle of incidence the instrument allows is set" in verdict.text

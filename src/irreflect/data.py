@@ -413,8 +413,10 @@ def _one_material(df: pd.DataFrame, source: str) -> str | None:
 def _check_partial_negative(power, sigma, source, rows) -> None:
     """Negative readings of a campaign (see :data:`PARTIAL_NEGATIVE_TOLERANCE`): refused
     when most of at least four nonzero readings are negative, or when a reading lies below
-    -that share of a larger positive reading (and below -4 sigma); a negative reading with
-    no larger positive one beside it may be noise around a small signal, and is kept."""
+    -that share of a larger positive reading (and below -4 sigma), or (with at least four
+    nonzero readings) below every positive one and 4 times the median |reading| (a peak with
+    its sign flipped); a negative reading with no larger positive one beside it and of the
+    size of the others may be noise around a small signal, and is kept."""
     neg = power < 0
     if not neg.any():
         return
@@ -428,6 +430,11 @@ def _check_partial_negative(power, sigma, source, rows) -> None:
     if sigma is not None:
         limit = np.maximum(limit, 4.0 * sigma)
     bad = (power < -limit) & (-power <= top)
+    if nonzero >= 4:
+        # larger than every positive reading and far above the typical one: a peak typed
+        # with its sign flipped, not noise around a small signal
+        typical = float(np.median(np.abs(power[power != 0])))
+        bad |= (power < -limit) & (-power > top) & (-power > 4.0 * typical)
     if bad.any():
         i = int(np.nonzero(bad)[0][0])
         _fail(f"{source}: power must be >= 0 up to noise; found {power[i]:g} at {rows(i)}, "

@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import dataclasses
 import os
+import re
 import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -35,7 +36,7 @@ from ..fitting import AVERAGED_OPTIONS, FitOptions, FitResult, fit, fit_averaged
 from ..models import get_model
 from ..models.aperture import with_aperture
 from ..models.paper import specular_share
-from ..validation import check_int, check_seed, short_list
+from ..validation import check_int, check_number, check_seed, short_list
 from .design import (
     DEFAULT_RULE,
     DesignRule,
@@ -241,10 +242,22 @@ class Campaign:
         self.point_model = get_model(model)
         self.model = with_aperture(self.point_model, instrument.resolution)
         self.seed = check_seed(seed)
+        if not isinstance(rule, DesignRule):
+            raise IrreflectError(f"rule must be a DesignRule (irreflect.campaign.DesignRule, "
+                                 f"or leave it out for the default); found {rule!r}")
         self.rule = rule
-        self.stop_tolerance = float(stop_tolerance)
+        self.stop_tolerance = check_number(stop_tolerance, "stop_tolerance", low=0.0,
+                                           high=1.0, low_open=True)
         self.name = name
         settings = instrument.settings()
+        capacity = instrument.capacity()
+        if capacity <= self.model.n_params:
+            raise IrreflectError(
+                f"the instrument can take at most {capacity} distinct reading(s) (readings of "
+                f"one angle of incidence at least {instrument.min_separation:g} deg apart, "
+                f"receiver {instrument.theta_min:g}..{instrument.theta_max:g} deg), fewer than "
+                f"the {self.model.n_params + 1} a first fit of '{self.model.name}' needs: "
+                "widen the receiver range, add angles of incidence or lower the resolution")
         width = np.full(len(settings), 10.0)
         near = np.abs(settings[:, 0] + settings[:, 1]) <= 5.0 * np.minimum(width, 2.0)
         self._settings = settings[thin_settings(settings, keep=near)]
@@ -357,7 +370,8 @@ class Campaign:
         if top <= 0:
             return
         over = self._overshoot(state.fit.values, top)
-        if over <= OVERSHOOT:
+        tie = self.rule.tie_ratio
+        if over <= OVERSHOOT and not tie:
             return
         z0 = self.model.from_natural(self._values[before][None])[0]
         try:
@@ -370,6 +384,15 @@ class Campaign:
         values = np.asarray(local.values, float)
         if self._overshoot(values, top) > OVERSHOOT:
             return
+        if over <= OVERSHOOT:
+            if not local.cost <= state.fit.cost * (1.0 + tie):
+                return  # no overshoot, and the continuation is not tied with the optimum
+            s_ = self._settings
+            with np.errstate(all="ignore"):
+                cont = self.model.predict_deg(values, s_[:, 0], s_[:, 1])
+            glob = state.range_pred
+            if not np.nanmean((cont - glob) ** 2) > 1e-3 * np.nanvar(glob):
+                return  # the same curve
         state.extra["rivals"] = [np.asarray(state.fit.values, float)]
         state.fit = _relative(local, self.model, self.measurements)
         with np.errstate(all="ignore"):
@@ -657,12 +680,21 @@ class Campaign:
         res = state.fit
         meas = self.measurements
         n = meas.n_points
-        f = state.range_pred
+        limit = self.instrument.max_gamma_settings
+        measured_g = {round(g, 6) for g in meas.gamma_deg}
+        spent = bool(limit) and len(measured_g) >= limit
+        # where the curve must hold: the whole range, or, once the instrument has set every
+        # angle of incidence it may, the settings at those angles (elsewhere the fit only
+        # extrapolates, and no reading can pin it down: it would move for ever)
+        where = (np.isin(np.round(self._settings[:, 0], 6), list(measured_g)) if spent
+                 else np.ones(len(self._settings), bool))
+        f = state.range_pred[where]
         ss_pred = float(np.sum((f - f.mean()) ** 2))
         # how far the fits on the first n - 1, n - 2 and n - 3 readings lie from this one
         moves = []
         for back in range(1, STOP_HOLD + 2):
             before = self._range_prediction(n - back)
+            before = None if before is None else before[where]
             if before is None or not np.all(np.isfinite(before)) or ss_pred <= 0:
                 moves.append(float("inf"))
             else:
@@ -676,7 +708,8 @@ class Campaign:
                    else (self.rule.noise * prior.scale[len(s_):]) ** 2)
         expected = posterior_error(prior, len(s_), np.maximum(noise_m, 1e-300),
                                    meas.power - res.fitted)
-        denom = ss_pred + expected
+        full = state.range_pred
+        denom = float(np.sum((full - full.mean()) ** 2)) + expected
         if denom > 0:
             r2_mid = 1.0 - expected / denom
             # the spread of the truth around the posterior's expectation, as measured on the
@@ -707,8 +740,6 @@ class Campaign:
         mags = np.abs(meas.gamma_deg)
         outside = [g for g in self.instrument.gammas
                    if abs(g) > mags.max() + 1e-6 or abs(g) < mags.min() - 1e-6]
-        limit = self.instrument.max_gamma_settings
-        spent = bool(limit) and len({round(g, 6) for g in meas.gamma_deg}) >= limit
         if outside and not spent:
             reasons.append("angles of incidence outside the measured span: "
                            + short_list([f"{g:g}" for g in outside], 4))
@@ -725,7 +756,8 @@ class Campaign:
         if outside and spent and not reasons:
             # the instrument can set no other angle: the stop stands, with what it leaves
             why += (f"extrapolated to |gamma| {short_list([f'{abs(g):g}' for g in outside], 4)}"
-                    f" deg: the {limit} angles of incidence the instrument allows are set",)
+                    f" deg: the {limit} angle{'s' if limit != 1 else ''} of incidence the instrument "
+                    f"allows {'are' if limit != 1 else 'is'} set",)
         return Verdict(not reasons, n, (float(r2_lo), float(r2_hi)), stability,
                        tuple(res.ill_determined), tuple(res.at_bound), why)
 
@@ -814,10 +846,13 @@ def _relative(res: FitResult, model, meas: Measurements) -> FitResult:
     stderr = res.stderr * np.sqrt(s2)
     values = np.asarray(res.values, float)
     # judge() flags a coefficient for a near-singular covariance as well as for its error;
-    # the first does not depend on the scale
-    singular = np.array([name in res.ill_determined and np.isfinite(e) and e <= abs(v)
-                         for name, v, e in zip(res.param_names, values, res.stderr,
-                                               strict=True)])
+    # the first does not depend on the scale, so it stands whatever the residuals (readings
+    # without noise at one angle of incidence leave the laws in gamma undetermined while the
+    # rescaled errors are 1e-10)
+    near = set(re.findall(r"(\w+) = \S+ \+- \S+ \(near-singular covariance\)",
+                          " ".join(res.warnings)))
+    singular = np.array([name in res.ill_determined and name in near
+                         for name in res.param_names])
     at_bound, ill, notes = judge(model, values, stderr, singular,
                                  np.radians(np.unique(meas.gamma_deg)),
                                  res.converged, res.message)

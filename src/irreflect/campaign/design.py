@@ -119,6 +119,7 @@ class DesignRule:
     power_floor: float = 0.0
     power_refit: bool = True
     saturated_gap: float = 30.0
+    tie_ratio: float = 0.0
 
     def __post_init__(self):
         # the knobs this file's defaults rest on, checked where a caller sets them

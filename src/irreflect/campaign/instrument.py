@@ -145,7 +145,22 @@ class Instrument:
                             ("gamma_change_cost", cost), ("resolution", resolution)):
             object.__setattr__(self, name, float(value))
         if self.settings_deg is not None:
-            s = np.asarray(self.settings_deg, float).reshape(-1, 2)
+            try:
+                s = np.array(self.settings_deg, float)
+            except (TypeError, ValueError):
+                s = np.zeros((0, 3))
+            if s.ndim != 2 or s.shape[1] != 2 or not len(s) or not np.all(np.isfinite(s)):
+                raise IrreflectError(
+                    "settings_deg must be (gamma, theta) pairs in degrees, an array of shape "
+                    f"(n, 2) of finite numbers; found shape {s.shape}: give one row per setting")
+            if np.any(np.abs(s) >= 90):
+                raise IrreflectError(f"settings_deg: angles must lie strictly between -90 and "
+                                     f"90 degrees; found {s[np.abs(s) >= 90][0]:g}")
+            if np.any(s[:, 0] > 0) and np.any(s[:, 0] < 0):
+                raise IrreflectError(
+                    "settings_deg: the angles of incidence mix signs, which is ambiguous: give "
+                    "them all <= 0 (the paper's convention) or all as magnitudes >= 0")
+            s[:, 0] = -np.abs(s[:, 0]) + 0.0  # magnitudes, as gammas_deg (theta kept)
             object.__setattr__(self, "settings_deg", s)
         if not len(self.settings()):
             raise IrreflectError(
@@ -156,8 +171,13 @@ class Instrument:
     @classmethod
     def from_table(cls, gamma_deg, theta_deg, **kwargs) -> Instrument:
         """The instrument that can take exactly the readings of a (dense) table."""
-        g = np.asarray(gamma_deg, float)
-        t = np.asarray(theta_deg, float)
+        g = np.asarray(gamma_deg, float).ravel()
+        t = np.asarray(theta_deg, float).ravel()
+        if not g.size or g.size != t.size:
+            raise IrreflectError(
+                f"an instrument from a table needs its readings' gamma and theta, one of each "
+                f"per reading; found {g.size} gamma(s) and {t.size} theta(s)")
+        g = -np.abs(g) if np.all(g >= 0) else g  # magnitudes, as gammas_deg
         diffs = np.concatenate([np.diff(np.unique(t[g == x])) for x in np.unique(g)])
         step = float(np.min(diffs)) if diffs.size else 1.0
         kwargs.setdefault("source_clearance", 0.0)
@@ -165,6 +185,27 @@ class Instrument:
         kwargs.setdefault("min_separation", 1e-6)
         return cls(gammas_deg=tuple(np.unique(g)), theta_min=float(t.min()),
                    theta_max=float(t.max()), settings_deg=np.column_stack([g, t]), **kwargs)
+
+    def capacity(self) -> int:
+        """The most distinct readings the instrument can take: per angle of incidence, the
+        receiver settings at least ``min_separation`` apart (greedily, along theta), summed
+        over the ``max_gamma_settings`` angles that hold the most."""
+        s = self.settings()
+        counts = []
+        for g in np.unique(s[:, 0]):
+            ts = np.sort(s[s[:, 0] == g, 1])
+            if np.all(np.diff(ts) >= self.min_separation - 1e-9):
+                counts.append(ts.size)  # every setting apart (the usual case: no loop)
+                continue
+            last, k = -np.inf, 0
+            for t in ts:
+                if t - last >= self.min_separation - 1e-9:
+                    last, k = t, k + 1
+            counts.append(k)
+        counts.sort(reverse=True)
+        if self.max_gamma_settings is not None:
+            counts = counts[:int(self.max_gamma_settings)]
+        return int(sum(counts))
 
     @property
     def gammas(self) -> np.ndarray:
