@@ -195,3 +195,23 @@ def test_predict_and_report():
     assert "u_ns" in text and "R^2" in text and "60 deg" in text
     errs = r.polar_errors()
     assert sorted(errs) == [10.0, 20.0, 30.0, 40.0, 50.0, 60.0]
+
+
+def test_predict_at_positive_gammas_says_which_frame_it_reads():
+    """A table of magnitudes is read as gamma = -|gamma|; predict() takes the model's frame,
+    where gamma > 0 is the mirrored one: predicting at the table's own columns gave R^2 -0.77
+    without a word."""
+    import warnings as _w
+
+    from irreflect.data import load_bundled
+    from irreflect.errors import FitWarning
+
+    res = fit(load_bundled("terrazzo"), seed=0)
+    with _w.catch_warnings(record=True) as caught:
+        _w.simplefilter("always")
+        mirrored = res.predict(30.0, -30.0)
+        same = res.predict(-30.0, 30.0)
+    assert mirrored == pytest.approx(same)  # the mirrored frame: both angles change sign
+    said = [str(w.message) for w in caught if issubclass(w.category, FitWarning)]
+    assert len(said) == 1 and "predict() got gamma_deg > 0" in said[0]
+    assert "pass -abs(gamma)" in said[0]

@@ -7,12 +7,13 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from warnings import warn
 
 import numpy as np
 
 from .. import metrics
 from ..data import check_enough_points
-from ..errors import DataError, IrreflectError
+from ..errors import DataError, FitWarning, IrreflectError
 from ..models import (
     ReflectionModel,
     get_model,
@@ -88,9 +89,21 @@ class FitResult:
         return self.power - self.residuals
 
     def predict(self, gamma_deg, theta_deg) -> np.ndarray:
-        """Model power at the given angles (degrees, paper convention)."""
+        """Model power at the given angles (degrees, paper convention: gamma <= 0 on the
+        source side, the mirror direction theta = -gamma).
+
+        A gamma > 0 is the paper's frame mirrored (the source on the positive side, both
+        angles change sign), which is what the model's formulas give; a table whose gammas
+        are all >= 0 is read as magnitudes instead (gamma = -|gamma|, theta kept), so a
+        warning says so: pass ``-abs(gamma)`` to predict at such a table's settings."""
         model = self.model_object or get_model(self.model)
         gamma_deg, theta_deg = check_angles_deg(gamma_deg, theta_deg)
+        if np.any(np.asarray(gamma_deg) > 0):
+            warn(FitWarning(
+                f"{self.model}: predict() got gamma_deg > 0, read as the paper's frame "
+                "mirrored (the source on the positive side, mirror at theta = -gamma); a "
+                "table's gammas >= 0 are read as magnitudes (gamma = -|gamma|, theta kept): "
+                "pass -abs(gamma) to predict at its settings"), stacklevel=2)
         return model.predict_deg(self.values, gamma_deg, theta_deg)
 
     @property
