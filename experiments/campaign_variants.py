@@ -22,6 +22,7 @@ About 45 s on 2 cores.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import sys
 import time
 import warnings
@@ -51,7 +52,7 @@ def cut(meas, how: str):
 
 
 def run(job):
-    path, how, readings = job
+    path, how, readings, changes = job
     warnings.simplefilter("ignore")
     from irreflect import fit
     from irreflect.campaign import DenseInstrument
@@ -60,7 +61,11 @@ def run(job):
 
     table = cut(read_measurements(path), how)
     target = fit(table, seed=0).r2 - 0.01
-    curve, verdicts, times = replay_adaptive(DenseInstrument(table), readings, seed=0)
+    from irreflect.campaign.design import DEFAULT_RULE
+
+    rule = dataclasses.replace(DEFAULT_RULE, **changes)
+    curve, verdicts, times = replay_adaptive(DenseInstrument(table), readings, seed=0,
+                                             rule=rule)
     r2 = curve.r2
     held = [n for n in sorted(r2) if all(r2[k] >= target for k in r2 if k >= n)]
     stop = min((n for n, v in verdicts.items() if v.stop), default=None)
@@ -76,14 +81,26 @@ def main(argv=None) -> int:
     parser.add_argument("--readings", type=int, default=20)
     parser.add_argument("--data-dir", default=None,
                         help="folder of tables (default ../shared/datasets/real)")
+    parser.add_argument("--rule", nargs="+", default=[], metavar="KNOB=VALUE",
+                        help="change numeric knobs of the adaptive rule "
+                             "(irreflect.campaign.DesignRule), e.g. tie_ratio=0")
     args = parser.parse_args(argv)
+    changes = {}
+    for item in args.rule:
+        key, _, value = item.partition("=")
+        try:
+            changes[key] = float(value)
+        except ValueError:
+            parser.error(f"--rule {item}: expected KNOB=NUMBER")
+    if changes:
+        print(f"rule: {changes}")
     root = Path(args.data_dir) if args.data_dir else (
         Path(__file__).resolve().parents[1].parent / "shared" / "datasets" / "real")
     files = sorted(root.rglob("*.csv"))
     if not files:
         print(f"no tables under {root}", file=sys.stderr)
         return 1
-    jobs = [(str(f), how, args.readings) for f in files for how in CUTS]
+    jobs = [(str(f), how, args.readings, changes) for f in files for how in CUTS]
     t0 = time.perf_counter()
     rows = []
     print(f"{'dataset':28} {'cut':10} {'pts':>5} {'R2 all':>7} {'N':>3} {'stop (R2)':>14} "

@@ -98,12 +98,12 @@ class DesignRule:
     tie_ratio : keep the continuation of the previous readings' fit (its local optimum on
         the current readings) when its cost is within this share of the global optimum's and
         their curves differ, the global one becoming a rival the next proposals test (0: off,
-        only an overshooting optimum is replaced). 0.03 since stop 37: with 2-3 % reading
-        noise it mends a jump between two optima 1.5 % apart in cost (Cornell Cayman at 22
-        readings, R^2 0.9972 -> 0.457 -> 0.9972; colodur within target from 18 readings to
-        16); it changes no noise-free real campaign before 20 readings, and on seeds 100-111
-        6 of 77 curves (4 better, e.g. matte-101 within target from 11 readings to 9; wild-102
-        at 9 readings 1.0 -> 0.76), the targets' counts unchanged
+        only an overshooting optimum is replaced). Tried at stop 37 with 0.03 and not kept:
+        with 2-3 % reading noise it mends a jump between two optima 1.5 % apart in cost
+        (Cornell Cayman at 22 readings, R^2 0.9972 -> 0.457 -> 0.9972), and on seeds
+        100-111 it changes 6 of 77 curves (4 for the better), but on the cut grids
+        (experiments/campaign_variants.py) 4 cuts for the worse and 1 for the better, with a
+        fourth bad stop (Ibiza without normal incidence, 0.030 below)
     """
 
     coefficient_prior: float = 1.0
@@ -128,7 +128,7 @@ class DesignRule:
     power_floor: float = 0.0
     power_refit: bool = True
     saturated_gap: float = 30.0
-    tie_ratio: float = 0.03
+    tie_ratio: float = 0.0
 
     def __post_init__(self):
         # the knobs this file's defaults rest on, checked where a caller sets them
