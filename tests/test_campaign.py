@@ -398,6 +398,16 @@ def test_the_verdict_names_missing_angles_of_incidence():
     assert not v.stop and "outside the measured span" in v.text and "-70" in v.text
 
 
+def test_the_verdict_dict_is_strict_json_before_any_reading():
+    # r2_band and stability are NaN before a fit: to_dict held NaN (json allow_nan=False failed)
+    v = Campaign(Instrument(gammas_deg=(-30,))).verdict()
+    assert np.isnan(v.stability)
+    d = json.loads(json.dumps(v.to_dict(), allow_nan=False))
+    assert d["r2_low"] is None and d["r2_high"] is None and d["stability"] is None
+    assert d["verdict"] == "continue" and d["n_measured"] == 0
+
+
+
 # ----------------------------------------------------------------------------- readings
 def test_add_refuses_a_repeated_reading_and_mixed_sigma():
     tool = Instrument(gammas_deg=(-20, -40))

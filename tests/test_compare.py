@@ -115,6 +115,19 @@ def test_model_list_parsing():
         parse_model_list("ward,ward")
     with pytest.raises(IrreflectError, match="MODEL@G"):
         parse_model_list("phong@x")
+    # another case: the registry name is suggested
+    with pytest.raises(UnknownNameError, match="unknown model 'TWO-LOBE': .* Did you mean "
+                       "'two-lobe'\\?$"):
+        parse_model_list("TWO-LOBE")
+
+
+@pytest.mark.parametrize("models", ["", "  ", [], [""], ("two-lobe", 3)])
+def test_compare_models_refuses_an_empty_model_list(models):
+    # '' and [] silently compared every default model (the CLI refuses --models "")
+    meas = load_bundled("terrazzo")
+    with pytest.raises(IrreflectError, match=r"^compare_models: models must be one or more "
+                       r"model names, .*; found .*: pass models=None for the default models$"):
+        compare_models(meas, models)
 
 
 # ----------------------------------------------------------------------------- CLI

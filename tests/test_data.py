@@ -11,7 +11,7 @@ from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 
 from irreflect.data import DataNotice, read_measurements, validate_table, write_measurements
-from irreflect.errors import DataError
+from irreflect.errors import DataError, IrreflectError
 from tests.conftest import synthetic
 
 
@@ -86,6 +86,29 @@ def test_duplicates_averaged_on_request(tmp_path):
     assert m.power[m.theta_deg == 0][0] == pytest.approx(1.5)
     assert m.sigma[m.theta_deg == 0][0] == pytest.approx(0.25)  # sqrt(0.09+0.16)/2
     assert any("averaged 1 duplicated" in n for n in m.notes)
+
+
+def test_average_duplicates_must_be_a_bool(tmp_path):
+    # 'no' is a true value: the duplicates were averaged
+    text = "gamma_deg,theta_deg,power\n-10,0,1\n-10,0,2\n-10,5,3\n"
+    with pytest.raises(IrreflectError, match="^average_duplicates must be True or False; "
+                       "found 'no'$"):
+        read_measurements(_csv(tmp_path, text), average_duplicates="no")
+    with pytest.raises(IrreflectError, match="average_duplicates must be True or False"):
+        validate_table(pd.read_csv(_csv(tmp_path, text)), average_duplicates="no")
+
+
+def test_blank_material_cells_are_unlabelled_not_a_second_material(tmp_path):
+    # refused as "2 materials (a, )"
+    text = ("gamma_deg,theta_deg,power,material\n-10,0,1,a\n-10,10,2,\n-20,5,3, \n"
+            "-20,15,2,a\n")
+    assert read_measurements(_csv(tmp_path, text)).material == "a"
+    frame = pd.DataFrame({"gamma_deg": [-10.0, -10.0, -20.0], "theta_deg": [0.0, 10.0, 5.0],
+                          "power": [1.0, 2.0, 3.0], "material": ["a", None, np.nan]})
+    assert validate_table(frame).material == "a"
+    assert validate_table(frame.assign(material=[None, "", np.nan])).material is None
+    with pytest.raises(DataError, match=r"names 2 materials \(a, b\)"):
+        validate_table(frame.assign(material=["a", "", "b"]))
 
 
 def test_positive_gammas_read_as_magnitudes_and_said_once(tmp_path):

@@ -120,6 +120,30 @@ def test_too_small_subsets_fail_with_score_zero():
     assert subs.r2_all[0] == 0.0 and subs.r2_all[1] > 0.999
 
 
+@pytest.mark.parametrize("engine", ["numpy", "compiled"])
+def test_subsets_without_a_degree_of_freedom_fail_as_fit_refuses_them(engine):
+    # a 7-point subset (two-lobe: 7 parameters) was fitted (R^2 0.86 on terrazzo), not failed
+    meas = synthetic(noise=0.01, seed=2)
+    masks = np.zeros((3, meas.n_points), bool)
+    masks[0, ::19] = True   # 7 points: no degree of freedom
+    masks[1, ::16] = True   # 9 points
+    masks[2, :8] = True     # 8 points: one degree of freedom
+    assert masks.sum(axis=1).tolist() == [7, 9, 8]
+    subs = fit_subsets(meas.gamma_deg, meas.theta_deg, meas.power, masks, engine=engine)
+    assert subs.failed.tolist() == [True, False, False]
+    assert subs.r2_all[0] == 0.0 and np.isnan(subs.params[0]).all()
+    assert subs.cost[0] == np.inf and not subs.converged[0]
+
+
+def test_subsets_of_constant_power_are_refused_as_fit_refuses_it():
+    # constant power gave r2_all 0 with failed False
+    meas = synthetic()
+    masks = np.ones((1, meas.n_points), bool)
+    with pytest.raises(DataError, match=r"^fit_subsets: power is constant \(1 at all 132 "
+                       r"points\): a reflection model needs the power measured at varying"):
+        fit_subsets(meas.gamma_deg, meas.theta_deg, np.ones(meas.n_points), masks)
+
+
 def test_same_seed_same_result_and_result_is_frozen():
     meas = synthetic(noise=0.01, seed=11)
     a, b = fit(meas, seed=4), fit(meas, seed=4)

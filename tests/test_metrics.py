@@ -58,3 +58,33 @@ def test_normalized_residuals_and_information_criteria():
     np.testing.assert_allclose(r, [2.0, -2.0])
     assert metrics.bic(1.0, 100, 7) - metrics.bic(1.0, 100, 6) == pytest.approx(np.log(100))
     assert metrics.aic(1.0, 100, 7) - metrics.aic(1.0, 100, 6) == pytest.approx(2.0)
+
+
+def test_arrays_of_other_lengths_are_refused_not_broadcast():
+    from irreflect.errors import IrreflectError
+
+    # a length-1 argument used to broadcast silently (rmse 1.29, r2 0.0)
+    with pytest.raises(IrreflectError, match=r"^rmse: measured has 1 point\(s\) and predicted 3 "
+                       r"\(along the last axis\): give one predicted value per measured point$"):
+        metrics.rmse([1.0], [1.0, 2.0, 3.0])
+    with pytest.raises(IrreflectError, match=r"^r2: measured has 3 point\(s\) and predicted 1 "):
+        metrics.r2([1.0, 2.0, 3.0], [2.0])
+    with pytest.raises(IrreflectError, match=r"^mse: measured has 3 point\(s\) and predicted 2 "):
+        metrics.mse([1, 2, 3], [1, 2])  # a bare numpy ValueError before
+    with pytest.raises(IrreflectError, match=r"of shape \(2, 3\) and predicted of shape \(4, 3\) "
+                       "do not pair up"):
+        metrics.r2(np.ones((2, 3)), np.ones((4, 3)))
+    with pytest.raises(IrreflectError, match=r"measured has 2 point\(s\) and sigma 3"):
+        metrics.normalized_residuals([1.0, 2.0], [1.0, 2.0], sigma=[1.0, 1.0, 1.0])
+    with pytest.raises(IrreflectError, match=r"theta_deg has 3 point\(s\) and measured 2"):
+        metrics.polar_area_error([0.0, 10.0, 20.0], [1.0, 2.0], lambda t: t)
+    with pytest.raises(IrreflectError, match=r"gamma_deg has 3 point\(s\) and theta_deg 2"):
+        metrics.polar_area_errors([-10.0] * 3, [0.0, 10.0], [1.0] * 3, lambda g, t: t)
+    with pytest.raises(IrreflectError, match="model_sampling must be 'measured' or "
+                       "'continuous'; found 'x'"):
+        metrics.polar_area_error([0.0, 10.0], [1.0, 1.0], lambda t: t, model_sampling="x")
+    # what pairs up still works: a batch of rows, one sigma for all, a constant target
+    np.testing.assert_allclose(metrics.r2([1.0, 2.0, 3.0], np.ones((2, 3))), [-1.5, -1.5])
+    np.testing.assert_allclose(metrics.normalized_residuals([2.0, 4.0], [1.0, 5.0], sigma=0.5),
+                               [2.0, -2.0])
+    assert metrics.r2([1.0, 1.0, 1.0], [1.0, 2.0, 3.0]) == -np.inf

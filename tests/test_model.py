@@ -114,6 +114,8 @@ def test_registry_names_and_errors():
     assert get_model("n-lobe:4").n_params == 12
     with pytest.raises(UnknownNameError, match="did you mean 'two-lobe'|Did you mean 'two-lobe'"):
         get_model("two_lobe")
+    with pytest.raises(UnknownNameError, match="Did you mean 'two-lobe'"):
+        get_model("TWO-LOBE")  # no suggestion before: matched case-sensitively
     with pytest.raises(IrreflectError, match="n-lobe:<integer>"):
         get_model("n-lobe:x")
     with pytest.raises(IrreflectError, match="between 1 and 6"):

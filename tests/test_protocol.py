@@ -594,6 +594,27 @@ def test_a_two_angle_pilot_is_refused_before_it_is_fitted(monkeypatch):
         evaluate.glossy_protocol_for(wild_material(0).measurements)
 
 
+def test_glossy_protocol_for_checks_its_arguments_and_takes_one_layout_as_text():
+    # layouts='paper' was split into letters ("unknown layout 'p'"); n_triples=0 and
+    # lobe_factors=() were reported as "fewer than three angles"
+    from irreflect.protocol import evaluate
+
+    meas = load_bundled("terrazzo")
+    with pytest.raises(IrreflectError, match="^glossy_protocol_for: n_triples must be an "
+                       "integer >= 1; found 0$"):
+        evaluate.glossy_protocol_for(meas, n_triples=0)
+    with pytest.raises(IrreflectError, match=r"^glossy_protocol_for: lobe_factors must be one "
+                       r"or more numbers > 0 .*; found \(\): pass e.g. \(0.5, 1.0, 2.0\)$"):
+        evaluate.glossy_protocol_for(meas, lobe_factors=())
+    with pytest.raises(IrreflectError, match="^glossy_protocol_for: layouts must name one or "
+                       "more of paper, balanced; found \\(\\)"):
+        evaluate.glossy_protocol_for(meas, layouts=())
+    with pytest.raises(IrreflectError, match="unknown glossy protocol layout 'papr'"):
+        evaluate.glossy_protocol_for(meas, layouts="papr")
+    proto = evaluate.glossy_protocol_for(meas, layouts="paper", lobe_factors=1.0, n_triples=1)
+    assert proto.settings["layout"] == "paper" and proto.settings["lobe_factor"] == 1.0
+
+
 # ------------------------------------------------- a table without the protocol's settings
 def _sparse_table():
     """15 readings on the paper's materials at settings far from Table 1's points: no

@@ -600,6 +600,35 @@ def test_a_material_file_is_strict_json_and_a_poor_reciprocal_form_is_warned_of(
     assert len(poor) == 1 and "the multipath from this surface is not the measured" in poor[0]
 
 
+def test_save_material_writes_nothing_that_load_material_refuses(tmp_path):
+    # a 'phong@10' fit, a negative wavelength and numeric notes were written, then refused
+    from irreflect import fit
+    from irreflect.data import load_bundled
+    from irreflect.room.materials import load_material, save_material
+
+    meas = load_bundled("terrazzo")
+    res = fit(meas)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        at10 = fit(meas, "phong@10")
+    path = tmp_path / "m.json"
+    with pytest.raises(IrreflectError, match=r"^save_material: .*m.json: model 'phong@10' is a "
+                       r"fit at one angle of incidence, .* save a fit of the model alone "
+                       r"\('phong'\); nothing written$"):
+        save_material(at10, path, reflectance=0.5)
+    with pytest.raises(IrreflectError, match=r"m.json: wavelength_nm must be a number > 0 and "
+                       r"<= 1e\+06 \(nm\); found -5.0; nothing written$"):
+        save_material(res, path, reflectance=0.5, wavelength_nm=-5)
+    with pytest.raises(IrreflectError, match="m.json: notes must be text .*; found 123; "
+                       "nothing written$"):
+        save_material(res, path, reflectance=0.5, notes=123)
+    with pytest.raises(IrreflectError, match="wavelength_nm must be a number .*; found 'abc'"):
+        save_material(res, path, reflectance=0.5, wavelength_nm="abc")  # a bare ValueError
+    assert not path.exists()
+    save_material(res, path, reflectance=0.5, wavelength_nm="905", notes="lab")
+    assert load_material(path).metadata["wavelength_nm"] == 905.0
+
+
 def test_a_modulation_faster_than_the_paths_is_warned_of(capsys):
     # at 1 THz the room printed a range error of -0.00 cm: phase ranging there cannot tell
     # ranges apart beyond 0.03 cm, far shorter than the paths

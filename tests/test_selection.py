@@ -16,6 +16,7 @@ from irreflect.data import bundled_dir, load_bundled, write_measurements
 from irreflect.errors import IrreflectError
 from irreflect.selection import (
     SubsetEvaluator,
+    compare_methods,
     hypervolume,
     knee_point,
     non_dominated,
@@ -307,6 +308,25 @@ def test_bad_inputs_raise(noisy):
         run_selection(noisy, selector="genetic", **SMALL)
     with pytest.raises(IrreflectError, match="distinct names"):
         run_many([noisy, noisy], seeds=[0], **SMALL)
+
+
+def test_compare_methods_refuses_a_result_or_fit_of_another_table_or_model(noisy, small_run):
+    other = synthetic(noise=0.004, seed=4, name="other")  # same grid, other readings
+    with pytest.raises(IrreflectError, match=r"result \(a selection run\) was made on other "
+                       r"points than those of 'other' \(same count, 132"):
+        compare_methods(other, small_run)
+    with pytest.raises(IrreflectError, match="result .* was made on 132 points, but 'part' "
+                       "has 100: pass one made on this table"):
+        compare_methods(replace(noisy.subset(np.arange(100)), name="part"), small_run)
+    with pytest.raises(IrreflectError, match="full_fit was made on 40 points, but 'noisy' "
+                       "has 132"):
+        compare_methods(noisy, full_fit=fitting.fit(noisy.subset(np.arange(40))))
+    with pytest.raises(IrreflectError, match="full_fit is a fit of model 'phong', not of "
+                       "'two-lobe'"):
+        compare_methods(noisy, full_fit=fitting.fit(noisy, "phong"))
+    with pytest.raises(IrreflectError, match="protocol points must be .* pairs of numbers "
+                       "\\(degrees\\); found 'x'"):
+        compare_methods(noisy, protocol_points="x")
 
 
 def test_default_workers_and_one_library_thread_each(monkeypatch):

@@ -298,7 +298,13 @@ def compare_models(measurements, models=None, *, phong_at_deg: float | None = No
     """
     seed = check_seed(seed)
     meas = as_measurements(measurements)
-    text = ",".join(models) if isinstance(models, list | tuple) else models
+    listed = isinstance(models, list | tuple) and all(isinstance(m, str) for m in models)
+    text = ",".join(models) if listed else models
+    if models is not None and not (isinstance(text, str) and text.strip()):
+        raise IrreflectError(
+            f"compare_models: models must be one or more model names, a list or a "
+            f"comma-separated text (e.g. 'two-lobe,phong'); found {models!r}: pass "
+            "models=None for the default models")
     notes = []
     if phong_at_deg is None:
         phong_at_deg, note = default_phong_deg(meas)

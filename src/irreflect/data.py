@@ -25,7 +25,13 @@ from ._atomic import atomic_path
 from ._inputs import read_bytes
 from .errors import DataError, IrreflectError, unknown_name
 from .paper import real_data_dir as _real
-from .validation import MAX_FILE_BYTES, MAX_TABLE_ROWS, check_real_array, short_list
+from .validation import (
+    MAX_FILE_BYTES,
+    MAX_TABLE_ROWS,
+    check_bool,
+    check_real_array,
+    short_list,
+)
 
 REQUIRED = ("gamma_deg", "theta_deg", "power")
 OPTIONAL = ("sigma", "material")
@@ -399,10 +405,11 @@ def _check_negative_power(power, sigma, source, rows):
 
 def _one_material(df: pd.DataFrame, source: str) -> str | None:
     """The table's material (None without a material column); a table naming two or more
-    is refused: it holds one material's readings."""
+    is refused: it holds one material's readings. Blank and NaN cells name none."""
     if "material" not in df.columns:
         return None
-    mats = df["material"].dropna().astype(str).unique()
+    mats = df["material"].dropna().astype(str).str.strip()
+    mats = mats[(mats != "") & (mats.str.lower() != "nan")].unique()
     if len(mats) > 1:
         _fail(f"{source}: the material column names {len(mats)} materials "
               f"({short_list(list(mats), 4)}): a table holds one material's readings; "
@@ -453,6 +460,8 @@ def validate_table(df: pd.DataFrame, source: str = "table", *,
     reading of additive noise is as often below 0 as above)."""
     if not isinstance(df, pd.DataFrame):
         _fail(f"{source}: expected a table (pandas DataFrame), found {type(df).__name__}")
+    average_duplicates = check_bool(average_duplicates, "average_duplicates")  # 'no' is true
+    partial = check_bool(partial, "partial")
     rows = _Rows(_row_lines)
     df = _check_columns(df, source)
     if len(df) == 0:

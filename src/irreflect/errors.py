@@ -47,7 +47,11 @@ def unknown_name(kind: str, name: str, valid) -> UnknownNameError:
     """Build the one-line error for a registry look-up that failed."""
 
     valid = sorted(valid)
-    close = difflib.get_close_matches(name, valid, n=1) if isinstance(name, str) else []
+    close = []
+    if isinstance(name, str):  # matched regardless of case: 'TWO-LOBE' -> 'two-lobe'
+        folded = {str(v).casefold(): str(v) for v in valid}
+        close = [folded[m] for m in difflib.get_close_matches(name.casefold(), list(folded),
+                                                                n=1)]
     hint = f" Did you mean '{close[0]}'?" if close else ""
     return UnknownNameError(
         f"unknown {kind} '{name}': expected one of {', '.join(valid)}.{hint}"

@@ -8,6 +8,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from .errors import IrreflectError
+
 #: Below this R^2 a model misses a table's shape: a campaign that stops on such a fit, and
 #: a protocol judged against an all-points fit this poor, say so and name
 #: ``irreflect diagnose`` (every real set's two-lobe fit is at 0.94 or above; a
@@ -15,10 +17,28 @@ import numpy as np
 MISFIT_R2 = 0.9
 
 
+def _paired(what: str, measured, predicted, names=("measured", "predicted")):
+    """``measured`` and ``predicted`` as float arrays (at least 1-d) with as many points
+    along the last axis; refuse (one line) arrays that only broadcast, or not at all."""
+    a = np.atleast_1d(np.asarray(measured, float))
+    b = np.atleast_1d(np.asarray(predicted, float))
+    if a.shape[-1] != b.shape[-1]:
+        raise IrreflectError(
+            f"{what}: {names[0]} has {a.shape[-1]} point(s) and {names[1]} "
+            f"{b.shape[-1]} (along the last axis): give one {names[1]} value per "
+            f"{names[0]} point")
+    try:
+        np.broadcast_shapes(a.shape, b.shape)
+    except ValueError:
+        raise IrreflectError(
+            f"{what}: {names[0]} of shape {a.shape} and {names[1]} of shape {b.shape} do not "
+            "pair up: give one vector, or a batch of rows of the same length") from None
+    return a, b
+
+
 def r2(measured, predicted) -> float | np.ndarray:
     """Coefficient of determination ``1 - SS_res / SS_tot`` along the last axis."""
-    measured = np.asarray(measured, float)
-    predicted = np.asarray(predicted, float)
+    measured, predicted = _paired("r2", measured, predicted)
     ss_res = np.sum((measured - predicted) ** 2, axis=-1)
     ss_tot = np.sum((measured - measured.mean(axis=-1, keepdims=True)) ** 2, axis=-1)
     with np.errstate(divide="ignore", invalid="ignore"):
@@ -28,22 +48,26 @@ def r2(measured, predicted) -> float | np.ndarray:
 
 def mse(measured, predicted) -> float | np.ndarray:
     """Mean squared error along the last axis."""
-    out = np.mean((np.asarray(measured, float) - np.asarray(predicted, float)) ** 2, axis=-1)
+    measured, predicted = _paired("mse", measured, predicted)
+    out = np.mean((measured - predicted) ** 2, axis=-1)
     return float(out) if np.ndim(out) == 0 else out
 
 
 def rmse(measured, predicted) -> float | np.ndarray:
     """Root mean squared error along the last axis."""
-    out = np.sqrt(mse(measured, predicted))
+    measured, predicted = _paired("rmse", measured, predicted)
+    out = np.sqrt(np.mean((measured - predicted) ** 2, axis=-1))
     return float(out) if np.ndim(out) == 0 else out
 
 
 def normalized_residuals(measured, predicted, sigma=None) -> np.ndarray:
     """Residuals ``measured - predicted`` divided by ``sigma`` (or, without sigma, by the
     measured value: the paper's relative residuals of Figs. 22-23)."""
-    measured = np.asarray(measured, float)
-    resid = measured - np.asarray(predicted, float)
+    measured, predicted = _paired("normalized_residuals", measured, predicted)
+    resid = measured - predicted
     scale = measured if sigma is None else np.asarray(sigma, float)
+    if scale.ndim > 0:  # one sigma per point (a single number scales them all)
+        _paired("normalized_residuals", measured, scale, ("measured", "sigma"))
     with np.errstate(divide="ignore", invalid="ignore"):
         return resid / scale
 
@@ -74,22 +98,30 @@ def polar_area_error(theta_deg, measured, model_fn, step_deg: float = 0.1,
     model_fn : callable
         ``model_fn(theta_deg_array) -> power`` of the model at that angle of incidence.
     """
-    theta_deg = np.asarray(theta_deg, float)
-    measured = np.asarray(measured, float)
+    theta_deg, measured = _paired("polar_area_error", theta_deg, measured,
+                                  ("theta_deg", "measured"))
+    if theta_deg.ndim != 1:
+        raise IrreflectError(f"polar_area_error: theta_deg must be one vector (one angle of "
+                             f"incidence); found shape {theta_deg.shape}")
     order = np.argsort(theta_deg)
     theta_deg, measured = theta_deg[order], measured[order]
     if theta_deg.size < 2 or theta_deg[-1] <= theta_deg[0]:
         return float("nan")
     if model_sampling not in ("measured", "continuous"):
-        raise ValueError(f"model_sampling must be 'measured' or 'continuous', got {model_sampling!r}")
+        raise IrreflectError(f"polar_area_error: model_sampling must be 'measured' or "
+                             f"'continuous'; found {model_sampling!r}")
     n_steps = max(int(np.ceil((theta_deg[-1] - theta_deg[0]) / step_deg)), 2)
     grid = np.unique(np.concatenate([np.linspace(theta_deg[0], theta_deg[-1], n_steps + 1),
                                      theta_deg]))
     r_meas = np.interp(grid, theta_deg, measured)
     if model_sampling == "measured":
-        r_model = np.interp(grid, theta_deg, np.asarray(model_fn(theta_deg), float))
+        r_model = np.asarray(model_fn(theta_deg), float)
+        _paired("polar_area_error", theta_deg, r_model, ("theta_deg", "model_fn"))
+        r_model = np.interp(grid, theta_deg, r_model)
     else:
         r_model = np.asarray(model_fn(grid), float)
+        if r_model.ndim:  # a single number is a constant model
+            _paired("polar_area_error", grid, r_model, ("the angle grid", "model_fn"))
     x = np.radians(grid)
     with np.errstate(over="ignore", invalid="ignore"):  # a wild model: an infinite error
         between = np.trapezoid(np.abs(r_meas**2 - r_model**2), x)
@@ -104,9 +136,10 @@ def polar_area_errors(gamma_deg, theta_deg, measured, predict_deg, step_deg: flo
     ``predict_deg(gamma_deg_array, theta_deg_array) -> power``. Returns ``{|gamma|: error}``
     ordered by increasing magnitude, as in the paper's Table 6.
     """
-    gamma_deg = np.asarray(gamma_deg, float)
-    theta_deg = np.asarray(theta_deg, float)
-    measured = np.asarray(measured, float)
+    gamma_deg, theta_deg = _paired("polar_area_errors", gamma_deg, theta_deg,
+                                   ("gamma_deg", "theta_deg"))
+    gamma_deg, measured = _paired("polar_area_errors", gamma_deg, measured,
+                                  ("gamma_deg", "measured"))
     out = {}
     for g in sorted(np.unique(gamma_deg), key=abs):
         sel = gamma_deg == g

@@ -191,12 +191,14 @@ class Verdict:
         return f"{head}: " + "; ".join(parts)
 
     def to_dict(self) -> dict:
-        return {"stop": self.stop, "verdict": "stop" if self.stop else "continue",
+        from .._jsonio import finite  # strict JSON, as FitResult.to_dict: NaN/inf -> None
+
+        return finite({"stop": self.stop, "verdict": "stop" if self.stop else "continue",
                 "n_measured": self.n_measured, "r2_low": self.r2_band[0],
                 "r2_high": self.r2_band[1], "stability": self.stability,
                 "ill_determined": list(self.ill_determined),
                 "at_bound": list(self.at_bound), "reasons": list(self.reasons),
-                "text": self.text}
+                "text": self.text})
 
 
 @dataclass

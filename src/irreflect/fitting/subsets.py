@@ -9,6 +9,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .. import metrics
+from ..errors import DataError
 from ..models import (
     Geometry,
     get_model,
@@ -71,9 +72,10 @@ def fit_subsets(gamma_deg, theta_deg, power, masks, model="two-lobe", *, sigma=N
     candidates. With ``scan``, global line searches along every coordinate follow (as in
     :func:`fit`), and Levenberg-Marquardt again from any better point. Nothing from the
     points outside the subset is used. The fit's R^2 is then measured against all ``n``
-    points, as a technician who measured only that subset would get. Subsets with fewer
-    points than parameters, or whose fit fails, are marked failed with R^2 = 0 (score
-    1 - R^2 = 1).
+    points, as a technician who measured only that subset would get. Subsets with no
+    more points than parameters (no degree of freedom, which :func:`fit` refuses), or
+    whose fit fails, are marked failed with R^2 = 0 (score 1 - R^2 = 1). Constant power
+    is refused (:class:`~irreflect.errors.DataError`), as :func:`fit` refuses it.
 
     With ``exhaustive``, every subset gets the complete search of :func:`fit` (one
     subset at a time; the screening options above are then ignored): the subset fit is
@@ -96,8 +98,12 @@ def fit_subsets(gamma_deg, theta_deg, power, masks, model="two-lobe", *, sigma=N
     b, n = masks.shape
     p_dim = model_obj.n_nonlinear
     weights_all = np.ones(n) if sigma is None else 1.0 / np.asarray(sigma, float) ** 2
+    if n and power.max() == power.min():  # as fit: R^2 on all points means nothing
+        raise DataError(
+            f"fit_subsets: power is constant ({power[0]:g} at all {n} points): a reflection "
+            "model needs the power measured at varying angles; check the power column")
     counts = masks.sum(axis=1)
-    ok = counts >= model_obj.n_params
+    ok = counts > model_obj.n_params  # a degree of freedom left, as fit requires
     if exhaustive:
         return _fit_subsets_one_by_one(model_obj, gamma, theta, power, masks, weights_all, ok,
                                        seed, engine)

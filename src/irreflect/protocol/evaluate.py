@@ -15,6 +15,7 @@ interpolating across a wide gap (for instance across a specular peak) would inve
 from __future__ import annotations
 
 import itertools
+import numbers
 import warnings
 from dataclasses import dataclass, field, replace
 
@@ -26,7 +27,7 @@ from ..data import Measurements, as_measurements
 from ..errors import FitError, FitWarning, IrreflectError, unknown_name
 from ..fitting import FitResult, fit
 from ..models import get_model, lobe_profile
-from ..validation import short_list
+from ..validation import check_int, short_list
 from .advice import (  # the coefficient checks and the rule live in .advice (re-exported)
     CORRELATION_LIMIT,  # noqa: F401
     MIN_DOF,
@@ -38,7 +39,7 @@ from .advice import (  # the coefficient checks and the rule live in .advice (re
     ill_determined,
     protocol_fails,  # noqa: F401
 )
-from .core import Protocol, glossy_protocol, lobe_half_width_deg, paper_protocol
+from .core import GLOSSY_LAYOUTS, Protocol, glossy_protocol, lobe_half_width_deg, paper_protocol
 from .export import as_protocol
 
 METHODS = ("interpolate", "snap")
@@ -332,6 +333,23 @@ def glossy_protocol_for(dense, reference: FitResult | None = None, *,
 
 
     dense = as_measurements(dense)
+    n_triples = check_int(n_triples, "glossy_protocol_for: n_triples")
+    layouts = (layouts,) if isinstance(layouts, str) else layouts  # one layout
+    if not isinstance(layouts, list | tuple) or not layouts:
+        raise IrreflectError(
+            f"glossy_protocol_for: layouts must name one or more of {', '.join(GLOSSY_LAYOUTS)};"
+            f" found {layouts!r}: pass e.g. layouts=('paper', 'balanced')")
+    for layout in layouts:
+        if layout not in GLOSSY_LAYOUTS:
+            raise unknown_name("glossy protocol layout", str(layout), GLOSSY_LAYOUTS)
+    factors = (lobe_factors,) if isinstance(lobe_factors, numbers.Real) else lobe_factors
+    if not isinstance(factors, list | tuple | np.ndarray) or not len(factors) or not all(
+            isinstance(f, numbers.Real) and not isinstance(f, bool) and 0 < f < np.inf
+            for f in factors):
+        raise IrreflectError(
+            "glossy_protocol_for: lobe_factors must be one or more numbers > 0 (lobe offsets "
+            f"in half widths of the lobe); found {lobe_factors!r}: pass e.g. (0.5, 1.0, 2.0)")
+    lobe_factors = tuple(float(f) for f in factors)
     # the paper's tool reaches +-70 deg; grazing receivers see effects the model lacks
     lo = max(float(np.min(dense.theta_deg)), -70.0) if theta_min is None else float(theta_min)
     hi = min(float(np.max(dense.theta_deg)), 70.0) if theta_max is None else float(theta_max)

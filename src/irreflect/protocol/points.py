@@ -107,7 +107,13 @@ def as_points(points) -> np.ndarray:
                 f"protocol points need columns gamma_deg, theta_deg; missing {sorted(missing)}"
             )
         return points[["gamma_deg", "theta_deg"]].to_numpy(float)
-    arr = np.asarray(points, float)
+    try:
+        arr = np.asarray(points, float)
+    except (TypeError, ValueError):
+        raise IrreflectError(
+            f"protocol points must be (gamma_deg, theta_deg) pairs of numbers (degrees); "
+            f"found {points!r:.60}: pass e.g. [(-20, 0), (-20, 20), ...] or a frame"
+        ) from None
     if arr.ndim != 2 or arr.shape[1] != 2:
         raise IrreflectError(
             f"protocol points must be (gamma_deg, theta_deg) pairs; found shape {arr.shape}"

@@ -799,6 +799,16 @@ def table_hemisphere_integral(mat: Material, n_mu: int = 96, n_az: int = 192) ->
 
 
 # ----------------------------------------------------------------------------- material files
+def _as_number(value):
+    """``value`` as a float when it reads as one, else as given (the schema names it)."""
+    if value is None or isinstance(value, bool):
+        return value
+    try:
+        return float(value)
+    except (TypeError, ValueError):
+        return value
+
+
 def save_material(result, path, *, data_file=None, wavelength_nm=None, notes=None,
                   reflectance=None) -> dict:
     """Write a fitted model as a material file (JSON), atomically.
@@ -826,7 +836,7 @@ def save_material(result, path, *, data_file=None, wavelength_nm=None, notes=Non
         "gamma_range_deg": [float(gamma.min()), float(gamma.max())],
         "data_file": None if data_file is None else str(data_file),
         "reflectance": reflectance,
-        "wavelength_nm": None if wavelength_nm is None else float(wavelength_nm),
+        "wavelength_nm": _as_number(wavelength_nm),
         "notes": notes or "",
     }
     verdict = result.verdict()
@@ -835,8 +845,19 @@ def save_material(result, path, *, data_file=None, wavelength_nm=None, notes=Non
     doc["warnings"] = list(result.warnings)
     if not np.all(np.isfinite(result.values)):
         raise IrreflectError(f"{path}: the fit has non-finite coefficients; nothing written")
+    text = dumps(doc)
+    try:  # nothing is written that load_material refuses
+        _check_material_document(parse_json(text, str(path), _FROM_FIT), path)
+    except IrreflectError as exc:
+        text = str(exc)
+        if "@" in str(result.model):  # a fit at one angle of incidence ('phong@10')
+            text = (f"model '{result.model}' is a fit at one angle of incidence, which a "
+                    "material file cannot hold: save a fit of the model alone "
+                    f"('{str(result.model).partition('@')[0]}')")
+        where = "" if str(path) in text else f"{path}: "
+        raise IrreflectError(f"save_material: {where}{text}; nothing written") from None
     with atomic_path(path, "--save") as tmp:
-        tmp.write_text(dumps(doc))
+        tmp.write_text(text)
     return doc
 
 
@@ -910,6 +931,30 @@ def check_params(model, params: dict, source: str) -> None:
                 f"{p.upper:g} ({p.description}); found {sc.found(value)}")
 
 
+def _check_material_document(doc, path) -> dict:
+    """The rules a material file's document must follow (:func:`load_material` reads only
+    such files, :func:`save_material` writes only such documents): the checked document."""
+    if not isinstance(doc, dict) or doc.get("format") != MATERIAL_FORMAT:
+        raise IrreflectError(f"{path} is not an irreflect material file (no \"format\": "
+                             f"\"{MATERIAL_FORMAT}\"); write one with 'irreflect fit DATA "
+                             "--save MATERIAL.json'")
+    version = doc.get("format_version")
+    if version != MATERIAL_FORMAT_VERSION:
+        raise IrreflectError(f"{path} has format_version {sc.found(version)}; this "
+                             f"irreflect reads version {MATERIAL_FORMAT_VERSION}")
+    doc = sc.validate(MATERIAL_FILE_SCHEMA, doc, str(path))
+    get_model(doc["model"])  # the bounds of its coefficients: from_model
+    extra = sorted(set(doc.get("stderr") or {}) - set(doc["params"]))
+    if extra:
+        raise IrreflectError(f"{path}: stderr has '{extra[0]}', which is not one of the "
+                             f"params ({', '.join(doc['params'])})")
+    grange = doc.get("gamma_range_deg")
+    if grange is not None and grange[0] > grange[1]:
+        raise IrreflectError(f"{path}: gamma_range_deg must be [min, max] with min <= max; "
+                             f"found {list(grange)}")
+    return doc
+
+
 def load_material(path, *, name: str | None = None, reflectance=None) -> Material:
     """Read a material file written by ``irreflect fit --save``.
 
@@ -922,20 +967,7 @@ def load_material(path, *, name: str | None = None, reflectance=None) -> Materia
         text = read_text(path, f"material '{label}'", _FROM_FIT, MAX_MATERIAL_BYTES)
         doc = parse_json(text, str(path), _FROM_FIT)
         path = Path(path)
-        if not isinstance(doc, dict) or doc.get("format") != MATERIAL_FORMAT:
-            raise IrreflectError(f"{path} is not an irreflect material file (no \"format\": "
-                                 f"\"{MATERIAL_FORMAT}\"); write one with 'irreflect fit DATA "
-                                 "--save MATERIAL.json'")
-        version = doc.get("format_version")
-        if version != MATERIAL_FORMAT_VERSION:
-            raise IrreflectError(f"{path} has format_version {sc.found(version)}; this "
-                                 f"irreflect reads version {MATERIAL_FORMAT_VERSION}")
-        doc = sc.validate(MATERIAL_FILE_SCHEMA, doc, str(path))
-        get_model(doc["model"])  # the bounds of its coefficients: from_model
-        extra = sorted(set(doc.get("stderr") or {}) - set(doc["params"]))
-        if extra:
-            raise IrreflectError(f"{path}: stderr has '{extra[0]}', which is not one of the "
-                                 f"params ({', '.join(doc['params'])})")
+        doc = _check_material_document(doc, path)
     except IrreflectError as exc:
         text = str(exc)
         where = "" if str(path) in text else f"{path}: "
@@ -946,9 +978,6 @@ def load_material(path, *, name: str | None = None, reflectance=None) -> Materia
             f"material '{label}': {path} gives no total reflectance: add reflectance = RHO "
             "(0..1) to the scene's material, or save the fit with --reflectance RHO")
     grange = doc.get("gamma_range_deg")
-    if grange is not None and grange[0] > grange[1]:
-        raise IrreflectError(f"material '{label}': {path}: gamma_range_deg must be [min, max] "
-                             f"with min <= max; found {list(grange)}")
     try:
         return from_model(doc["model"], doc["params"], rho, name=label,
                           source=f"{path.name} ({doc['model']})", stderr=doc.get("stderr"),

@@ -430,6 +430,22 @@ def _r2_all(meas: Measurements, mask: np.ndarray, model, seed: int, what: str = 
     return float(metrics.r2(meas.power, res.predict(meas.gamma_deg, meas.theta_deg)))
 
 
+def _check_same_points(meas: Measurements, other, what: str) -> None:
+    """Refuse a search result or fit (``other``: anything with ``gamma_deg``, ``theta_deg``,
+    ``power``) that was not made on the points of ``meas``."""
+    n = np.size(other.power)
+    if n != meas.n_points:
+        raise IrreflectError(
+            f"compare_methods: {what} was made on {n} points, but '{meas.name}' has "
+            f"{meas.n_points}: pass one made on this table")
+    if not (np.array_equal(other.gamma_deg, meas.gamma_deg)
+            and np.array_equal(other.theta_deg, meas.theta_deg)
+            and np.array_equal(other.power, meas.power)):
+        raise IrreflectError(
+            f"compare_methods: {what} was made on other points than those of '{meas.name}' "
+            f"(same count, {meas.n_points}, other angles or power): pass one made on this table")
+
+
 def compare_methods(meas: Measurements, result: SelectionResult | None = None,
                     model="two-lobe", seed: int = 0, protocol_points=None,
                     full_fit=None) -> dict:
@@ -444,6 +460,15 @@ def compare_methods(meas: Measurements, result: SelectionResult | None = None,
     each method has ``r2`` and ``n_points`` (B is None-valued without a 12-point subset).
     """
     meas = as_measurements(meas)
+    if result is not None:
+        _check_same_points(meas, result.measurements, "result (a selection run)")
+    if full_fit is not None:
+        _check_same_points(meas, full_fit, "full_fit")
+        wanted = get_model(model).name
+        if full_fit.model != wanted:
+            raise IrreflectError(
+                f"compare_methods: full_fit is a fit of model '{full_fit.model}', not of "
+                f"'{wanted}': pass a fit of model '{wanted}' on all points, or no full_fit")
     summary = None if result is None else result.front_summary
     if (full_fit is None and summary is not None and summary.n_total == meas.n_points
             and result.model == get_model(model).name):
