@@ -762,6 +762,11 @@ def test_the_protocols_are_replayed_with_the_instruments_errors():
     assert again.curves["paper"].r2[12] == r_noisy  # seeded
     shifted = replay(dense, ("paper",), n_max=10, angle_error_deg=3.0, seed=1)
     assert shifted.curves["paper"].r2[12] != r_clean
+    # the replay's dict is strict JSON: a score that could not be made is null, not NaN
+    clean.curves["paper"].r2[13] = float("nan")
+    d = json.loads(json.dumps(clean.to_dict(), allow_nan=False))
+    assert d["curves"]["paper"]["r2"]["12"] == pytest.approx(r_clean)
+    assert d["curves"]["paper"]["r2"]["13"] is None
 
 
 def test_interpolating_a_lobe_the_table_does_not_resolve_is_warned(tmp_path):

@@ -281,7 +281,10 @@ class ReplayResult:
         return pd.DataFrame(rows)
 
     def to_dict(self) -> dict:
-        return {
+        """The replay as strict JSON (NaN and infinities as None)."""
+        from .._jsonio import finite
+
+        return finite({
             "dataset": self.dataset, "n_points": self.n_points,
             "reference_r2": self.reference_r2, "target": self.target,
             "stop_n": self.stop_n,
@@ -292,7 +295,7 @@ class ReplayResult:
             "proposal_seconds": self.proposal_seconds,
             "settings": self.settings,
             "warnings": self.warnings,
-        }
+        })
 
 
 def _score(model, meas: Measurements, dense: Measurements, seed: int) -> float:
