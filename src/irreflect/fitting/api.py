@@ -119,6 +119,12 @@ def fit(measurements, model="two-lobe", options: FitOptions | None = None,
         return dataclasses.replace(inner, model=str(spec))
     t0 = time.perf_counter()
     meas = as_measurements(measurements)  # a path is read once, for both searches
+    if np.any(meas.gamma_deg > 0):  # only a Measurements built by hand keeps them
+        warn(FitWarning(
+            f"{meas.name}: gamma_deg > 0 in a Measurements object is the paper's frame "
+            "mirrored (mirror at theta = -gamma); a table of magnitudes is read as gamma = "
+            "-|gamma| by read_measurements / validate_table (or fit(DataFrame)): build the "
+            "Measurements with -abs(gamma) if they are magnitudes"), stacklevel=2)
     try:
         result = _fit_search(meas, model, t0, opts)
         failure = None
