@@ -683,25 +683,8 @@ class Campaign:
         meas = self.measurements
         n = meas.n_points
         limit = self.instrument.max_gamma_settings
-        measured_g = {round(g, 6) for g in meas.gamma_deg}
-        spent = bool(limit) and len(measured_g) >= limit
-        # where the curve must hold: the whole range, or, once the instrument has set every
-        # angle of incidence it may, the settings at those angles (elsewhere the fit only
-        # extrapolates, and no reading can pin it down: it would move for ever)
-        where = (np.isin(np.round(self._settings[:, 0], 6), list(measured_g)) if spent
-                 else np.ones(len(self._settings), bool))
-        f = state.range_pred[where]
-        ss_pred = float(np.sum((f - f.mean()) ** 2))
-        # how far the fits on the first n - 1, n - 2 and n - 3 readings lie from this one
-        moves = []
-        for back in range(1, STOP_HOLD + 2):
-            before = self._range_prediction(n - back)
-            before = None if before is None else before[where]
-            if before is None or not np.all(np.isfinite(before)) or ss_pred <= 0:
-                moves.append(float("inf"))
-            else:
-                moves.append(float(np.sum((before - f) ** 2)) / ss_pred)
-        stability = max(moves)
+        spent = bool(limit) and len({round(g, 6) for g in meas.gamma_deg}) >= limit
+        stability = self._stability(state, n, spent)
         # the expected squared difference between the material and the fit over the range:
         # the design's posterior (its variance, and its mean's departure from the fit)
         s_ = self._settings
@@ -762,6 +745,28 @@ class Campaign:
                     f"allows {'are' if limit != 1 else 'is'} set",)
         return Verdict(not reasons, n, (float(r2_lo), float(r2_hi)), stability,
                        tuple(res.ill_determined), tuple(res.at_bound), why)
+
+    def _stability(self, state: _State, n: int, spent: bool) -> float:
+        """How far the fits on the first n - 1, n - 2 and n - 3 readings lie from the current
+        one, as a share of its variance (inf while they do not exist), over the whole
+        range; or, once the instrument has set every angle of incidence it may (``spent``),
+        at those angles only: elsewhere the fit extrapolates and no reading can pin it
+        down, so it would move for ever."""
+        where = np.ones(len(self._settings), bool)
+        if spent:
+            measured = np.unique(np.round(self.measurements.gamma_deg, 6))
+            where = np.isin(np.round(self._settings[:, 0], 6), measured)
+        f = state.range_pred[where]
+        ss_pred = float(np.sum((f - f.mean()) ** 2))
+        moves = []
+        for back in range(1, STOP_HOLD + 2):
+            before = self._range_prediction(n - back)
+            before = None if before is None else before[where]
+            if before is None or not np.all(np.isfinite(before)) or ss_pred <= 0:
+                moves.append(float("inf"))
+            else:
+                moves.append(float(np.sum((before - f) ** 2)) / ss_pred)
+        return max(moves)
 
     def _settled_gap(self, state: _State) -> tuple[float, float, float] | None:
         """The saturated gap (:meth:`_saturated_gap`) when it is all that keeps the verdict

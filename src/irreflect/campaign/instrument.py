@@ -145,23 +145,7 @@ class Instrument:
                             ("gamma_change_cost", cost), ("resolution", resolution)):
             object.__setattr__(self, name, float(value))
         if self.settings_deg is not None:
-            try:
-                s = np.array(self.settings_deg, float)
-            except (TypeError, ValueError):
-                s = np.zeros((0, 3))
-            if s.ndim != 2 or s.shape[1] != 2 or not len(s) or not np.all(np.isfinite(s)):
-                raise IrreflectError(
-                    "settings_deg must be (gamma, theta) pairs in degrees, an array of shape "
-                    f"(n, 2) of finite numbers; found shape {s.shape}: give one row per setting")
-            if np.any(np.abs(s) >= 90):
-                raise IrreflectError(f"settings_deg: angles must lie strictly between -90 and "
-                                     f"90 degrees; found {s[np.abs(s) >= 90][0]:g}")
-            if np.any(s[:, 0] > 0) and np.any(s[:, 0] < 0):
-                raise IrreflectError(
-                    "settings_deg: the angles of incidence mix signs, which is ambiguous: give "
-                    "them all <= 0 (the paper's convention) or all as magnitudes >= 0")
-            s[:, 0] = -np.abs(s[:, 0]) + 0.0  # magnitudes, as gammas_deg (theta kept)
-            object.__setattr__(self, "settings_deg", s)
+            object.__setattr__(self, "settings_deg", _checked_settings(self.settings_deg))
         if not len(self.settings()):
             raise IrreflectError(
                 f"the instrument can take no reading: every receiver angle in [{lo:g}, "
@@ -295,3 +279,25 @@ def thin_settings(settings: np.ndarray, limit: int = MAX_SETTINGS, keep=None) ->
         pick = np.unique(np.round(np.linspace(0, rest.size - 1, room)).astype(int))
         chosen += list(rest[pick])
     return np.sort(np.asarray(chosen, int))
+
+
+def _checked_settings(settings_deg) -> np.ndarray:
+    """``settings_deg`` as an ``(n, 2)`` array of (gamma, theta) in degrees, gammas given
+    as magnitudes read as ``-|gamma|`` (as ``gammas_deg``), or a one-line error."""
+    try:
+        s = np.array(settings_deg, float)
+    except (TypeError, ValueError):
+        s = np.zeros((0, 3))
+    if s.ndim != 2 or s.shape[1] != 2 or not len(s) or not np.all(np.isfinite(s)):
+        raise IrreflectError(
+            "settings_deg must be (gamma, theta) pairs in degrees, an array of shape "
+            f"(n, 2) of finite numbers; found shape {s.shape}: give one row per setting")
+    if np.any(np.abs(s) >= 90):
+        raise IrreflectError(f"settings_deg: angles must lie strictly between -90 and "
+                             f"90 degrees; found {s[np.abs(s) >= 90][0]:g}")
+    if np.any(s[:, 0] > 0) and np.any(s[:, 0] < 0):
+        raise IrreflectError(
+            "settings_deg: the angles of incidence mix signs, which is ambiguous: give "
+            "them all <= 0 (the paper's convention) or all as magnitudes >= 0")
+    s[:, 0] = -np.abs(s[:, 0]) + 0.0  # magnitudes, as gammas_deg (theta kept)
+    return s
