@@ -208,37 +208,6 @@ def test_real_ptfe_comparison(real_dir):
     assert at[75.0] > 3 * at[15.0]
 
 
-# ----------------------------------------------------------------------------- report
-def test_reproduce_section_quick(tmp_path):
-    from irreflect.fitting import fit
-    from irreflect.report import ReportContext
-    from irreflect.report.compare import section as reproduce_section
-
-    datasets = {n: load_bundled(n) for n in ("terrazzo", "plasterboard")}
-    from irreflect.paper import paper_tables_dir
-
-    ctx = ReportContext(datasets=datasets, fits={n: fit(m) for n, m in datasets.items()},
-                        out_dir=tmp_path, quick=True, seed=0, paper_dir=paper_tables_dir(),
-                        reconstructions=frozenset(datasets))
-    section = reproduce_section(ctx)
-    for name in section.tables:
-        assert f"{{table:{name}}}" in section.markdown
-    for name, path in section.figures.items():
-        assert f"{{figure:{name}}}" in section.markdown and path.exists()
-    t6 = section.tables["compare_table6"]
-    assert len(t6) == 12 and set(t6["material"]) == {"terrazzo", "plasterboard"}
-    # reuses the context's two-lobe fit, scored on the same data
-    terr = t6[t6["material"] == "terrazzo"].set_index("gamma_deg")
-    expected = ctx.fits["terrazzo"].polar_errors()
-    assert terr.loc[60.0, "two-lobe (ours)"] == pytest.approx(expected[60.0], abs=0.006)
-    assert (terr["phong@10 (ours)"].iloc[-1] > 5 * terr["two-lobe (ours)"].iloc[-1])
-    models = section.tables["compare_models"]
-    assert {"two-lobe", "phong@10", "lafortune", "torrance-sparrow"} <= set(models["model"])
-    assert terr.loc[60.0, "phong@10 (paper)"] == pytest.approx(45.3)
-    # the noise floor: the generating curve is no better than our two-lobe fit, on average
-    assert terr["noise floor (ours)"].mean() > 0.8 * terr["two-lobe (ours)"].mean()
-
-
 def test_models_with_more_parameters_than_points_are_skipped_when_asked():
     g = np.repeat([-20.0, -40.0], 3)
     t = np.tile([-30.0, 10.0, 40.0], 2)

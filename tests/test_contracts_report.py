@@ -147,6 +147,38 @@ def test_sections_name_their_tables_and_figures_apart(made):
             figures[key] = name
 
 
+def test_report_compare_section(made, context):
+    """The comparison section's numbers (moved here from test_compare.py: the section is
+    computed once, on this module's context, for this and the contract tests above)."""
+    section = made("compare")
+    t6 = section.tables["compare_table6"]
+    assert len(t6) == 12 and set(t6["material"]) == {"terrazzo", "plasterboard"}
+    # reuses the context's two-lobe fit, scored on the same data
+    terr = t6[t6["material"] == "terrazzo"].set_index("gamma_deg")
+    expected = context.fits["terrazzo"].polar_errors()
+    assert terr.loc[60.0, "two-lobe (ours)"] == pytest.approx(expected[60.0], abs=0.006)
+    assert (terr["phong@10 (ours)"].iloc[-1] > 5 * terr["two-lobe (ours)"].iloc[-1])
+    models = section.tables["compare_models"]
+    assert {"two-lobe", "phong@10", "lafortune", "torrance-sparrow"} <= set(models["model"])
+    assert terr.loc[60.0, "phong@10 (paper)"] == pytest.approx(45.3)
+    # the noise floor: the generating curve is no better than our two-lobe fit, on average
+    assert terr["noise floor (ours)"].mean() > 0.8 * terr["two-lobe (ours)"].mean()
+
+
+def test_report_diagnose_section(made):
+    """The diagnosis section's numbers (moved here from test_diagnose.py, where it ran on
+    terrazzo and foam board: the section is computed once, on this module's context)."""
+    from irreflect.diagnose import CATALOGUE, NO_MISSING_EFFECT
+
+    section = made("diagnose")
+    table = section.tables["diagnose_summary"]
+    assert list(table["dataset"]) == list(DATASETS)
+    assert set(table["verdict"]) == {NO_MISSING_EFFECT}
+    assert table["chi2/dof before"].between(0.6, 1.5).all()
+    assert Path(section.figures["diagnose_residuals"]).stat().st_size > 10_000
+    assert len(section.tables["diagnose_candidates"]) == 2 * len(CATALOGUE)
+
+
 def test_report_room_section(made):
     """The room section's numbers (moved here from test_room.py: the section is computed
     once, for this and the contract tests above)."""

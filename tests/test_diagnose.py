@@ -202,24 +202,6 @@ def test_cli_readable_report_and_errors(tmp_path, capsys):
     assert bad.read_text() == "x"
 
 
-# ----------------------------------------------------------------------------- report
-def test_reproduce_section_quick(tmp_path):
-    from irreflect.report import ReportContext
-    from irreflect.report.diagnose import section as reproduce_section
-
-    data = {n: load_bundled(n) for n in ("terrazzo", "foam_board")}
-    ctx = ReportContext(datasets=data, fits={n: fit(m) for n, m in data.items()},
-                        out_dir=tmp_path, quick=True)
-    sec = reproduce_section(ctx)
-    table = sec.tables["diagnose_summary"]
-    assert list(table["dataset"]) == ["terrazzo", "foam_board"]
-    assert set(table["verdict"]) == {NO_MISSING_EFFECT}
-    assert table["chi2/dof before"].between(0.6, 1.5).all()
-    assert "{table:diagnose_summary}" in sec.markdown
-    assert sec.figures["diagnose_residuals"].stat().st_size > 10_000
-    assert len(sec.tables["diagnose_candidates"]) == 2 * len(CATALOGUE)
-
-
 # ----------------------------------------------------------------------------- real data
 @pytest.mark.real
 def test_real_data_verdicts_follow_the_residual_evidence(real_dir):
