@@ -159,6 +159,8 @@ def test_two_runs_through_a_link_and_its_target_are_locked_out_of_each_other(tmp
     (["compare", "{data}", "--models", "two-lobe,,phong"], "remove the extra comma"),
     (["diagnose", "{data}", "--extensions", "background,"], "has an empty name between its "
                                                            "commas"),
+    (["campaign", "{data}", "--strategies", "adaptive,"], "--strategies 'adaptive,' has an "
+                                                         "empty name"),
     (["evaluate-protocol", "{data}", "{data}", "--monte-carlo", "5", "--angle-error", "20"],
      "--angle-error (deg) must be a finite number >= 0 and <= 10; found 20.0"),
 ])

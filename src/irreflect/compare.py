@@ -34,7 +34,7 @@ from .errors import DataError, FitError, IrreflectError
 from .fitting import GAMMA_TOL_DEG as _GAMMA_TOL_DEG
 from .fitting import fit
 from .models import get_model, parse_spec
-from .validation import check_seed
+from .validation import check_seed, split_names
 
 #: Models compared by default; ``phong@{G}`` takes the ``phong_at_deg`` of the call.
 DEFAULT_MODELS = ("two-lobe", "phong@{G}", "phong", "blinn-phong", "lafortune", "ward",
@@ -186,12 +186,7 @@ def parse_model_list(text=None, phong_at_deg: float = 10.0) -> list[str]:
     if text is None or not str(text).strip():
         labels = [m.replace("{G}", g_text) for m in DEFAULT_MODELS]
     else:
-        labels = [t.strip() for t in str(text).split(",")]
-        if any(not t for t in labels) and any(labels):
-            raise IrreflectError(
-                f"--models '{text}' has an empty name between its commas (expected names "
-                "separated by single commas, e.g. two-lobe,phong): remove the extra comma")
-        labels = [t for t in labels if t]
+        labels = split_names(text, "--models", "two-lobe,phong")
     out = []
     for label in labels:
         if label.endswith("@"):

@@ -23,6 +23,20 @@ from .errors import DataError, IrreflectError
 
 
 # ----------------------------------------------------------------------------- text
+def split_names(text: str, option: str, example: str) -> list[str]:
+    """The names of a comma-separated option (``--models two-lobe,phong``), stripped; []
+    when it names none (the caller says what it expected), and a one-line error for an
+    empty name between commas ('a,,b', a trailing comma), which would be dropped silently."""
+    names = [t.strip() for t in str(text).split(",")]
+    if not any(names):
+        return []
+    if not all(names):
+        raise IrreflectError(f"{option} '{text}' has an empty name between its commas "
+                             f"(expected names separated by single commas, e.g. {example}): "
+                             "remove the extra comma")
+    return names
+
+
 def short_list(items, limit: int = 8, fmt=str) -> str:
     """``a, b, c`` for short lists, ``a, b, c, ... (400 in all)`` for long ones: an error
     line names a few values, never hundreds."""

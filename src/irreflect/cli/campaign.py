@@ -238,10 +238,10 @@ def _campaign(args) -> int:
     from ..data import read_measurements
     from ..errors import unknown_name
     from ..models import get_model
-    from ..validation import check_points_budget
+    from ..validation import check_points_budget, split_names
 
     model = get_model(args.model)
-    strategies = [s.strip() for s in args.strategies.split(",") if s.strip()]
+    strategies = split_names(args.strategies, "--strategies", "adaptive,paper")
     if not strategies:
         raise IrreflectError("--strategies: expected a comma-separated list of "
                              f"{', '.join(STRATEGIES)}; found none")

@@ -57,21 +57,18 @@ def _cmd_diagnose(args: argparse.Namespace) -> int:
     from ..errors import IrreflectError
     from ..models import get_model
     from ..models.extensions import get_extension
+    from ..validation import split_names
 
     if not 0.0 < args.alpha < 1.0:
         raise IrreflectError(f"--alpha must lie strictly between 0 and 1 (e.g. 0.01), found "
                              f"{args.alpha:g}")
     extensions = None
     if args.extensions is not None:
-        extensions = [e.strip() for e in args.extensions.split(",") if e.strip()]
+        extensions = split_names(args.extensions, "--extensions", "background,retroreflection")
         if not extensions:
             raise IrreflectError("--extensions is empty: expected a comma-separated list of "
                                  "extensions (see 'irreflect models'), or leave the option out "
                                  "to try them all")
-        if len(extensions) < len(args.extensions.split(",")):
-            raise IrreflectError(f"--extensions '{args.extensions}' has an empty name between "
-                                 "its commas (expected names separated by single commas, e.g. "
-                                 "background,retroreflection): remove the extra comma")
         for name in extensions:
             get_extension(name)
         twice = sorted({n for n in extensions if extensions.count(n) > 1})
