@@ -662,4 +662,6 @@ def test_report_does_not_score_the_protocol_at_other_settings(tmp_path):
     # findings say so too, rather than "no fit failed" above a table that says it did
     care = [f.text for f in section.findings if f.severity == 1 and f.dataset == "sparse15"]
     assert any(t.startswith("the two-lobe fit on all points is NOT trustworthy: specular "
-                            "lobe not resolved") for t in care)
+                            "lobe not resolved at |gamma| 10, 20, 40, 60 deg; shape not "
+                            "reproduced at |gamma| 10, 30, 40, 50, 60 deg (details in the fit "
+                            "checks") for t in care), care

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import re
 import statistics
 import time
 from dataclasses import dataclass
@@ -202,9 +203,18 @@ def _fit_checks(ctx: ReportContext):
                                              f"converge ({res.message})"))
         elif not verdict.trustworthy:  # the fit checks' table says so: the findings too
             findings.append(Finding(1, name, "the two-lobe fit on all points is NOT "
-                                             "trustworthy: " + "; ".join(verdict.problems())
-                                             + " (the fit checks of Tables 2-4)"))
+                                             "trustworthy: " + "; ".join(
+                                                 _short(p) for p in verdict.problems())
+                                             + " (details in the fit checks, Tables 2-4)"))
     return checks, findings
+
+
+def _short(problem: str) -> str:
+    """A fit check's problem in a line: its kind and the angles of incidence it names
+    ('specular lobe not resolved at |gamma| 10, 20 deg'), without the per-angle detail."""
+    kind, sep, rest = problem.partition(" at |gamma| = ")
+    gammas = re.findall(r"(?:^|, )(\d+(?:\.\d+)?) deg \(", rest) if sep else []
+    return f"{kind} at |gamma| {', '.join(gammas)} deg" if gammas else problem
 
 
 def _markdown(ctx: ReportContext, rows2, verdicts, notes, figures) -> str:
