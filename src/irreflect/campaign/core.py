@@ -21,7 +21,6 @@ from __future__ import annotations
 
 import dataclasses
 import os
-import re
 import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -856,10 +855,7 @@ def _relative(res: FitResult, model, meas: Measurements) -> FitResult:
     # the first does not depend on the scale, so it stands whatever the residuals (readings
     # without noise at one angle of incidence leave the laws in gamma undetermined while the
     # rescaled errors are 1e-10)
-    near = set(re.findall(r"(\w+) = \S+ \+- \S+ \(near-singular covariance\)",
-                          " ".join(res.warnings)))
-    singular = np.array([name in res.ill_determined and name in near
-                         for name in res.param_names])
+    singular = np.array([name in res.singular for name in res.param_names])
     at_bound, ill, notes = judge(model, values, stderr, singular,
                                  np.radians(np.unique(meas.gamma_deg)),
                                  res.converged, res.message)

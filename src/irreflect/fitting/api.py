@@ -308,4 +308,6 @@ def _fit_search(meas, model, t0, opts: FitOptions) -> FitResult:
         n_params=model_obj.n_params, nfev=int(n_evals), n_starts=n_starts,
         fit_ms=(time.perf_counter() - t0) * 1e3, seed=seed, cost=cb, converged=converged,
         message=message, at_bound=at_bound, ill_determined=ill, warnings=warnings,
+        singular=tuple(n for n, s in zip(model_obj.param_names, fin.singular, strict=True)
+                       if s),
         model_object=model_obj)

@@ -63,6 +63,9 @@ class FitResult:
     warnings: tuple[str, ...] = ()
     model_object: ReflectionModel | None = field(default=None, compare=False)
     retried: str = ""  # why fit() searched a second time, and what it found (empty: no)
+    #: coefficients along a near-singular direction of the information matrix (among
+    #: ``ill_determined``): a flag that does not depend on the residuals' scale
+    singular: tuple[str, ...] = ()
 
     def __repr__(self) -> str:
         flags = "" if not self.warnings else f", {len(self.warnings)} warning(s)"

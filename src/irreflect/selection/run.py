@@ -487,21 +487,15 @@ def compare_methods(meas: Measurements, result: SelectionResult | None = None,
     points = paper_protocol_points(meas) if protocol_points is None else protocol_points
     if len(_as_points(points)) > meas.n_points:
         # fewer measured points than the protocol has: Method 12 cannot be formed
-        out["12"] = {"r2": None, "n_points": None}
-        out["order_holds"] = True
-        out["note"] = (f"the table has {meas.n_points} points, fewer than the protocol's "
-                       f"{len(_as_points(points))}: Method 12 not available")
-        return out
+        return _without_method12(out, f"the table has {meas.n_points} points, fewer than "
+                                      f"the protocol's {len(_as_points(points))}: Method 12 "
+                                      "not available")
     snapped = snap_points(meas, points)
     try:
         check_snapped(meas, snapped, "the paper's protocol" if protocol_points is None
                       else "the given protocol points")
     except IrreflectError as exc:  # the table lacks the protocol's settings
-        out["12"] = {"r2": None, "n_points": None}
-        b = out["B"]["r2"]
-        out["order_holds"] = bool(b is None or out["A"]["r2"] >= b - 1e-9)
-        out["note"] = f"Method 12 not available: {exc}"
-        return out
+        return _without_method12(out, f"Method 12 not available: {exc}")
     mask_12 = np.zeros(meas.n_points, bool)
     mask_12[snapped["index"].to_numpy()] = True
     gammas = sorted({float(g) for g in snapped["gamma_requested"]}, key=abs)
@@ -527,6 +521,16 @@ def compare_methods(meas: Measurements, result: SelectionResult | None = None,
         else:
             out["note"] = ("12 above B: the search did not find the best 12-point subset within "
                            "its budget (raise --generations or --pop-size)")
+    return out
+
+
+def _without_method12(out: dict, note: str) -> dict:
+    """``out`` of :func:`compare_methods` when Method 12 cannot be formed: A >= B is all
+    the order there is to check."""
+    out["12"] = {"r2": None, "n_points": None}
+    b = out["B"]["r2"]
+    out["order_holds"] = bool(b is None or out["A"]["r2"] >= b - 1e-9)
+    out["note"] = note
     return out
 
 
