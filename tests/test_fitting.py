@@ -144,6 +144,32 @@ def test_subsets_of_constant_power_are_refused_as_fit_refuses_it():
         fit_subsets(meas.gamma_deg, meas.theta_deg, np.ones(meas.n_points), masks)
 
 
+def test_subsets_at_positive_gammas_say_which_frame_they_read():
+    """fit_subsets(|gamma|, ...) fitted the magnitudes in the mirrored frame without a word
+    (a table's gammas >= 0 are read as -|gamma|): the warning of FitResult.predict, once per
+    call, not once per subset."""
+    import warnings as _w
+
+    from irreflect.errors import FitWarning
+
+    meas = synthetic(noise=0.004, seed=5)
+    masks = np.ones((3, meas.n_points), bool)
+    masks[1, ::2] = False
+    masks[2, ::3] = False
+    with _w.catch_warnings(record=True) as caught:
+        _w.simplefilter("always")
+        mirrored = fit_subsets(-meas.gamma_deg, -meas.theta_deg, meas.power, masks)
+        said = [str(w.message) for w in caught if issubclass(w.category, FitWarning)]
+        assert len(said) == 1 and said[0].startswith("fit_subsets got gamma_deg > 0, read as "
+                                                     "the paper's frame mirrored")
+        assert "pass -abs(gamma) to fit them at a table's settings" in said[0]
+        caught.clear()
+        plain = fit_subsets(meas.gamma_deg, meas.theta_deg, meas.power, masks)
+    assert not caught  # the paper's frame: nothing to say
+    # the mirrored frame indeed: both angles' signs changed give the same fits
+    np.testing.assert_allclose(mirrored.params, plain.params, rtol=1e-6, atol=1e-9)
+
+
 def test_same_seed_same_result_and_result_is_frozen():
     meas = synthetic(noise=0.01, seed=11)
     a, b = fit(meas, seed=4), fit(meas, seed=4)

@@ -24,6 +24,16 @@ from .cache import per_model
 
 
 # ----------------------------------------------------------------------------- results
+def mirrored_gamma_warning(who: str, to: str) -> FitWarning:
+    """The warning for angles of incidence > 0 given to ``who`` (``FitResult.predict``,
+    ``fit_subsets``): the model reads them in the paper's frame mirrored, where a table's
+    gammas >= 0 are read as magnitudes; ``to``: what ``-abs(gamma)`` lets the caller do."""
+    return FitWarning(
+        f"{who} got gamma_deg > 0, read as the paper's frame mirrored (the source on the "
+        "positive side, mirror at theta = -gamma); a table's gammas >= 0 are read as "
+        f"magnitudes (gamma = -|gamma|, theta kept): pass -abs(gamma) to {to}")
+
+
 @dataclass(frozen=True, repr=False)
 class FitResult:
     """Outcome of one fit. Frozen: the fitter is not kept inside it.
@@ -102,11 +112,8 @@ class FitResult:
         model = self.model_object or get_model(self.model)
         gamma_deg, theta_deg = check_angles_deg(gamma_deg, theta_deg)
         if np.any(np.asarray(gamma_deg) > 0):
-            warn(FitWarning(
-                f"{self.model}: predict() got gamma_deg > 0, read as the paper's frame "
-                "mirrored (the source on the positive side, mirror at theta = -gamma); a "
-                "table's gammas >= 0 are read as magnitudes (gamma = -|gamma|, theta kept): "
-                "pass -abs(gamma) to predict at its settings"), stacklevel=2)
+            warn(mirrored_gamma_warning(f"{self.model}: predict()", "predict at its settings"),
+                 stacklevel=2)
         return model.predict_deg(self.values, gamma_deg, theta_deg)
 
     @property

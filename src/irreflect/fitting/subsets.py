@@ -5,6 +5,7 @@ inner loop). The compiled side: :mod:`.subsets_kernel`.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from warnings import warn
 
 import numpy as np
 
@@ -18,6 +19,7 @@ from ..validation import check_fit_options, check_seed, check_starts, check_subs
 from .engine import _kernel_codes, _kernel_geometry, _kernel_static, _w
 from .local import STOP_FTOL, STOP_STUCK, STOP_XTOL, _levenberg_marquardt
 from .options import FitOptions
+from .results import mirrored_gamma_warning
 from .screening import (
     _block_candidates,
     _projected_cost,
@@ -93,6 +95,9 @@ def fit_subsets(gamma_deg, theta_deg, power, masks, model="two-lobe", *, sigma=N
     seed = check_seed(seed)
     gamma_deg, theta_deg, power, masks, sigma = check_subset_inputs(gamma_deg, theta_deg, power,
                                                                     masks, sigma)
+    if gamma_deg.size and gamma_deg.max() > 0:  # once per call, as FitResult.predict says it
+        warn(mirrored_gamma_warning("fit_subsets", "fit them at a table's settings"),
+             stacklevel=2)
     gamma = np.radians(gamma_deg)
     theta = np.radians(theta_deg)
     b, n = masks.shape
