@@ -267,6 +267,26 @@ def test_predict_at_positive_gammas_says_which_frame_it_reads():
     assert "pass -abs(gamma)" in said[0]
 
 
+def test_predict_refuses_none_for_an_angle_in_one_line():
+    """predict(None, 30) gave NaN and predict(-10, None) 0.0 (None read as NaN): an angle
+    that is not a number is refused; NaN itself still gives NaN (a missing angle)."""
+    from irreflect.errors import IrreflectError
+
+    res = fit(synthetic(noise=0.003, seed=2), seed=0)
+    with pytest.raises(IrreflectError, match=r"^gamma_deg must be numbers; found None: give a "
+                       r"number for every value \(NaN for a missing one\)$"):
+        res.predict(None, 30)
+    with pytest.raises(IrreflectError, match=r"^theta_deg must be numbers; found None: "):
+        res.predict(-10, None)
+    with pytest.raises(IrreflectError, match=r"^theta_deg must be numbers; found None at "
+                       r"index 1: "):
+        res.predict(-10, [0.0, None])
+    with pytest.raises(IrreflectError, match=r"^gamma_deg must be numbers; found "):
+        res.predict(object(), 30)
+    assert np.isnan(res.predict(np.nan, 30.0))
+    assert res.predict(-10.0, 10.0) > 0
+
+
 def test_a_hand_built_table_of_positive_gammas_is_named_when_fitted():
     """fit(Measurements(|gamma|, ...)) read the magnitudes in the mirrored frame: R^2 0.047
     with only 'measure more angles' to say why, where the same DataFrame fits to 0.99."""

@@ -159,6 +159,12 @@ def check_real_array(values, name: str, *, ndim: int | None = 1, finite: bool = 
     if np.iscomplexobj(arr):
         raise DataError(f"{where}{name} holds complex numbers; expected real numbers: pass "
                         "the magnitude (abs) or the real part")
+    if arr.dtype == object:  # None is no number: astype(float) would make it NaN
+        missing = next((i for i, v in enumerate(arr.flat) if v is None), None)
+        if missing is not None:
+            at = f" at index {missing}" if arr.ndim else ""
+            raise DataError(f"{where}{name} must be numbers; found None{at}: give a number "
+                            f"for every value{'' if finite else ' (NaN for a missing one)'}")
     if arr.dtype.kind not in "iuf":
         try:
             arr = arr.astype(float)
