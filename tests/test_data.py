@@ -71,6 +71,32 @@ def test_validation_errors_are_one_line_and_say_how_to_fix(tmp_path, text, patte
     assert "\n" not in str(info.value)
 
 
+def test_series_with_different_indexes_are_refused_not_paired_by_position():
+    """Measurements(Series, Series, Series) whose indexes differ paired the values by
+    position silently (gamma of label 5 with power of label 0); equal indexes still pass."""
+    from irreflect.data import Measurements
+
+    df = synthetic(noise=0.004, seed=1).to_frame()
+    shifted = df.set_axis(df.index + 5)
+    with pytest.raises(DataError, match=r"^Measurements 'measurements': gamma_deg and power are "
+                       r"pandas Series with different indexes \(5, 6, 7, \.\.\. and 0, 1, 2, "
+                       r"\.\.\.\), which would pair their values by position, not by label: "
+                       r"take them from one DataFrame, call \.reset_index\(drop=True\) on each, "
+                       r"or pass arrays \(\.to_numpy\(\)\)$"):
+        Measurements(shifted["gamma_deg"], shifted["theta_deg"], df["power"])
+    sigma = pd.Series(np.full(len(df), 0.01)).iloc[::-1]  # the same labels, another order
+    with pytest.raises(DataError, match="gamma_deg and sigma are pandas Series with different"):
+        Measurements(df["gamma_deg"], df["theta_deg"].to_numpy(), df["power"].to_numpy(),
+                     sigma=sigma)
+    fixed = Measurements(shifted["gamma_deg"].reset_index(drop=True), df["theta_deg"],
+                         df["power"])
+    np.testing.assert_array_equal(fixed.gamma_deg, df["gamma_deg"].to_numpy())
+    same = Measurements(shifted["gamma_deg"], shifted["theta_deg"], shifted["power"])
+    np.testing.assert_array_equal(same.power, df["power"].to_numpy())
+    one = Measurements(shifted["gamma_deg"], df["theta_deg"].to_numpy(), df["power"].to_numpy())
+    assert one.n_points == len(df)  # one Series among arrays: nothing to pair by label
+
+
 def test_missing_file_and_unknown_type(tmp_path):
     with pytest.raises(DataError, match="no such file"):
         read_measurements(tmp_path / "absent.csv")

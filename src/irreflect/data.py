@@ -71,6 +71,7 @@ class Measurements:
     def __post_init__(self):
         # arrays of real, finite numbers, one per point (lists are converted)
         source = f"Measurements '{self.name}'"
+        _check_series_aligned(self, source)
         arrays = {k: check_real_array(getattr(self, k), k, source=source)
                   for k in ("gamma_deg", "theta_deg", "power")}
         if self.sigma is not None:
@@ -125,6 +126,25 @@ class Measurements:
 
 def _fail(msg: str):
     raise DataError(msg)
+
+
+def _check_series_aligned(meas, source: str) -> None:
+    """pandas Series given for the columns of a :class:`Measurements` pair up by position
+    once converted to arrays: refuse Series whose indexes differ (they would pair the
+    rows of different labels)."""
+    series = {k: getattr(meas, k) for k in ("gamma_deg", "theta_deg", "power", "sigma")
+              if isinstance(getattr(meas, k), pd.Series)}
+    if len(series) < 2:
+        return
+    (first, ref), *rest = series.items()
+    for k, s in rest:
+        if not s.index.equals(ref.index):
+            def shown(index):
+                return short_list(index[:3].tolist(), 3) + (", ..." if len(index) > 3 else "")
+            _fail(f"{source}: {first} and {k} are pandas Series with different indexes "
+                  f"({shown(ref.index)} and {shown(s.index)}), which would pair their values "
+                  "by position, not by label: take them from one DataFrame, call "
+                  ".reset_index(drop=True) on each, or pass arrays (.to_numpy())")
 
 
 #: sigma must lie within these multiples of the largest |power|: weights 1/sigma^2 beyond
