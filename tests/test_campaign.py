@@ -65,6 +65,14 @@ def test_instrument_settings_follow_its_limits():
 
 @pytest.mark.parametrize("kwargs, fragment", [
     (dict(gammas_deg=()), "at least one angle of incidence"),
+    # None said 'found nan' (read as NaN), and text was a bare numpy ValueError
+    (dict(gammas_deg=None), r"^gammas_deg must list the angles of incidence the source arm can "
+                            r"be set to, in degrees; found None: pass e\.g\. "
+                            r"gammas_deg=\(-10, -30, -50\) \(--gammas G \[G \.\.\.\]\)$"),
+    (dict(gammas_deg=[-10, None]), r"^the instrument: gammas_deg \(the angles of incidence\) "
+                                   r"must be numbers; found None at index 1: "),
+    (dict(gammas_deg="abc"), r"gammas_deg \(the angles of incidence\) must be numbers; "
+                             r"found (np\.str_\()?'abc'"),
     (dict(gammas_deg=(-20, 30)), "mix signs"),
     (dict(gammas_deg=(-95,)), "strictly between -90 and 90"),
     (dict(gammas_deg=(-20,), theta_min=50, theta_max=-50), "theta_min < theta_max"),

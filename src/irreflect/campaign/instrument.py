@@ -23,7 +23,7 @@ import numpy as np
 
 from ..errors import IrreflectError
 from ..models.aperture import unresolved as unresolved_lobe
-from ..validation import check_number
+from ..validation import check_number, check_real_array
 
 #: Largest number of settings a campaign scores at once (the range and the candidates are
 #: thinned to this many, keeping the settings near a mirror direction first): the
@@ -86,7 +86,12 @@ class Instrument:
     settings_deg: np.ndarray | None = field(default=None, repr=False, compare=False)
 
     def __post_init__(self):
-        gammas = np.asarray(self.gammas_deg, float).ravel()
+        if self.gammas_deg is None:
+            raise IrreflectError("gammas_deg must list the angles of incidence the source arm "
+                                 "can be set to, in degrees; found None: pass e.g. "
+                                 "gammas_deg=(-10, -30, -50) (--gammas G [G ...])")
+        gammas = check_real_array(self.gammas_deg, "gammas_deg (the angles of incidence)",
+                                  ndim=None, source="the instrument").ravel()
         if gammas.size == 0:
             raise IrreflectError("the instrument needs at least one angle of incidence "
                                  "(--gammas G [G ...]); found none")
