@@ -929,6 +929,38 @@ def test_fit_takes_the_receivers_resolution_as_next_does(tmp_path):
     assert code != 0 and "drop '@G' or --resolution" in err and "\n" not in err.strip()
 
 
+def test_fit_averaged_of_one_angle_of_incidence_says_what_to_call():
+    """fit_averaged(m, 'phong@10') said 'give it where a fit is made (irreflect fit,
+    compare)', naming commands to an API caller already making a fit: at width 0 it is the
+    plain fit that fit_averaged documents; wider, the error names the calls that work."""
+    from irreflect.data import load_bundled
+    from irreflect.fitting import fit, fit_averaged, points_at_incidence
+    from irreflect.models import get_model
+
+    meas = load_bundled("terrazzo")
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        point = fit_averaged(meas, "phong@10")
+        plain = fit(meas, "phong@10")
+        assert point.model == "phong@10" and point.n_points == plain.n_points < meas.n_points
+        np.testing.assert_array_equal(point.values, plain.values)
+        with pytest.raises(IrreflectError, match=(
+                r"^fit_averaged: model 'phong@10' with width_deg 2: '@10' fits the readings of "
+                r"one angle of incidence as points, not averaged over a receiver: call "
+                r"fit\(measurements, 'phong@10'\) for that fit, or fit_averaged\("
+                r"points_at_incidence\(measurements, 10\), 'phong', 2\) to fit those readings "
+                r"averaged$")):
+            fit_averaged(meas, "phong@10", 2.0)
+        # the call the message names works
+        averaged = fit_averaged(points_at_incidence(meas, 10), "phong", 2.0)
+        assert averaged.model == "phong" and averaged.n_points == plain.n_points
+    with pytest.raises(IrreflectError, match=r"resolution \(--resolution, deg\) must be"):
+        fit_averaged(meas, "phong@10", -1.0)  # the width is checked first, as without '@'
+    with pytest.raises(IrreflectError, match=r"in Python fit\(data, 'phong@10'\)\), or the "
+                       r"model alone \('phong'\)$"):
+        get_model("phong@10")
+
+
 def _receiver_readings(params, width):
     """Readings of a two-lobe material by a receiver ``width`` deg wide (0: a point): every
     degree within 6 deg of each mirror and 9 receiver angles across -80..80 deg, at gamma

@@ -157,13 +157,23 @@ def fit_averaged(measurements, model="two-lobe", width_deg: float = 0.0,
     ``settings`` as for :func:`fit`), and local searches from its optimum (and any
     ``extra_starts``) fit the average. The coefficients are the material's, as a point
     receiver would see it; the result's ``predict`` gives what the receiver reads (its
-    ``model_object`` is the averaged model)."""
+    ``model_object`` is the averaged model). A model ``MODEL@G`` (one angle of incidence)
+    is fitted as points (:func:`fit`), so only with ``width_deg`` 0."""
     from ..models.aperture import with_aperture
 
-    point_model = get_model(model)
+    spec = parse_spec(model) if isinstance(model, str) and "@" in model else None
+    point_model = get_model(model if spec is None else spec.model_text)
     averaged = with_aperture(point_model, width_deg)
     if averaged is point_model:
-        return fit(measurements, point_model, options, **settings)
+        return fit(measurements, point_model if spec is None else model, options, **settings)
+    if spec is not None:  # get_model's message names the commands, not this function
+        at, width = f"{spec.at_gamma_deg:g}", f"{float(width_deg):g}"
+        raise IrreflectError(
+            f"fit_averaged: model '{spec}' with width_deg {width}: '@{at}' fits the readings "
+            "of one angle of incidence as points, not averaged over a receiver: call "
+            f"fit(measurements, '{spec}') for that fit, or fit_averaged(points_at_incidence("
+            f"measurements, {at}), '{spec.model_text}', {width}) to fit those readings "
+            "averaged")
     point = fit(measurements, point_model, options, **settings)
     opts = _options(options, settings)
     z0 = point_model.from_natural(np.asarray(point.values, float)[None])[0]

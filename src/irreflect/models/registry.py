@@ -148,7 +148,8 @@ def get_model(model) -> ReflectionModel:
         raise IrreflectError(
             f"model '{spec}': '@{spec.at_gamma_deg:g}' chooses the points a model is fitted "
             "to (one angle of incidence); give it where a fit is made (irreflect fit, "
-            f"compare), or the model alone ('{spec.model_text}')"
+            f"compare; in Python fit(data, '{spec}')), or the model alone "
+            f"('{spec.model_text}')"
         )
     key = spec.model_text
     if key not in _MODEL_CACHE:
