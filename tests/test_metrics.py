@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 from irreflect import metrics
+from irreflect.errors import MetricWarning
 
 
 def test_r2_rmse_mse_by_hand():
@@ -87,4 +88,25 @@ def test_arrays_of_other_lengths_are_refused_not_broadcast():
     np.testing.assert_allclose(metrics.r2([1.0, 2.0, 3.0], np.ones((2, 3))), [-1.5, -1.5])
     np.testing.assert_allclose(metrics.normalized_residuals([2.0, 4.0], [1.0, 5.0], sigma=0.5),
                                [2.0, -2.0])
-    assert metrics.r2([1.0, 1.0, 1.0], [1.0, 2.0, 3.0]) == -np.inf
+    with pytest.warns(MetricWarning):
+        assert metrics.r2([1.0, 1.0, 1.0], [1.0, 2.0, 3.0]) == -np.inf
+
+
+def test_r2_of_a_constant_target_warns_that_it_is_undefined():
+    """r2 of a constant target returned -inf (or NaN) without a word: SS_tot = 0."""
+    import warnings
+
+    with pytest.warns(MetricWarning, match=r"^r2: R\^2 is undefined for a constant target "
+                      r"\(measured is 2 at all 4 point\(s\), so SS_tot = 0\); returned -inf "
+                      r"\(NaN where predicted matches it exactly\): score such a target with "
+                      r"rmse or mse instead$") as said:
+        assert metrics.r2([2.0] * 4, [1.0, 2.0, 3.0, 4.0]) == -np.inf
+    assert len(said) == 1 and said[0].filename == __file__  # the caller's line
+    with pytest.warns(MetricWarning, match=r"measured is 4 at all 3 point\(s\) in 1 of 2 rows"):
+        out = metrics.r2([[1.0, 2.0, 3.0], [4.0, 4.0, 4.0]], [1.0, 2.0, 4.0])
+    assert out[0] == pytest.approx(0.5) and out[1] == -np.inf  # one warning for the batch
+    with pytest.warns(MetricWarning):
+        assert np.isnan(metrics.r2([3.0, 3.0], [3.0, 3.0]))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # a varying target: nothing to say
+        assert metrics.r2([1.0, 2.0, 3.0], np.ones((2, 3))).tolist() == [-1.5, -1.5]

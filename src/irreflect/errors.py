@@ -43,6 +43,11 @@ class FitWarning(UserWarning):
     command prints these as one line each on stderr (``irreflect: warning: ...``)."""
 
 
+class MetricWarning(RuntimeWarning):
+    """A measure of fit that is undefined for its input (R^2 of a constant target): the
+    value returned (-inf, NaN) is no score of the fit."""
+
+
 def unknown_name(kind: str, name: str, valid) -> UnknownNameError:
     """Build the one-line error for a registry look-up that failed."""
 

@@ -6,9 +6,11 @@ batch of predictions ``(B, n)`` against one measured vector ``(n,)`` gives ``B``
 
 from __future__ import annotations
 
+from warnings import warn
+
 import numpy as np
 
-from .errors import IrreflectError
+from .errors import IrreflectError, MetricWarning
 
 #: Below this R^2 a model misses a table's shape: a campaign that stops on such a fit, and
 #: a protocol judged against an all-points fit this poor, say so and name
@@ -37,13 +39,35 @@ def _paired(what: str, measured, predicted, names=("measured", "predicted")):
 
 
 def r2(measured, predicted) -> float | np.ndarray:
-    """Coefficient of determination ``1 - SS_res / SS_tot`` along the last axis."""
+    """Coefficient of determination ``1 - SS_res / SS_tot`` along the last axis.
+
+    Undefined for a constant target (``SS_tot = 0``): -inf is returned (NaN where the
+    prediction matches it exactly), with a :class:`~irreflect.errors.MetricWarning`."""
     measured, predicted = _paired("r2", measured, predicted)
     ss_res = np.sum((measured - predicted) ** 2, axis=-1)
     ss_tot = np.sum((measured - measured.mean(axis=-1, keepdims=True)) ** 2, axis=-1)
     with np.errstate(divide="ignore", invalid="ignore"):
         out = 1.0 - ss_res / ss_tot
+    constant = ss_tot == 0
+    if np.any(constant):
+        _warn_constant_target(measured, constant)
     return float(out) if np.ndim(out) == 0 else out
+
+
+def _warn_constant_target(measured: np.ndarray, constant: np.ndarray) -> None:
+    """The warning of :func:`r2` for a target that does not vary (one line)."""
+    n = measured.shape[-1]
+    where = (f" in {int(np.sum(constant))} of {constant.size} rows" if measured.ndim > 1
+             else "")
+    if n:
+        first = measured.reshape(-1, n)[int(np.flatnonzero(np.ravel(constant))[0])]
+        what = f"measured is {first[0]:g} at all {n} point(s){where}"
+    else:
+        what = "measured has no points"
+    warn(MetricWarning(
+        f"r2: R^2 is undefined for a constant target ({what}, so SS_tot = 0); returned "
+        "-inf (NaN where predicted matches it exactly): score such a target with rmse or mse "
+        "instead"), stacklevel=3)
 
 
 def mse(measured, predicted) -> float | np.ndarray:
