@@ -272,6 +272,27 @@ def test_cli_writes_every_output(noisy, tmp_path, capsys):
     assert "knee: N =" in printed.out
 
 
+def test_cli_max_points_above_the_table_is_clamped_with_a_warning(noisy, tmp_path, capsys):
+    """--max-points 500 on a 132-point table ran as all points, the run line saying 'all
+    points' and nothing about the 500: a warning names both, and the run is the clamped one."""
+    data = write_measurements(noisy, tmp_path / "noisy.csv")
+    code = main(["select", str(data), "--pop-size", "8", "--generations", "2", "--quiet",
+                 "--max-points", "500", "--out", str(tmp_path / "out")])
+    assert code == 0
+    printed = capsys.readouterr()
+    said = [line for line in printed.err.splitlines() if "--max-points" in line]
+    assert said == ["irreflect: warning: noisy: --max-points 500 exceeds the table's 132 points: "
+                    "subsets of up to all 132 points are searched (as with --max-points 132)"]
+    assert "noisy: 132 points, selector nsga2, population 8, 2 generations, all points" in \
+        printed.out
+    summary = json.loads((tmp_path / "out" / "summary.json").read_text())
+    assert summary["settings"]["max_points"] == 132
+    # at the table's size, or below it, there is nothing to say
+    assert main(["select", str(data), "--pop-size", "8", "--generations", "2", "--quiet",
+                 "--max-points", "132", "--out", str(tmp_path / "same")]) == 0
+    assert "--max-points" not in capsys.readouterr().err
+
+
 def test_cli_several_seeds_write_one_folder_per_run(noisy, tmp_path):
     data = write_measurements(noisy, tmp_path / "noisy.csv")
     out = tmp_path / "multi"

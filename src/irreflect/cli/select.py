@@ -147,6 +147,13 @@ def _cmd_select(args) -> int:
             check_selection_budget(meas.n_points, args.max_points, str(path))
             check_search_budget(args.pop_size, args.generations, meas.n_points,
                                 pop_option="--pop-size", gen_option="--generations")
+            if args.max_points is not None and args.max_points > meas.n_points:
+                # the search clamps it (run_selection): said before the work, not hidden
+                # behind the run line's "all points"
+                n = meas.n_points
+                print(f"irreflect: warning: {meas.name}: --max-points {args.max_points} "
+                      f"exceeds the table's {n} points: subsets of up to all {n} points are "
+                      f"searched (as with --max-points {n})", file=sys.stderr)
             tables.append(meas)
         return _run_and_write(args, tables, seeds, out, flat)
 
