@@ -177,6 +177,35 @@ def load(kind: str, seed: int):
     raise ValueError(kind)
 
 
+def platform_line() -> str:
+    """The machine and the numeric libraries the numbers were measured with: a campaign's
+    curve can change at a borderline set from one machine to another (the fits' sums and
+    numpy's exp/pow take different vector paths on different CPUs, and a fit of 8-15
+    readings that sits between two optima can then land in the other)."""
+    import platform
+
+    import numba
+    import scipy
+
+    cpu = platform.processor() or platform.machine()
+    try:
+        with open("/proc/cpuinfo") as fh:
+            info = fh.read()
+        names = [ln.split(":", 1)[1].strip() for ln in info.splitlines()
+                 if ln.startswith("model name")]
+        flags = next((ln.split(":", 1)[1].split() for ln in info.splitlines()
+                      if ln.startswith("flags")), [])
+        if names:
+            cpu = names[0]
+        wide = "avx512f" if "avx512f" in flags else "avx2" if "avx2" in flags else ""
+        if wide:
+            cpu += f" ({wide})"
+    except OSError:
+        pass
+    return (f"platform: {cpu}, {os.cpu_count()} cores; numpy {np.__version__}, scipy "
+            f"{scipy.__version__}, numba {numba.__version__}")
+
+
 # ----------------------------------------------------------------------------- one table
 def _warm_worker():
     """Load the compiled fitting kernel once per worker process, before any campaign is
@@ -423,6 +452,7 @@ def main(argv=None) -> int:
     t0 = time.perf_counter()
     print(f"{len(jobs_r)} real and {len(jobs_g)} generated tables, {args.workers} workers, "
           f"{args.n_max} readings per campaign", flush=True)
+    print(platform_line(), flush=True)
     with ProcessPoolExecutor(args.workers, initializer=_warm_worker) as pool:
         rows = list(pool.map(run_one, jobs_r + jobs_g))
     real, gen = rows[:len(jobs_r)], rows[len(jobs_r):]

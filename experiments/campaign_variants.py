@@ -103,6 +103,10 @@ def main(argv=None) -> int:
     jobs = [(str(f), how, args.readings, changes) for f in files for how in CUTS]
     t0 = time.perf_counter()
     rows = []
+    sys.path.insert(0, str(Path(__file__).resolve().parent))
+    from bench_campaign import platform_line
+
+    print(platform_line())
     print(f"{'dataset':28} {'cut':10} {'pts':>5} {'R2 all':>7} {'N':>3} {'stop (R2)':>14} "
           f"{'slowest (s)':>11}")
     with ProcessPoolExecutor(args.workers) as ex:
