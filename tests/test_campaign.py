@@ -485,6 +485,34 @@ def test_readings_negative_beyond_noise_are_refused_in_one_line(tmp_path):
     assert validate_table(pd.DataFrame(peaks, columns=cols), partial=True).n_points == 7
 
 
+def test_a_known_noise_floor_keeps_the_first_noisy_readings_of_a_replay():
+    # a mirror-like material with additive detector noise (bench_campaign.py wild-710): its
+    # first readings off the unresolved peak are mostly noise, 3 of 5 below zero and one
+    # at -2.2e6 against a largest reading of 2.5e6. Without a noise floor the campaign
+    # took them for a sign error and the replay stopped at its 5th reading
+    from irreflect.data import validate_table
+    from irreflect.synthetic import wild_material
+
+    cols = ["gamma_deg", "theta_deg", "power"]
+    rows = [(-30.0, 30.0, 2.5e6), (-60.0, 60.0, -2.2e6), (-45.0, 45.0, -1.0e6),
+            (-30.0, -20.0, 3.0e5), (-60.0, 0.0, -4.0e5)]
+    with pytest.raises(DataError, match="3 of the 5 nonzero readings are negative"):
+        validate_table(pd.DataFrame(rows, columns=cols), partial=True)
+    with pytest.raises(DataError, match="give the readings' noise"):
+        validate_table(pd.DataFrame(rows[:2], columns=cols), partial=True)
+    kept = validate_table(pd.DataFrame(rows, columns=cols), partial=True, noise_floor=3e6)
+    assert kept.n_points == 5
+    # beyond the floor: still a sign error
+    with pytest.raises(DataError, match="beyond 25% of the largest reading"):
+        validate_table(pd.DataFrame(rows, columns=cols), partial=True, noise_floor=2e6)
+    with pytest.raises(IrreflectError, match="noise_floor"):
+        Campaign(Instrument(gammas_deg=(-30, -60)), noise_floor=-1.0)
+    dense = wild_material(710).measurements
+    assert float(np.min(dense.power)) < -2e6  # the table's own noise, which it accepts
+    curve, verdicts, _ = replay_adaptive(DenseInstrument(dense), n_max=10)
+    assert max(curve.r2) == 10 and np.isfinite(curve.r2[10])
+
+
 def test_a_coarse_receiver_step_says_the_mirror_is_not_reached(tmp_path):
     measured = tmp_path / "measured.csv"
     measured.write_text("gamma_deg,theta_deg,power\n")

@@ -29,6 +29,7 @@ from .validation import (
     MAX_FILE_BYTES,
     MAX_TABLE_ROWS,
     check_bool,
+    check_number,
     check_real_array,
     short_list,
 )
@@ -437,23 +438,23 @@ def _one_material(df: pd.DataFrame, source: str) -> str | None:
     return mats[0] if len(mats) else None
 
 
-def _check_partial_negative(power, sigma, source, rows) -> None:
+def _check_partial_negative(power, sigma, source, rows, noise_floor: float = 0.0) -> None:
     """Negative readings of a campaign (see :data:`PARTIAL_NEGATIVE_TOLERANCE`): refused
     when most of at least four nonzero readings are negative, or when a reading lies below
     -that share of a larger positive reading (and below -4 sigma), or (with at least four
     nonzero readings) below every positive one and 4 times the median |reading| (a peak with
     its sign flipped); a negative reading with no larger positive one beside it and of the
     size of the others may be noise around a small signal, and is kept."""
-    neg = power < 0
+    neg = power < -noise_floor  # within the known noise floor: noise, not a sign error
     if not neg.any():
         return
-    nonzero = int(np.count_nonzero(power))
+    nonzero = int(np.count_nonzero(np.abs(power) > noise_floor))
     if nonzero >= 4 and 2 * int(neg.sum()) > nonzero:
         _fail(f"{source}: power must be >= 0 up to noise; {int(neg.sum())} of the "
               f"{nonzero} nonzero readings are negative: check the detector offset or the "
               "sign of the column")
     top = float(np.max(power))
-    limit = np.full(power.shape, PARTIAL_NEGATIVE_TOLERANCE * max(top, 0.0))
+    limit = np.full(power.shape, max(PARTIAL_NEGATIVE_TOLERANCE * max(top, 0.0), noise_floor))
     if sigma is not None:
         limit = np.maximum(limit, 4.0 * sigma)
     bad = (power < -limit) & (-power <= top)
@@ -466,22 +467,28 @@ def _check_partial_negative(power, sigma, source, rows) -> None:
         i = int(np.nonzero(bad)[0][0])
         _fail(f"{source}: power must be >= 0 up to noise; found {power[i]:g} at {rows(i)}, "
               f"beyond {PARTIAL_NEGATIVE_TOLERANCE:.0%} of the largest reading ({top:g}): "
-              "check the detector offset or the sign of the column")
+              "check the detector offset or the sign of the column, or give the readings' "
+              "noise (a sigma column; down to -4 sigma is kept)")
 
 
 def validate_table(df: pd.DataFrame, source: str = "table", *,
                    average_duplicates: bool = False, name: str | None = None,
-                   partial: bool = False, _row_lines=None) -> Measurements:
+                   partial: bool = False, noise_floor: float = 0.0,
+                   _row_lines=None) -> Measurements:
     """Check a table and convert it to :class:`Measurements` (see the module docstring).
 
     ``partial``: the table is a campaign's readings so far, not a table to fit on its own:
     power may be 0 (or tiny) in every row and a reading may be negative noise, which a
     whole table would refuse (a reading beyond the lobe of a glossy material is 0; one
-    reading of additive noise is as often below 0 as above)."""
+    reading of additive noise is as often below 0 as above). ``noise_floor`` (power units,
+    partial tables only): a negative reading down to minus this is noise, whatever the
+    other readings (the detector's dark noise, known beforehand: a campaign's first
+    readings can be too few and too small to tell noise from a sign error)."""
     if not isinstance(df, pd.DataFrame):
         _fail(f"{source}: expected a table (pandas DataFrame), found {type(df).__name__}")
     average_duplicates = check_bool(average_duplicates, "average_duplicates")  # 'no' is true
     partial = check_bool(partial, "partial")
+    noise_floor = check_number(noise_floor, "noise_floor", low=0.0)
     rows = _Rows(_row_lines)
     df = _check_columns(df, source)
     if len(df) == 0:
@@ -542,7 +549,7 @@ def validate_table(df: pd.DataFrame, source: str = "table", *,
         notes.append(f"{source}: averaged {merged} duplicated (gamma, theta) row(s)")
         rows = _Rows()  # row numbers no longer match the file
     if partial:
-        _check_partial_negative(power, sigma, source, rows)
+        _check_partial_negative(power, sigma, source, rows, noise_floor)
     note = None if partial else _check_negative_power(power, sigma, source, rows)
     if note:
         notes.append(note)

@@ -230,11 +230,18 @@ class Campaign:
         The adaptive rule's settings.
     stop_tolerance : float
         See :data:`STOP_TOLERANCE`.
+    noise_floor : float
+        Power units: a negative reading down to minus this is the detector's noise, not a
+        sign error (default 0: a negative reading beyond 25 % of the largest reading so far
+        is refused, and so is one with no positive reading as large; readings with a sigma
+        column may go down to -4 sigma). A replay sets it from the dense table's own most
+        negative reading, which the table's check accepted.
     """
 
     def __init__(self, instrument: Instrument, measured=None, *, model: str = "two-lobe",
                  seed: int = 0, rule: DesignRule = DEFAULT_RULE,
-                 stop_tolerance: float = STOP_TOLERANCE, name: str = "campaign"):
+                 stop_tolerance: float = STOP_TOLERANCE, name: str = "campaign",
+                 noise_floor: float = 0.0):
         if not isinstance(instrument, Instrument):
             raise IrreflectError(f"expected an Instrument; found {type(instrument).__name__}")
         self.instrument = instrument
@@ -250,6 +257,7 @@ class Campaign:
         self.stop_tolerance = check_number(stop_tolerance, "stop_tolerance", low=0.0,
                                            high=1.0, low_open=True)
         self.name = name
+        self.noise_floor = check_number(noise_floor, "noise_floor", low=0.0)
         settings = instrument.settings()
         capacity = instrument.capacity()
         if capacity <= self.model.n_params:
@@ -310,7 +318,8 @@ class Campaign:
                 f"{combined['theta_deg'].iloc[i]:g}) is given twice: average the "
                 "repeated readings into one row, or remove one")
         frame = combined.copy()
-        validate_table(frame, self.name, partial=True)  # the table's checks (signs, sigma)
+        # the table's checks (signs, sigma)
+        validate_table(frame, self.name, partial=True, noise_floor=self.noise_floor)
         self._rows = combined.reset_index(drop=True)
         self._sigma = has_sigma
         if self._state is not None and self._state.fit is not None:

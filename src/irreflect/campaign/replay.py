@@ -318,7 +318,11 @@ def replay_adaptive(source: DenseInstrument, n_max: int = 25, *, model="two-lobe
     dense = source.dense
     rng = np.random.default_rng([check_seed(seed), 11])
     tool = source.instrument(**(instrument_options or {}))
-    campaign = Campaign(tool, model=model, seed=seed, rule=rule, name=dense.name)
+    # a reading as negative as the dense table's own (which its check accepted as noise)
+    # is noise, even among a campaign's first few small readings
+    floor = max(0.0, -float(np.min(dense.power)))
+    campaign = Campaign(tool, model=model, seed=seed, rule=rule, name=dense.name,
+                        noise_floor=floor)
     r2, verdicts, times = {}, {}, []
     t0 = time.perf_counter()
     judged = 0.0  # the verdict's time, counted with the proposal after it (they share work)
