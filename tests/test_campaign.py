@@ -842,6 +842,21 @@ def test_a_stop_on_a_model_that_misfits_its_readings_says_so():
     # test_the_verdict_continues_until_the_curve_holds_then_stops)
 
 
+def test_a_generated_foreign_table_stays_within_the_power_a_table_may_hold():
+    # a Lafortune lobe with |C_x| > 1 and an exponent near 1e4 reached 2e191 (seed 602):
+    # no table loader accepts it (data.POWER_RANGE) and the benchmark's fit failed with
+    # 'no start reached a finite cost'; its peak is now set to 1
+    from irreflect.data import POWER_RANGE, validate_table
+    from irreflect.synthetic import foreign_material
+
+    table = foreign_material(602)
+    assert table.model == "lafortune"
+    assert 0.5 < float(np.max(table.measurements.power)) < 2.0
+    frame = table.measurements.to_frame()
+    assert validate_table(frame, "602").n_points == len(frame)
+    assert POWER_RANGE[0] < float(np.max(foreign_material(107).measurements.power)) < 1e6
+
+
 def test_a_replayed_r2_far_below_zero_is_printed_in_exponent_form():
     from irreflect.cli.campaign import _r2
 
