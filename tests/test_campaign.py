@@ -1098,3 +1098,37 @@ def test_a_campaign_held_to_one_angle_of_incidence_stops():
     assert verdict.stop and campaign.n_measured <= 16
     assert len(set(campaign.measurements.gamma_deg)) == 1
     assert "the 1 angle of incidence the instrument allows is set" in verdict.text
+
+
+def test_a_replay_with_the_receivers_resolution_fits_the_averaged_model(tmp_path):
+    # a dense table read by a receiver 4 deg wide (a glossy lobe of about 1.2 deg half
+    # width, blurred): fitted as points, no fit reaches it (the all-points fit 0.9990, the
+    # paper's 12 points 0.971); with --resolution 4 every fit is the model averaged over
+    # the receiver, and the table is recovered (R^2 1.0000), as 'next --resolution' fits
+    from irreflect.models import get_model
+    from irreflect.models.aperture import with_aperture
+
+    g, t = np.meshgrid([-10.0, -30.0, -50.0, -70.0], np.arange(-85, 85.01, 1.0), indexing="ij")
+    g, t = g.ravel(), t.ravel()
+    keep = np.abs(t - g) >= 3
+    g, t = g[keep], t[keep]
+    truth = np.array([0.05, -1.5, 1.2, 0.5, 3000.0, 0.3, 1.0])
+    power = with_aperture(get_model("two-lobe"), 4.0).predict_deg(truth, g, t)
+    dense = Measurements(gamma_deg=g, theta_deg=t, power=power, name="blur4")
+    point = replay(dense, ["adaptive", "paper"], n_max=12)
+    wide = replay(dense, ["adaptive", "paper"], n_max=12, resolution=4.0)
+    assert point.reference_r2 < 0.9995 < 0.99999 < wide.reference_r2
+    assert point.curves["paper"].r2[12] < 0.98 < 0.9999 < wide.curves["paper"].r2[12]
+    assert wide.curves["adaptive"].r2[12] > 0.9999 > point.curves["adaptive"].r2[12]
+    assert wide.settings["resolution_deg"] == 4.0 and point.settings["resolution_deg"] == 0.0
+    hind = replay(dense, ["hindsight"], n_max=9, generations=2, resolution=4.0)
+    assert "selected and scored as points" in hind.curves["hindsight"].note
+    path = tmp_path / "blur4.csv"
+    dense.to_frame().to_csv(path, index=False)
+    code, stdout, err = _run(["campaign", path, "--strategies", "paper", "--resolution", "4",
+                              "--json"])
+    assert code == 0, err
+    out = json.loads(stdout)
+    assert out["settings"]["resolution_deg"] == 4.0 and out["reference_r2"] > 0.99999
+    code, _, err = _run(["campaign", path, "--strategies", "paper", "--resolution", "-1"])
+    assert code != 0 and err.count("\n") == 1

@@ -38,7 +38,7 @@ import pandas as pd
 from .. import metrics
 from ..data import Measurements, as_measurements
 from ..errors import FitError, FitWarning, IrreflectError, unknown_name
-from ..fitting import FitResult, fit
+from ..fitting import FitResult, fit_averaged
 from ..models import get_model
 from ..validation import check_int, check_number, check_search_budget, check_seed
 from .core import Campaign
@@ -298,11 +298,14 @@ class ReplayResult:
         })
 
 
-def _score(model, meas: Measurements, dense: Measurements, seed: int) -> float:
+def _score(model, meas: Measurements, dense: Measurements, seed: int,
+           resolution: float = 0.0) -> float:
+    """R^2 against all of ``dense`` of the model fitted to ``meas`` (averaged over a
+    receiver of ``resolution`` degrees, as the dense table's readings are)."""
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", FitWarning)
-            res = fit(meas, model, seed=seed)
+            res = fit_averaged(meas, model, resolution, seed=seed)
     except (FitError, IrreflectError):
         return float("nan")
     with np.errstate(all="ignore"):
@@ -349,7 +352,7 @@ def replay_adaptive(source: DenseInstrument, n_max: int = 25, *, model="two-lobe
 
 
 def replay_protocol(source: DenseInstrument, kind: str, *, model="two-lobe",
-                    seed: int = 0) -> StrategyCurve:
+                    seed: int = 0, resolution: float = 0.0) -> StrategyCurve:
     """The paper's (``kind="paper"``) or the glossy-aware (``"glossy"``) 12-point protocol,
     its power read from the dense table (interpolated along theta where the table did not
     measure its angles) with the instrument's noise and angle error, as the adaptive
@@ -374,14 +377,14 @@ def replay_protocol(source: DenseInstrument, kind: str, *, model="two-lobe",
                             power=source.disturb(meas.gamma_deg, meas.theta_deg, meas.power,
                                                  rng),
                             sigma=meas.sigma, name=meas.name)
-    r2 = _score(model, meas, dense, seed)
+    r2 = _score(model, meas, dense, seed, resolution)
     gammas = "/".join(f"{g:g}" for g in proto.settings.get("gammas_deg", proto.gammas))
     return StrategyCurve(kind, {meas.n_points: r2}, meas.to_frame(),
                          time.perf_counter() - t0, note=f"gammas {gammas} deg")
 
 
 def replay_random(source: DenseInstrument, n_max: int = 25, *, model="two-lobe", seed: int = 0,
-                  n_draws: int = 3) -> StrategyCurve:
+                  n_draws: int = 3, resolution: float = 0.0) -> StrategyCurve:
     """Readings at random settings of the instrument, one at a time; the median R^2 over
     ``n_draws`` seeded draws at each N."""
     dense = source.dense
@@ -401,7 +404,7 @@ def replay_random(source: DenseInstrument, n_max: int = 25, *, model="two-lobe",
         for n in range(model_obj.n_params + 1, len(order) + 1):
             meas = Measurements(gamma_deg=s[:n, 0], theta_deg=s[:n, 1], power=power[:n],
                                 name=dense.name)
-            per_n.setdefault(n, []).append(_score(model_obj, meas, dense, seed))
+            per_n.setdefault(n, []).append(_score(model_obj, meas, dense, seed, resolution))
     r2 = {n: float(np.nanmedian(v)) if np.isfinite(v).any() else float("nan")
           for n, v in per_n.items()}
     return StrategyCurve("random", r2, first if first is not None else pd.DataFrame(),
@@ -440,7 +443,7 @@ def replay(dense, strategies=STRATEGIES, *, n_max: int = 25, model="two-lobe", s
            method: str = "nearest", tolerance_deg: float = 0.5, theta_step=None,
            noise: float = 0.0, angle_error_deg: float = 0.0, generations: int = 100,
            rule: DesignRule = DEFAULT_RULE, reference: FitResult | None = None,
-           progress=None) -> ReplayResult:
+           progress=None, resolution: float = 0.0) -> ReplayResult:
     """Replay every strategy of ``strategies`` against ``dense`` (a path, DataFrame or
     Measurements) used as the instrument; see the module docstring.
 
@@ -449,6 +452,12 @@ def replay(dense, strategies=STRATEGIES, *, n_max: int = 25, model="two-lobe", s
     generations : NSGA-II generations of the hindsight bound (population 100)
     reference : the model's fit on all points of ``dense`` (fitted when not given)
     progress : callable(str), told what runs
+    resolution : deg, the full width of receiver angle each reading of ``dense`` averages
+        over (0: a point receiver): the adaptive campaign's instrument has it, and the
+        protocols', random readings' and the reference fit are the model averaged over it
+        (:func:`irreflect.fitting.fit_averaged`), as ``irreflect fit --resolution`` fits;
+        the hindsight subsets are selected and scored as points (``select`` has no
+        resolution), which their note says
     """
     dense = as_measurements(dense)
     n_max = check_int(n_max, "n_max", 9)
@@ -463,31 +472,41 @@ def replay(dense, strategies=STRATEGIES, *, n_max: int = 25, model="two-lobe", s
         check_search_budget(100, check_int(generations, "generations", 1), dense.n_points,
                             pop_option="population", gen_option="--generations")
     model_obj = get_model(model)
+    resolution = check_number(resolution, "resolution", low=0.0, high=30.0)
     source = DenseInstrument(dense, method=method, tolerance_deg=tolerance_deg,
                              theta_step=theta_step, noise=noise,
                              angle_error_deg=angle_error_deg, seed=seed)
-    if reference is None or reference.model != model_obj.name:
+    if resolution:  # an instrument that cannot take readings this wide: refused before a fit
+        source.instrument(resolution=resolution)
+    if reference is None or reference.model != model_obj.name or resolution:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", FitWarning)
-            reference = fit(dense, model_obj, seed=seed)
+            reference = fit_averaged(dense, model_obj, resolution, seed=seed)
     say = progress or (lambda text: None)
     curves, verdicts, times = {}, {}, []
     for s in strategies:
         say(f"{dense.name}: {s}")
         if s == "adaptive":
-            curves[s], verdicts, times = replay_adaptive(source, n_max, model=model_obj,
-                                                         seed=seed, rule=rule)
+            curves[s], verdicts, times = replay_adaptive(
+                source, n_max, model=model_obj, seed=seed, rule=rule,
+                instrument_options={"resolution": resolution} if resolution else None)
         elif s in ("paper", "glossy"):
-            curves[s] = replay_protocol(source, s, model=model_obj, seed=seed)
+            curves[s] = replay_protocol(source, s, model=model_obj, seed=seed,
+                                        resolution=resolution)
         elif s == "random":
-            curves[s] = replay_random(source, n_max, model=model_obj, seed=seed)
+            curves[s] = replay_random(source, n_max, model=model_obj, seed=seed,
+                                      resolution=resolution)
         else:
             curves[s] = replay_hindsight(source, n_max, model=model_obj, seed=seed,
                                          generations=generations)
+            if resolution:
+                curves[s].note += (f"; selected and scored as points (select has no "
+                                   f"resolution), not averaged over {resolution:g} deg")
     return ReplayResult(
         dataset=dense.name, n_points=dense.n_points, reference_r2=float(reference.r2),
         curves=curves, verdicts=verdicts, proposal_seconds=times,
         warnings=[w for w in (source.coarse_peaks(), source.mirror_gaps()) if w],
         settings={"n_max": n_max, "model": model_obj.name, "seed": seed, "method": method,
                   "tolerance_deg": tolerance_deg, "theta_step": theta_step, "noise": noise,
-                  "angle_error_deg": angle_error_deg, "generations": generations})
+                  "angle_error_deg": angle_error_deg, "generations": generations,
+                  "resolution_deg": resolution})

@@ -270,7 +270,7 @@ def _campaign(args) -> int:
                         method=args.method, tolerance_deg=args.tolerance,
                         theta_step=args.theta_step, noise=args.noise,
                         angle_error_deg=args.angle_error, generations=args.generations,
-                        progress=told)
+                        progress=told, resolution=args.resolution)
     finally:
         bar.close()
     for text in result.warnings:
@@ -437,6 +437,12 @@ def register(sub) -> None:
                    help="receiver angle error, uniform +- this many degrees (default 0)")
     p.add_argument("--generations", type=POSITIVE_INT, default=100,
                    help="NSGA-II generations of the hindsight subsets (default 100)")
+    p.add_argument("--resolution", type=NON_NEGATIVE, default=0.0, metavar="DEG",
+                   help="the receiver's angular resolution the dense table was measured "
+                        "with: the full width of receiver angle one reading averages over "
+                        "(deg, default 0: a point receiver); the campaign's instrument has "
+                        "it and every fit but the hindsight subsets' is the model averaged "
+                        "over it, as 'irreflect next --resolution' fits")
     add_model_argument(p)
     p.add_argument("--seed", type=SEED, default=0,
                    help="seed of the fits, the noise and the random readings (default 0)")
