@@ -32,9 +32,9 @@ from . import metrics
 from .data import as_measurements
 from .errors import DataError, FitError, IrreflectError
 from .fitting import GAMMA_TOL_DEG as _GAMMA_TOL_DEG
-from .fitting import fit
+from .fitting import fit, fit_averaged, points_at_incidence
 from .models import get_model, parse_spec
-from .validation import check_seed, split_names
+from .validation import check_number, check_seed, split_names
 
 #: Models compared by default; ``phong@{G}`` takes the ``phong_at_deg`` of the call.
 DEFAULT_MODELS = ("two-lobe", "phong@{G}", "phong", "blinn-phong", "lafortune", "ward",
@@ -265,7 +265,7 @@ def default_phong_deg(meas) -> tuple[float, str]:
 
 def compare_models(measurements, models=None, *, phong_at_deg: float | None = None,
                    seed: int = 0, fits: dict | None = None, progress: bool | None = False,
-                   skip_failures: bool = False) -> Comparison:
+                   skip_failures: bool = False, resolution: float = 0.0) -> Comparison:
     """Fit every model to the same table and score it (section 5.3).
 
     Parameters
@@ -290,8 +290,15 @@ def compare_models(measurements, models=None, *, phong_at_deg: float | None = No
         FitError, e.g. no better than a constant, or a DataError, e.g. more parameters than
         points) instead of raising; a request that cannot be met (``MODEL@G`` at an angle
         that was not measured) still raises.
+    resolution : float, degrees
+        The receiver's angular resolution (the full width of receiver angle a reading
+        averages over; 0: a point receiver): every model is fitted as its average over
+        the receiver (:func:`irreflect.fitting.fit_averaged`; ``MODEL@G`` on the points of
+        that incidence) and scored as such, as ``irreflect fit --resolution`` fits; ``fits``
+        (point fits) are not reused.
     """
     seed = check_seed(seed)
+    resolution = check_number(resolution, "resolution", low=0.0, high=30.0)
     meas = as_measurements(measurements)
     listed = isinstance(models, list | tuple) and all(isinstance(m, str) for m in models)
     text = ",".join(models) if listed else models
@@ -308,19 +315,27 @@ def compare_models(measurements, models=None, *, phong_at_deg: float | None = No
             notes.append(note)
     labels = parse_model_list(text, phong_at_deg)
     fits = fits or {}
+    if resolution:
+        fits = {}
+        notes.append(f"every model fitted as its average over the receiver's {resolution:g} "
+                     "deg resolution (the coefficients are the material's)")
     scores, skipped = {}, {}
     bar = tqdm(labels, desc=f"compare {meas.name}", unit="model", leave=False,
                disable=(not progress) if progress is not None else None)
     for label in bar:
         base, at, g = label.partition("@")
         try:
-            if at:
+            if at and resolution:
+                sub = points_at_incidence(meas, float(g), label)
+                result, n_sub = fit_averaged(sub, base, resolution, seed=seed), sub.n_points
+                scores[label] = score(meas, result, label, f"|gamma| = {g} deg ({n_sub} points)")
+            elif at:
                 result, n_sub = fit_at_incidence(meas, base, float(g), seed=seed)
                 scores[label] = score(meas, result, label, f"|gamma| = {g} deg ({n_sub} points)")
             else:
                 result = fits.get(label)
                 if result is None or result.n_points != meas.n_points:
-                    result = fit(meas, label, seed=seed)
+                    result = fit_averaged(meas, label, resolution, seed=seed)
                 scores[label] = score(meas, result, label)
         except (IrreflectError, FitError) as exc:
             # the data cannot support this model (no usable optimum, too few points): left
