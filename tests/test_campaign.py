@@ -1132,3 +1132,41 @@ def test_a_replay_with_the_receivers_resolution_fits_the_averaged_model(tmp_path
     assert out["settings"]["resolution_deg"] == 4.0 and out["reference_r2"] > 0.99999
     code, _, err = _run(["campaign", path, "--strategies", "paper", "--resolution", "-1"])
     assert code != 0 and err.count("\n") == 1
+
+
+def test_a_fit_with_the_receivers_resolution_warns_of_its_own_result_only(tmp_path):
+    # fit_averaged starts from a point fit; on readings blurred by a 4-deg receiver that
+    # point fit leaves v_nd ill-determined (-0.096 +- 0.19), and `fit --resolution` printed
+    # its warning under a result that has v_nd = 0.5 +- 7e-12. Now only the result warns
+    from irreflect.fitting import fit, fit_averaged
+
+    path = tmp_path / "blur4.csv"
+    g, t = np.meshgrid([-10.0, -30.0, -50.0, -70.0], np.arange(-85, 85.01, 1.0),
+                       indexing="ij")
+    g, t = g.ravel(), t.ravel()
+    keep = np.abs(t - g) >= 3
+    g, t = g[keep], t[keep]
+    truth = np.array([0.05, -1.5, 1.2, 0.5, 3000.0, 0.3, 1.0])
+    from irreflect.models import get_model
+    from irreflect.models.aperture import with_aperture
+
+    power = with_aperture(get_model("two-lobe"), 4.0).predict_deg(truth, g, t)
+    meas = Measurements(gamma_deg=g, theta_deg=t, power=power, name="blur4")
+    meas.to_frame().to_csv(path, index=False)
+    with pytest.warns(Warning, match="ill-determined by these data: v_nd"):
+        fit(meas)  # the point fit's warning, as a point fit
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        res = fit_averaged(meas, "two-lobe", 4.0)
+    assert res.values[3] == pytest.approx(0.5, rel=1e-6)
+    code, _, err = _run(["fit", path, "--resolution", "4"])
+    assert code == 0 and "ill-determined" not in err
+    # plot --fit draws the averaged fit; --resolution without --fit is said to do nothing
+    code, out, err = _run(["plot", path, "--fit", "--resolution", "4", "--out",
+                           tmp_path / "p.png"])
+    assert code == 0 and "ill-determined" not in err and (tmp_path / "p.png").stat().st_size
+    code, _, err = _run(["plot", path, "--resolution", "4", "--out", tmp_path / "q.png"])
+    assert code == 0 and "--resolution has no effect without --fit" in err
+    code, _, err = _run(["plot", path, "--fit", "--model", "phong@10", "--resolution", "4",
+                         "--out", tmp_path / "r.png"])
+    assert code != 0 and "drop '@G' or --resolution" in err and not (tmp_path / "r.png").exists()

@@ -98,13 +98,21 @@ def _cmd_fit(args) -> int:
 
 def _cmd_plot(args) -> int:
     from .._atomic import claim_output
-    from ..fitting import fit
+    from ..fitting import fit, fit_averaged
     from ..models import parse_spec
     from ..plots import plot_polar, save_figure
 
     model = args.model or "two-lobe"
-    parse_spec(model).model()
-    unused = [o for o, v in (("--model", args.model), ("--seed", args.seed)) if v is not None]
+    spec = parse_spec(model)
+    spec.model()
+    if args.resolution and spec.at_gamma_deg is not None:
+        from ..errors import IrreflectError
+
+        raise IrreflectError(f"--resolution with model '{model}': a fit at one angle of "
+                             "incidence ('@G') takes the readings as points; drop '@G' or "
+                             "--resolution")
+    unused = [o for o, v in (("--model", args.model), ("--seed", args.seed),
+                             ("--resolution", args.resolution or None)) if v is not None]
     if unused and not args.fit:
         print(f"irreflect: warning: {' and '.join(unused)} {'has' if len(unused) == 1 else 'have'}"
               " no effect without --fit (the figure then draws the readings only)",
@@ -113,9 +121,15 @@ def _cmd_plot(args) -> int:
         meas = load_data(args)
         predict, title = None, meas.name
         if args.fit:
-            result = fit(meas, model, seed=args.seed or 0, engine=_engine(meas.n_points))
+            if args.resolution:  # the curve drawn is what the receiver reads
+                result = fit_averaged(meas, model, args.resolution, seed=args.seed or 0,
+                                      engine=_engine(meas.n_points))
+            else:
+                result = fit(meas, model, seed=args.seed or 0, engine=_engine(meas.n_points))
             predict = result.predict
             title = f"{meas.name}: {result.model} fit, R^2 = {result.r2:.4f}"
+            if args.resolution:
+                title += f" (averaged over {args.resolution:g} deg)"
         ax = plot_polar(meas, predict, title=title, radius=args.radius)
         save_figure(ax.figure, args.out)
     print(f"wrote {args.out}")
@@ -170,6 +184,11 @@ def register(sub) -> None:
                         "glossy materials, else linear)")
     p.add_argument("--seed", type=SEED, default=None,
                    help="seed of the fit's random extra starts, with --fit (default 0)")
+    p.add_argument("--resolution", type=NON_NEGATIVE, default=0.0, metavar="DEG",
+                   help="with --fit: the receiver's angular resolution (the full width of "
+                        "receiver angle one reading averages over); the model is fitted "
+                        "and drawn as its average over it, as 'fit --resolution' fits (deg, "
+                        "default 0: a point receiver)")
     p.add_argument("--out", required=True, metavar="FILE.png",
                    help="figure file (.png, .svg or .pdf)")
     p.set_defaults(handler=_cmd_plot)

@@ -174,7 +174,11 @@ def fit_averaged(measurements, model="two-lobe", width_deg: float = 0.0,
             f"fit(measurements, '{spec}') for that fit, or fit_averaged(points_at_incidence("
             f"measurements, {at}), '{spec.model_text}', {width}) to fit those readings "
             "averaged")
-    point = fit(measurements, point_model, options, **settings)
+    with warnings.catch_warnings():
+        # the point fit is only the averaged fit's start: its warnings (a coefficient it
+        # leaves ill-determined, say) are not the result's, which warns for itself
+        warnings.simplefilter("ignore", FitWarning)
+        point = fit(measurements, point_model, options, **settings)
     opts = _options(options, settings)
     z0 = point_model.from_natural(np.asarray(point.values, float)[None])[0]
     starts = z0 if opts.extra_starts is None else np.vstack(
