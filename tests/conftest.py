@@ -27,6 +27,26 @@ from irreflect.paper import TABLE3 as PAPER_TABLE3
 TABLE3 = PAPER_TABLE3
 
 
+def blurred_glossy(width: float = 4.0) -> Measurements:
+    """A glossy two-lobe table (lobe half width about 1.2 deg) read by a receiver ``width``
+    deg wide: every degree at gamma -10, -30, -50, -70, nothing within 3 deg of the
+    source; the truth is :data:`BLURRED_TRUTH`."""
+    from irreflect.models import get_model
+    from irreflect.models.aperture import with_aperture
+
+    g, t = np.meshgrid([-10.0, -30.0, -50.0, -70.0], np.arange(-85, 85.01, 1.0),
+                       indexing="ij")
+    g, t = g.ravel(), t.ravel()
+    keep = np.abs(t - g) >= 3
+    g, t = g[keep], t[keep]
+    power = with_aperture(get_model("two-lobe"), width).predict_deg(BLURRED_TRUTH, g, t)
+    return Measurements(gamma_deg=g, theta_deg=t, power=power, name=f"blur{width:g}")
+
+
+#: the coefficients of :func:`blurred_glossy`'s material
+BLURRED_TRUTH = np.array([0.05, -1.5, 1.2, 0.5, 3000.0, 0.3, 1.0])
+
+
 def paper_grid(dense: bool = True):
     """The paper's sampling plan (same as experiments/make_datasets.py)."""
     gammas, thetas = [], []

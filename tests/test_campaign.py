@@ -1105,16 +1105,9 @@ def test_a_replay_with_the_receivers_resolution_fits_the_averaged_model(tmp_path
     # width, blurred): fitted as points, no fit reaches it (the all-points fit 0.9990, the
     # paper's 12 points 0.971); with --resolution 4 every fit is the model averaged over
     # the receiver, and the table is recovered (R^2 1.0000), as 'next --resolution' fits
-    from irreflect.models import get_model
-    from irreflect.models.aperture import with_aperture
+    from conftest import blurred_glossy
 
-    g, t = np.meshgrid([-10.0, -30.0, -50.0, -70.0], np.arange(-85, 85.01, 1.0), indexing="ij")
-    g, t = g.ravel(), t.ravel()
-    keep = np.abs(t - g) >= 3
-    g, t = g[keep], t[keep]
-    truth = np.array([0.05, -1.5, 1.2, 0.5, 3000.0, 0.3, 1.0])
-    power = with_aperture(get_model("two-lobe"), 4.0).predict_deg(truth, g, t)
-    dense = Measurements(gamma_deg=g, theta_deg=t, power=power, name="blur4")
+    dense = blurred_glossy(4.0)
     point = replay(dense, ["adaptive", "paper"], n_max=12)
     wide = replay(dense, ["adaptive", "paper"], n_max=12, resolution=4.0)
     assert point.reference_r2 < 0.9995 < 0.99999 < wide.reference_r2
@@ -1138,27 +1131,19 @@ def test_a_fit_with_the_receivers_resolution_warns_of_its_own_result_only(tmp_pa
     # fit_averaged starts from a point fit; on readings blurred by a 4-deg receiver that
     # point fit leaves v_nd ill-determined (-0.096 +- 0.19), and `fit --resolution` printed
     # its warning under a result that has v_nd = 0.5 +- 7e-12. Now only the result warns
+    from conftest import BLURRED_TRUTH, blurred_glossy
+
     from irreflect.fitting import fit, fit_averaged
 
     path = tmp_path / "blur4.csv"
-    g, t = np.meshgrid([-10.0, -30.0, -50.0, -70.0], np.arange(-85, 85.01, 1.0),
-                       indexing="ij")
-    g, t = g.ravel(), t.ravel()
-    keep = np.abs(t - g) >= 3
-    g, t = g[keep], t[keep]
-    truth = np.array([0.05, -1.5, 1.2, 0.5, 3000.0, 0.3, 1.0])
-    from irreflect.models import get_model
-    from irreflect.models.aperture import with_aperture
-
-    power = with_aperture(get_model("two-lobe"), 4.0).predict_deg(truth, g, t)
-    meas = Measurements(gamma_deg=g, theta_deg=t, power=power, name="blur4")
+    meas = blurred_glossy(4.0)
     meas.to_frame().to_csv(path, index=False)
     with pytest.warns(Warning, match="ill-determined by these data: v_nd"):
         fit(meas)  # the point fit's warning, as a point fit
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         res = fit_averaged(meas, "two-lobe", 4.0)
-    assert res.values[3] == pytest.approx(0.5, rel=1e-6)
+    assert res.values[3] == pytest.approx(BLURRED_TRUTH[3], rel=1e-6)
     code, _, err = _run(["fit", path, "--resolution", "4"])
     assert code == 0 and "ill-determined" not in err
     # plot --fit draws the averaged fit; --resolution without --fit is said to do nothing

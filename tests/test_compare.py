@@ -6,7 +6,7 @@ import json
 
 import numpy as np
 import pytest
-from conftest import paper_grid
+from conftest import blurred_glossy, paper_grid
 
 from irreflect import fit, metrics
 from irreflect.cli import main
@@ -281,17 +281,7 @@ def test_compare_with_the_receivers_resolution_fits_every_model_averaged(tmp_pat
     # a glossy table read by a receiver 4 deg wide (lobe half width about 1.2 deg): as
     # points the two-lobe model leaves a polar-area error of 4.1 % (R^2 0.9990); averaged
     # over the receiver it is recovered, and MODEL@G is fitted averaged on its incidence
-    from irreflect.models import get_model
-    from irreflect.models.aperture import with_aperture
-
-    g, t = np.meshgrid([-10.0, -30.0, -50.0, -70.0], np.arange(-85, 85.01, 1.0),
-                       indexing="ij")
-    g, t = g.ravel(), t.ravel()
-    keep = np.abs(t - g) >= 3
-    g, t = g[keep], t[keep]
-    truth = np.array([0.05, -1.5, 1.2, 0.5, 3000.0, 0.3, 1.0])
-    power = with_aperture(get_model("two-lobe"), 4.0).predict_deg(truth, g, t)
-    meas = Measurements(gamma_deg=g, theta_deg=t, power=power, name="blur4")
+    meas = blurred_glossy(4.0)
     point = compare_models(meas, "two-lobe,phong@10")
     wide = compare_models(meas, "two-lobe,phong@10", resolution=4.0)
     assert point.scores["two-lobe"].r2 < 0.9995 < 0.99999 < wide.scores["two-lobe"].r2

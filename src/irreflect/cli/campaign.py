@@ -23,6 +23,7 @@ from .options import (
     SEED,
     Flatten,
     add_model_argument,
+    add_resolution_argument,
     int_at_least,
     print_json,
 )
@@ -358,12 +359,9 @@ def _add_instrument_options(p) -> None:
     p.add_argument("--theta-step", type=POSITIVE, default=1.0,
                    help="the receiver's step: it stands at theta-min + k * step (deg, "
                         "default 1)")
-    p.add_argument("--resolution", type=NON_NEGATIVE, default=0.0, metavar="DEG",
-                   help="the receiver's angular resolution: the full width of the receiver "
-                        "angles one reading averages over (deg, default 0: a point "
-                        "receiver): the readings are fitted as that average (the "
-                        "coefficients are the material's), no two are closer than half of "
-                        "it, and a lobe narrower than it is warned of")
+    add_resolution_argument(p, "the readings are fitted as that average (the coefficients "
+                               "are the material's), no two are closer than half of it, and "
+                               "a lobe narrower than it is warned of")
     p.add_argument("--min-separation", type=NON_NEGATIVE, default=None,
                    help="two readings of one angle of incidence closer than this are the "
                         "same (deg, default half the step or half the resolution, whichever "
@@ -437,12 +435,9 @@ def register(sub) -> None:
                    help="receiver angle error, uniform +- this many degrees (default 0)")
     p.add_argument("--generations", type=POSITIVE_INT, default=100,
                    help="NSGA-II generations of the hindsight subsets (default 100)")
-    p.add_argument("--resolution", type=NON_NEGATIVE, default=0.0, metavar="DEG",
-                   help="the receiver's angular resolution the dense table was measured "
-                        "with: the full width of receiver angle one reading averages over "
-                        "(deg, default 0: a point receiver); the campaign's instrument has "
-                        "it and every fit but the hindsight subsets' is the model averaged "
-                        "over it, as 'irreflect next --resolution' fits")
+    add_resolution_argument(p, "the dense table was read with it: the campaign's "
+                               "instrument has it and every fit but the hindsight subsets' "
+                               "is the model averaged over it, as 'next --resolution' fits")
     add_model_argument(p)
     p.add_argument("--seed", type=SEED, default=0,
                    help="seed of the fits, the noise and the random readings (default 0)")

@@ -5,7 +5,14 @@ from __future__ import annotations
 import contextlib
 import sys
 
-from .options import FINITE, NON_NEGATIVE, SEED, add_data_argument, load_data, print_json
+from .options import (
+    FINITE,
+    SEED,
+    add_data_argument,
+    add_resolution_argument,
+    load_data,
+    print_json,
+)
 
 
 def _cmd_compare(args) -> int:
@@ -68,11 +75,8 @@ def register(sub) -> None:
                         "the paper, or the nearest measured one when the table has no 10 deg; "
                         "an explicit G must be measured)")
     p.add_argument("--seed", type=SEED, default=0, help="seed of every fit (default 0)")
-    p.add_argument("--resolution", type=NON_NEGATIVE, default=0.0, metavar="DEG",
-                   help="the receiver's angular resolution: the full width of the receiver "
-                        "angles one reading averages over (deg, default 0: a point "
-                        "receiver); every model is fitted and scored as its average over "
-                        "it, as 'irreflect fit --resolution' fits")
+    add_resolution_argument(p, "every model is fitted and scored as its average over it, "
+                               "as 'fit --resolution' fits")
     p.add_argument("--json", action="store_true", help="one JSON object on stdout")
     p.add_argument("--out", default=None, metavar="DIR",
                    help="write polar plots per angle of incidence (Fig. 25), a line chart of "

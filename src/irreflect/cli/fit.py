@@ -6,11 +6,11 @@ import contextlib
 import sys
 
 from .options import (
-    NON_NEGATIVE,
     POSITIVE,
     SEED,
     add_data_argument,
     add_model_argument,
+    add_resolution_argument,
     load_data,
     print_json,
 )
@@ -156,11 +156,8 @@ def register(sub) -> None:
     p.add_argument("--seed", type=SEED, default=0,
                    help="seed of the random extra starts (default 0)")
     p.add_argument("--json", action="store_true", help="one JSON object on stdout")
-    p.add_argument("--resolution", type=NON_NEGATIVE, default=0.0, metavar="DEG",
-                   help="the receiver's angular resolution: the full width of the receiver "
-                        "angles one reading averages over; the readings are fitted as the "
-                        "model averaged over it, so the coefficients are the material's "
-                        "(deg, default 0: a point receiver)")
+    add_resolution_argument(p, "the readings are fitted as the model averaged over it, so "
+                               "the coefficients are the material's")
     p.add_argument("--save", metavar="MATERIAL.json",
                    help="also write the fit as a material file for room scenes (default: no)")
     p.add_argument("--reflectance", default=None, metavar="RHO|K",
@@ -184,11 +181,8 @@ def register(sub) -> None:
                         "glossy materials, else linear)")
     p.add_argument("--seed", type=SEED, default=None,
                    help="seed of the fit's random extra starts, with --fit (default 0)")
-    p.add_argument("--resolution", type=NON_NEGATIVE, default=0.0, metavar="DEG",
-                   help="with --fit: the receiver's angular resolution (the full width of "
-                        "receiver angle one reading averages over); the model is fitted "
-                        "and drawn as its average over it, as 'fit --resolution' fits (deg, "
-                        "default 0: a point receiver)")
+    add_resolution_argument(p, "with --fit, the model is fitted and drawn as its average "
+                               "over it, as 'fit --resolution' fits")
     p.add_argument("--out", required=True, metavar="FILE.png",
                    help="figure file (.png, .svg or .pdf)")
     p.set_defaults(handler=_cmd_plot)

@@ -101,6 +101,15 @@ def add_model_argument(parser: argparse.ArgumentParser, default: str = "two-lobe
                              "two-lobe+background)")
 
 
+def add_resolution_argument(parser: argparse.ArgumentParser, effect: str) -> None:
+    """``--resolution DEG``: the receiver's angular resolution, one wording everywhere, and
+    what it does in the command (``effect``)."""
+    parser.add_argument("--resolution", type=NON_NEGATIVE, default=0.0, metavar="DEG",
+                        help="the receiver's angular resolution: the full width of receiver "
+                             "angle one reading averages over (deg, default 0: a point "
+                             f"receiver); {effect}")
+
+
 def load_data(args, command: str | None = None, path=None):
     """Read the DATA table of a command and refuse it up front when it is larger than the
     command's memory budget (:data:`irreflect.validation.POINT_BUDGET`)."""
