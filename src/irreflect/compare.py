@@ -202,7 +202,8 @@ def parse_model_list(text=None, phong_at_deg: float = 10.0) -> list[str]:
     return out
 
 
-def fit_at_incidence(meas, model, gamma_abs_deg: float, *, seed: int = 0):
+def fit_at_incidence(meas, model, gamma_abs_deg: float, *, seed: int = 0,
+                     resolution: float = 0.0):
     """Fit ``model`` to the points of one angle of incidence ``|gamma| = gamma_abs_deg``
     (``fit(meas, "MODEL@G")``).
 
@@ -211,10 +212,17 @@ def fit_at_incidence(meas, model, gamma_abs_deg: float, *, seed: int = 0):
     whose parameters vary with gamma, such as two-lobe, is left undetermined in those
     directions by a single incidence.)
 
+    With ``resolution`` (deg), the points of that incidence are fitted as the model
+    averaged over a receiver that wide (:func:`irreflect.fitting.fit_averaged`).
+
     Returns ``(FitResult, number of points fitted)``. Raises IrreflectError if the table
     has no such angle of incidence.
     """
-    result = fit(meas, f"{parse_spec(model).model_text}@{abs(gamma_abs_deg):g}", seed=seed)
+    text = parse_spec(model).model_text
+    if resolution:
+        sub = points_at_incidence(meas, gamma_abs_deg, f"{text}@{abs(gamma_abs_deg):g}")
+        return fit_averaged(sub, text, resolution, seed=seed), sub.n_points
+    result = fit(meas, f"{text}@{abs(gamma_abs_deg):g}", seed=seed)
     return result, int(result.n_points)
 
 
@@ -325,12 +333,9 @@ def compare_models(measurements, models=None, *, phong_at_deg: float | None = No
     for label in bar:
         base, at, g = label.partition("@")
         try:
-            if at and resolution:
-                sub = points_at_incidence(meas, float(g), label)
-                result, n_sub = fit_averaged(sub, base, resolution, seed=seed), sub.n_points
-                scores[label] = score(meas, result, label, f"|gamma| = {g} deg ({n_sub} points)")
-            elif at:
-                result, n_sub = fit_at_incidence(meas, base, float(g), seed=seed)
+            if at:
+                result, n_sub = fit_at_incidence(meas, base, float(g), seed=seed,
+                                                 resolution=resolution)
                 scores[label] = score(meas, result, label, f"|gamma| = {g} deg ({n_sub} points)")
             else:
                 result = fits.get(label)

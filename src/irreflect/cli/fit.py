@@ -17,20 +17,27 @@ from .options import (
 from .options import single_fit_engine as _engine
 
 
-def _cmd_fit(args) -> int:
-    from .._atomic import claim_output
-    from ..fitting import fit, fit_averaged
+def _check_model_and_resolution(model: str, resolution: float) -> None:
+    """The model's name, and that a fit at one angle of incidence ('@G') is not asked to
+    average over a receiver, checked before any work."""
     from ..models import parse_spec
 
-    model = args.model
     spec = parse_spec(model)
-    spec.model()  # the name checked before any work ('phong@10' included)
-    if args.resolution and spec.at_gamma_deg is not None:
+    spec.model()  # ('phong@10' included)
+    if resolution and spec.at_gamma_deg is not None:
         from ..errors import IrreflectError
 
         raise IrreflectError(f"--resolution with model '{model}': a fit at one angle of "
                              "incidence ('@G') takes the readings as points; drop '@G' or "
                              "--resolution")
+
+
+def _cmd_fit(args) -> int:
+    from .._atomic import claim_output
+    from ..fitting import fit_averaged
+
+    model = args.model
+    _check_model_and_resolution(model, args.resolution)
     if args.save is None and (args.reflectance is not None or args.wavelength is not None
                               or args.notes is not None):
         from ..errors import IrreflectError
@@ -45,11 +52,9 @@ def _cmd_fit(args) -> int:
              if args.save is not None else contextlib.nullcontext())
     with claim:  # the material file's path is checked and locked before any work
         meas = load_data(args)
-        if args.resolution:
-            result = fit_averaged(meas, model, args.resolution, seed=args.seed,
-                                  engine=_engine(meas.n_points))
-        else:
-            result = fit(meas, model, seed=args.seed or 0, engine=_engine(meas.n_points))
+        # resolution 0: the plain fit
+        result = fit_averaged(meas, model, args.resolution, seed=args.seed or 0,
+                              engine=_engine(meas.n_points))
         if args.save is not None:
             from ..room.materials import save_material
 
@@ -98,19 +103,11 @@ def _cmd_fit(args) -> int:
 
 def _cmd_plot(args) -> int:
     from .._atomic import claim_output
-    from ..fitting import fit, fit_averaged
-    from ..models import parse_spec
+    from ..fitting import fit_averaged
     from ..plots import plot_polar, save_figure
 
     model = args.model or "two-lobe"
-    spec = parse_spec(model)
-    spec.model()
-    if args.resolution and spec.at_gamma_deg is not None:
-        from ..errors import IrreflectError
-
-        raise IrreflectError(f"--resolution with model '{model}': a fit at one angle of "
-                             "incidence ('@G') takes the readings as points; drop '@G' or "
-                             "--resolution")
+    _check_model_and_resolution(model, args.resolution)
     unused = [o for o, v in (("--model", args.model), ("--seed", args.seed),
                              ("--resolution", args.resolution or None)) if v is not None]
     if unused and not args.fit:
@@ -121,11 +118,9 @@ def _cmd_plot(args) -> int:
         meas = load_data(args)
         predict, title = None, meas.name
         if args.fit:
-            if args.resolution:  # the curve drawn is what the receiver reads
-                result = fit_averaged(meas, model, args.resolution, seed=args.seed or 0,
-                                      engine=_engine(meas.n_points))
-            else:
-                result = fit(meas, model, seed=args.seed or 0, engine=_engine(meas.n_points))
+            # with a resolution, the curve drawn is what the receiver reads
+            result = fit_averaged(meas, model, args.resolution, seed=args.seed or 0,
+                                  engine=_engine(meas.n_points))
             predict = result.predict
             title = f"{meas.name}: {result.model} fit, R^2 = {result.r2:.4f}"
             if args.resolution:
