@@ -1125,6 +1125,8 @@ def test_a_replay_with_the_receivers_resolution_fits_the_averaged_model(tmp_path
     assert out["settings"]["resolution_deg"] == 4.0 and out["reference_r2"] > 0.99999
     code, _, err = _run(["campaign", path, "--strategies", "paper", "--resolution", "-1"])
     assert code != 0 and err.count("\n") == 1
+    code, _, err = _run(["campaign", path, "--strategies", "paper", "--resolution", "95"])
+    assert code != 0 and "receiver's resolution (--resolution, deg) must be" in err
 
 
 def test_a_fit_with_the_receivers_resolution_warns_of_its_own_result_only(tmp_path):

@@ -34,7 +34,8 @@ from .errors import DataError, FitError, IrreflectError
 from .fitting import GAMMA_TOL_DEG as _GAMMA_TOL_DEG
 from .fitting import fit, fit_averaged, points_at_incidence
 from .models import get_model, parse_spec
-from .validation import check_number, check_seed, split_names
+from .models.aperture import check_resolution
+from .validation import check_seed, split_names
 
 #: Models compared by default; ``phong@{G}`` takes the ``phong_at_deg`` of the call.
 DEFAULT_MODELS = ("two-lobe", "phong@{G}", "phong", "blinn-phong", "lafortune", "ward",
@@ -306,7 +307,7 @@ def compare_models(measurements, models=None, *, phong_at_deg: float | None = No
         (point fits) are not reused.
     """
     seed = check_seed(seed)
-    resolution = check_number(resolution, "resolution", low=0.0, high=30.0)
+    resolution = check_resolution(resolution)
     meas = as_measurements(measurements)
     listed = isinstance(models, list | tuple) and all(isinstance(m, str) for m in models)
     text = ",".join(models) if listed else models

@@ -40,6 +40,7 @@ from ..data import Measurements, as_measurements
 from ..errors import FitError, FitWarning, IrreflectError, unknown_name
 from ..fitting import FitResult, fit_averaged
 from ..models import get_model
+from ..models.aperture import check_resolution
 from ..validation import check_int, check_number, check_search_budget, check_seed
 from .core import Campaign
 from .design import DEFAULT_RULE, DesignRule
@@ -472,7 +473,7 @@ def replay(dense, strategies=STRATEGIES, *, n_max: int = 25, model="two-lobe", s
         check_search_budget(100, check_int(generations, "generations", 1), dense.n_points,
                             pop_option="population", gen_option="--generations")
     model_obj = get_model(model)
-    resolution = check_number(resolution, "resolution", low=0.0, high=30.0)
+    resolution = check_resolution(resolution)
     source = DenseInstrument(dense, method=method, tolerance_deg=tolerance_deg,
                              theta_step=theta_step, noise=noise,
                              angle_error_deg=angle_error_deg, seed=seed)

@@ -24,11 +24,17 @@ from .base import ReflectionModel
 APERTURE_NODES = 5
 
 
+def check_resolution(width_deg) -> float:
+    """A receiver's resolution (the full width, deg, of receiver angle a reading averages
+    over), checked as every command and function that takes one checks it."""
+    return check_number(width_deg, "the receiver's resolution (--resolution, deg)",
+                        low=0.0, high=90.0)
+
+
 def with_aperture(model: ReflectionModel, width_deg: float,
                   nodes: int = APERTURE_NODES) -> ReflectionModel:
     """``model`` as read by a receiver averaging over ``width_deg`` degrees (0: ``model``)."""
-    width = check_number(width_deg, "the receiver's resolution (--resolution, deg)",
-                         low=0.0, high=90.0)
+    width = check_resolution(width_deg)
     if not width > 0:
         return model
     x, w = np.polynomial.legendre.leggauss(int(nodes))
