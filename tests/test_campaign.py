@@ -1132,7 +1132,7 @@ def test_a_replay_with_the_receivers_resolution_fits_the_averaged_model(tmp_path
 def test_a_fit_with_the_receivers_resolution_warns_of_its_own_result_only(tmp_path):
     # fit_averaged starts from a point fit; on readings blurred by a 4-deg receiver that
     # point fit leaves v_nd ill-determined (-0.096 +- 0.19), and `fit --resolution` printed
-    # its warning under a result that has v_nd = 0.5 +- 7e-12. Now only the result warns
+    # its warning under a result that has v_nd = 0.5002 +- 0.0005. Now only the result warns
     from conftest import BLURRED_TRUTH, blurred_glossy
 
     from irreflect.fitting import fit, fit_averaged
@@ -1145,7 +1145,7 @@ def test_a_fit_with_the_receivers_resolution_warns_of_its_own_result_only(tmp_pa
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         res = fit_averaged(meas, "two-lobe", 4.0)
-    assert res.values[3] == pytest.approx(BLURRED_TRUTH[3], rel=1e-6)
+    assert res.values[3] == pytest.approx(BLURRED_TRUTH[3], rel=1e-3)  # the aperture model against this helper's own integral
     code, _, err = _run(["fit", path, "--resolution", "4"])
     assert code == 0 and "ill-determined" not in err
     # plot --fit draws the averaged fit; --resolution without --fit is said to do nothing

@@ -451,7 +451,8 @@ def replay(dense, strategies=STRATEGIES, *, n_max: int = 25, model="two-lobe", s
     n_max : readings of the adaptive campaign, random readings and hindsight subsets
     method, tolerance_deg, theta_step, noise, angle_error_deg : see :class:`DenseInstrument`
     generations : NSGA-II generations of the hindsight bound (population 100)
-    reference : the model's fit on all points of ``dense`` (fitted when not given)
+    reference : the model's fit on all points of ``dense`` (fitted when not given, and
+        refitted averaged over the receiver when ``resolution`` is given)
     progress : callable(str), told what runs
     resolution : deg, the full width of receiver angle each reading of ``dense`` averages
         over (0: a point receiver): the adaptive campaign's instrument has it, and the
