@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import warnings
 from dataclasses import replace
 
 import numpy as np
@@ -291,6 +292,17 @@ def test_cli_max_points_above_the_table_is_clamped_with_a_warning(noisy, tmp_pat
     assert main(["select", str(data), "--pop-size", "8", "--generations", "2", "--quiet",
                  "--max-points", "132", "--out", str(tmp_path / "same")]) == 0
     assert "--max-points" not in capsys.readouterr().err
+
+
+def test_api_max_points_above_the_table_warns_and_is_clamped(noisy):
+    """run_selection(max_points=500) on a 132-point table searched up to 132 without a word
+    (the warning was the CLI's alone): the API warns too, and the run is the clamped one."""
+    with pytest.warns(UserWarning, match="max_points 500 exceeds the table's 132 points"):
+        res = run_selection(noisy, seed=1, pop_size=8, generations=2, max_points=500)
+    assert res.settings["max_points"] == 132
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        run_selection(noisy, seed=1, pop_size=8, generations=2, max_points=132)
 
 
 def test_cli_several_seeds_write_one_folder_per_run(noisy, tmp_path):
