@@ -263,14 +263,14 @@ def _checked_run(meas, model_obj, run, selector, pop_size, generations, max_poin
         raise IrreflectError(f"checkpoint must be a file path (or None); found {checkpoint!r}")
     n = meas.n_points
     check_selection_budget(n, max_points, meas.name, option="max_points")
-    if max_points is not None and max_points > n:
-        # searched up to n (check_sizes clamps it); said here, not only by the CLI
-        warnings.warn(f"{meas.name}: max_points {max_points} exceeds the table's {n} "
-                      f"points: subsets of up to all {n} points are searched (as with "
-                      f"max_points={n})", UserWarning, stacklevel=3)
     check_search_budget(pop_size, generations, n)
     cand = np.ones(n, bool) if candidates is None else np.asarray(candidates, bool)
     n_min, n_max = check_sizes(n, model_obj.n_params, max_points, candidates)
+    if max_points is not None and max_points > n:
+        # searched up to n (check_sizes has clamped it); said here, not only by the CLI
+        warnings.warn(f"{meas.name}: max_points {max_points} exceeds the table's {n} "
+                      f"points: subsets of up to all {n} points are searched (as with "
+                      f"max_points={n})", UserWarning, stacklevel=3)
     if initial is not None:
         initial = check_masks(initial, n, "initial")
     if checkpoint is not None and not run.resumable:
