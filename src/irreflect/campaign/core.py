@@ -49,7 +49,7 @@ from .design import (
     region,
     specular_half_width,
 )
-from .instrument import Instrument, thin_settings
+from .instrument import MAX_SETTINGS, Instrument, thin_settings
 
 #: The verdict stops when the fits without the last readings (see :data:`STOP_HOLD`)
 #: predict the whole range within this share of the current fit's variance over it. With
@@ -76,6 +76,11 @@ FIT_OPTIONS = FitOptions(polish=False)
 #: is replaced by the continuation of the previous fit when that does not
 #: (:meth:`Campaign._choose_continuation`).
 OVERSHOOT = 1.5
+#: A fit that still predicts more than this many times the largest reading at an unmeasured
+#: setting (no continuation mends it) is tested there, and the verdict does not stop on it
+#: (:meth:`Campaign._overshooting`). 3 rather than OVERSHOOT: a matte paper's early fit
+#: predicts 1.56 times its largest reading at grazing incidence, a needle 39 times.
+TEST_OVERSHOOT = 3.0
 #: a stop on a fit whose R^2 on its own readings is below :data:`irreflect.metrics.MISFIT_R2`
 #: says the model may lack an effect (every real set's campaign fit is at 0.928 or above
 #: from 10 readings on)
@@ -267,8 +272,21 @@ class Campaign:
                 f"receiver {instrument.theta_min:g}..{instrument.theta_max:g} deg), fewer than "
                 f"the {self.model.n_params + 1} a first fit of '{self.model.name}' needs: "
                 "widen the receiver range, add angles of incidence or lower the resolution")
-        width = np.full(len(settings), 10.0)
-        near = np.abs(settings[:, 0] + settings[:, 1]) <= 5.0 * np.minimum(width, 2.0)
+        off = np.abs(settings[:, 0] + settings[:, 1])
+        # from the setting nearest the mirror at each angle of incidence (at normal
+        # incidence the mirror is on the source, kept clear)
+        at_gamma = np.unique(settings[:, 0], return_inverse=True)[1].ravel()
+        first = np.full(at_gamma.max() + 1, np.inf)
+        np.minimum.at(first, at_gamma, off)
+        off = off - first[at_gamma]
+        radius = 10.0  # deg around every mirror direction, narrowed on a fine receiver grid
+        near = off <= radius
+        while near.sum() > MAX_SETTINGS // 2 and radius > 0.1:
+            radius /= 2.0
+            near = off <= radius
+        # and the normal, the diffuse lobe's axis: a fit's diffuse index law at its bound
+        # can put a needle there at an unmeasured angle of incidence (_overshooting)
+        near |= np.abs(settings[:, 1]) <= 0.5
         self._settings = settings[thin_settings(settings, keep=near)]
         self._range = settings[thin_settings(settings, MAX_RANGE_POINTS)]
         self._rows = pd.DataFrame(columns=["gamma_deg", "theta_deg", "power"])
@@ -410,8 +428,11 @@ class Campaign:
                                                       self._settings[:, 1])
 
     def _overshoot(self, values, top: float) -> float:
-        """The largest power the coefficients predict on the range, in units of ``top``."""
-        s = self._settings
+        """The largest power the coefficients predict on the range, in units of ``top``:
+        on every setting of the range, not only the design's thinned ones (a diffuse index
+        law at its bound made a needle at the normal at one grazing angle of incidence,
+        0.3 deg wide and 68 times the largest reading, that the thinned settings missed)."""
+        s = self._range
         with np.errstate(all="ignore"):
             pred = self.model.predict_deg(np.asarray(values, float), s[:, 0], s[:, 1])
         peak = float(np.nanmax(pred)) if np.any(np.isfinite(pred)) else float("inf")
@@ -515,6 +536,7 @@ class Campaign:
             measured = {round(g, 6) for g, _ in taken}
             key = out["gamma_deg"].round(6)
             out["new_gamma"] = ~key.isin(measured) & ~key.duplicated()
+            out["why"] = _new_gamma_reason_first(out)
         return out
 
     def _taken(self) -> list[tuple[float, float]]:
@@ -602,6 +624,8 @@ class Campaign:
         rows = []
         extra_rows, extra_noise = [], []
         open_gap = self._settled_gap(state)
+        outside = None if open_gap else self._settled_outside(state)
+        over = self._overshooting(state)
         for _ in range(k):
             free = self._free_mask(taken)
             if not free.any():
@@ -609,6 +633,17 @@ class Campaign:
             gains = post.gains()
             j, because = self._gap_setting(open_gap, free) if open_gap else (None, "")
             open_gap = None
+            if j is None and over is not None and free[over[0]]:
+                j, because = over[0], (f"tests the fit's prediction of {over[1]:.3g} times "
+                                       "the largest reading here, where nothing is measured")
+            over = None
+            if j is None and outside is not None:
+                at = free & (np.abs(s[:, 0] - outside) < 1e-6)
+                if at.any():
+                    j = int(np.argmax(np.where(at, gains, -np.inf)))
+                    because = ("the curve has settled on the measured angles of incidence; "
+                               "this one lies outside their span")
+            outside = None
             if j is None:
                 new = ~np.isin(np.round(s[:, 0], 6), list(measured_g))
                 gains = np.where(new, gains / (1.0 + self.instrument.gamma_change_cost), gains)
@@ -724,6 +759,11 @@ class Campaign:
                            f"{moved} of its variance (stop below "
                            f"{100 * self.stop_tolerance:.2g}%)")
 
+        over = self._overshooting(state)
+        if over is not None:
+            g_, t_ = self._settings[over[0]]
+            reasons.append(f"the fit predicts {over[1]:.3g} times the largest reading at "
+                           f"gamma {g_:g}, theta {t_:g} deg, where nothing is measured")
         gap = self._saturated_gap(state)
         if gap is not None:
             a, b, c = gap
@@ -785,6 +825,47 @@ class Campaign:
         v = self.verdict()
         only = all(r.startswith("the specular share saturates") for r in v.reasons)
         return gap if (not v.stop and only) else None
+
+    def _overshooting(self, state: _State) -> tuple[int, float] | None:
+        """The setting where the fit predicts most, in units of the largest reading, when
+        that is more than :data:`TEST_OVERSHOOT` and nothing is measured there (the continuation
+        of the previous fit overshot as well, or there was none): ``(index, ratio)``;
+        else None. Such a prediction is a claim one reading tests, and the verdict does not
+        stop on it."""
+        if "overshooting" in state.extra:
+            return state.extra["overshooting"]
+        state.extra["overshooting"] = None
+        if state.fit is None or state.range_pred is None:
+            return None
+        top = float(np.max(self.measurements.power))
+        pred = np.nan_to_num(state.range_pred, nan=0.0, posinf=np.finfo(float).max)
+        if top <= 0 or not pred.size:
+            return None
+        j = int(np.argmax(pred))
+        ratio = float(pred[j]) / top
+        if not ratio > TEST_OVERSHOOT:
+            return None
+        state.extra["overshooting"] = (j, ratio)
+        return state.extra["overshooting"]
+
+    def _settled_outside(self, state: _State) -> float | None:
+        """The angle of incidence of the instrument farthest outside the measured span when
+        that is all that keeps the verdict from stopping (the curve has held on the
+        measured ones): then the next proposal is taken there. (An opening that skipped
+        normal incidence, its mirror direction in the receiver's clearance of the source,
+        left a campaign that never stopped: the verdict waited for an angle the rule rated
+        low.)"""
+        v = self.verdict()
+        if v.stop or not v.reasons or not all(
+                r.startswith("angles of incidence outside") for r in v.reasons):
+            return None
+        mags = np.abs(self.measurements.gamma_deg)
+        lo, hi = float(mags.min()), float(mags.max())
+        outside = [float(g) for g in self.instrument.gammas
+                   if abs(g) > hi + 1e-6 or abs(g) < lo - 1e-6]
+        if not outside:
+            return None
+        return max(outside, key=lambda g: max(abs(g) - hi, lo - abs(g)))
 
     def _gap_setting(self, gap, free: np.ndarray) -> tuple[int | None, str]:
         """The free setting nearest the mirror direction at the gap's angle of incidence,
@@ -871,6 +952,30 @@ def _relative(res: FitResult, model, meas: Measurements) -> FitResult:
     return dataclasses.replace(res, sigma=None, chi2_reduced=float("nan"), covariance=cov,
                                stderr=stderr, at_bound=at_bound, ill_determined=ill,
                                warnings=notes)
+
+
+_NEW_GAMMA = "; a new angle of incidence"
+
+
+def _new_gamma_reason_first(out: pd.DataFrame) -> pd.Series:
+    """The proposals' reasons with the clause that a setting opens a new angle of
+    incidence moved to the row that opens it in measurement order (the greedy choice
+    gave it to the row chosen first, which may be measured after another row there)."""
+    why = out["why"].astype(str).tolist()
+    key = out["gamma_deg"].round(6).tolist()
+    for i, opens in enumerate(out["new_gamma"].tolist()):
+        if not opens:
+            continue
+        for j in range(len(why)):
+            at = why[j].find(_NEW_GAMMA)
+            if j == i or key[j] != key[i] or at < 0:
+                continue
+            end = why[j].find(";", at + 2)
+            clause = why[j][at:] if end < 0 else why[j][at:end]
+            why[j] = why[j].replace(clause, "", 1)
+            why[i] += clause
+            break
+    return pd.Series(why, index=out.index)
 
 
 def _farthest(settings, free, taken) -> int:

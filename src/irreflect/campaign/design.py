@@ -151,11 +151,12 @@ DEFAULT_RULE = DesignRule()
 def opening_design(instrument, n: int) -> list[tuple[float, float, str]]:
     """The first ``n`` readings when nothing is measured: ``(gamma, theta, why)``.
 
-    Three angles of incidence spanning the instrument's (the smallest and the largest
-    whose mirror direction it can reach, and the one nearest their middle; fewer if it
-    has fewer or ``max_gamma_settings`` says so), so that no later fit extrapolates in
-    gamma; at each the mirror direction (the specular peak: its height, and whether there
-    is a lobe at all); a reading on the lobe's body a degree (or 1.5 receiver steps, or the
+    Three angles of incidence spanning the instrument's (its smallest and largest, and the
+    one nearest their middle whose mirror direction it can reach; fewer if it has fewer or
+    ``max_gamma_settings`` says so, and then the smallest and largest whose mirror direction
+    it reaches), so that no later fit extrapolates in gamma; at each
+    the mirror direction (the specular peak: its height, and whether there is a lobe at
+    all; where no receiver reaches it, the setting nearest it); a reading on the lobe's body a degree (or 1.5 receiver steps, or the
     receiver's resolution, whichever is largest) from the mirror at the largest and the
     smallest angle, which starts bracketing the lobe's width;
     and the diffuse lobe away from the mirror: on the source side, near the normal at
@@ -167,7 +168,11 @@ def opening_design(instrument, n: int) -> list[tuple[float, float, str]]:
     missed = instrument.mirror_misses()
     reach = [g for g in gammas if g not in missed]
     pool = reach if reach else list(gammas)
-    lo, hi = pool[0], pool[-1]
+    # the span is the instrument's: an extreme angle whose mirror direction no receiver
+    # reaches (normal incidence with the receiver kept off the source) is still set, its
+    # "mirror" reading the reachable setting nearest it; the verdict does not stop while
+    # an angle of incidence lies outside the measured span
+    lo, hi = (gammas[0], gammas[-1]) if limit >= 3 else (pool[0], pool[-1])
     mid = pool[int(np.argmin([abs(abs(g) - (abs(lo) + abs(hi)) / 2) for g in pool]))]
     chosen = list(dict.fromkeys([hi, lo, mid]))[:max(limit, 1)]
     chosen = sorted(chosen, key=abs)
@@ -549,9 +554,9 @@ def region(gamma: float, theta: float, width: float, measured_gammas=()) -> str:
     if off <= max(0.3 * width, 0.05) and off <= 2.0:
         return "the mirror direction (specular peak)"
     if off <= min(2.5 * width, 20.0):
-        return f"the specular lobe's body, {off:.1f} deg from the mirror"
+        return f"the specular lobe's body, {round(off, 2):g} deg from the mirror"
     if off <= min(8.0 * width, 30.0):
-        return f"the specular lobe's flank, {off:.1f} deg from the mirror"
+        return f"the specular lobe's flank, {round(off, 2):g} deg from the mirror"
     if abs(theta) >= 60.0:
         return f"grazing reception (theta {theta:g} deg)"
     if abs(theta) <= 10.0:

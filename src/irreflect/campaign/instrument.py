@@ -271,13 +271,17 @@ class Instrument:
 
 def thin_settings(settings: np.ndarray, limit: int = MAX_SETTINGS, keep=None) -> np.ndarray:
     """Indices of at most ``limit`` of ``settings``: all of ``keep`` (a boolean mask, e.g.
-    the settings near a mirror direction) and an even spread of the others per angle of
-    incidence."""
+    the settings near a mirror direction; an even spread of them when they are more than
+    half the limit: the first half of them had left the largest angles of incidence
+    without their mirror settings) and an even spread of the others."""
     n = len(settings)
     if n <= limit:
         return np.arange(n)
     keep = np.zeros(n, bool) if keep is None else np.asarray(keep, bool)
-    chosen = list(np.flatnonzero(keep)[: limit // 2])
+    kept = np.flatnonzero(keep)
+    if kept.size > limit // 2:  # an even spread of them too, over every angle of incidence
+        kept = kept[np.unique(np.round(np.linspace(0, kept.size - 1, limit // 2)).astype(int))]
+    chosen = list(kept)
     rest = np.flatnonzero(~keep)
     room = limit - len(chosen)
     if room > 0 and rest.size:

@@ -440,6 +440,22 @@ def replay_hindsight(source: DenseInstrument, n_max: int = 25, *, model="two-lob
                               f"{pop_size}")
 
 
+def _reference_misfit(reference: FitResult, dense: Measurements) -> str:
+    """The warning when the all-points fit, the campaigns' target, explains its table
+    poorly: a target of R^2 0.26 is met by almost any campaign, and says nothing of it."""
+    r2 = float(reference.r2)
+    if not (np.isfinite(r2) and r2 < metrics.MISFIT_R2):
+        return ""
+    text = (f"the all-points fit explains the table only to R^2 {r2:.4g}: the model "
+            "misfits this material, and coming within 0.01 of it says little of a campaign "
+            "(irreflect diagnose names what the model lacks)")
+    if dense.sigma is not None:
+        text += (f"; its fit is weighted by the sigma column (reduced chi^2 "
+                 f"{reference.chi2_reduced:.4g}) while R^2 weighs every point alike: "
+                 "without the column the fits are scored in power units")
+    return text
+
+
 def replay(dense, strategies=STRATEGIES, *, n_max: int = 25, model="two-lobe", seed: int = 0,
            method: str = "nearest", tolerance_deg: float = 0.5, theta_step=None,
            noise: float = 0.0, angle_error_deg: float = 0.0, generations: int = 100,
@@ -507,7 +523,8 @@ def replay(dense, strategies=STRATEGIES, *, n_max: int = 25, model="two-lobe", s
     return ReplayResult(
         dataset=dense.name, n_points=dense.n_points, reference_r2=float(reference.r2),
         curves=curves, verdicts=verdicts, proposal_seconds=times,
-        warnings=[w for w in (source.coarse_peaks(), source.mirror_gaps()) if w],
+        warnings=[w for w in (source.coarse_peaks(), source.mirror_gaps(),
+                              _reference_misfit(reference, dense)) if w],
         settings={"n_max": n_max, "model": model_obj.name, "seed": seed, "method": method,
                   "tolerance_deg": tolerance_deg, "theta_step": theta_step, "noise": noise,
                   "angle_error_deg": angle_error_deg, "generations": generations,
