@@ -839,7 +839,9 @@ class Campaign:
             return None
         top = float(np.max(self.measurements.power))
         pred = np.nan_to_num(state.range_pred, nan=0.0, posinf=np.finfo(float).max)
-        if top <= 0 or not pred.size:
+        # where a reading can still be taken (a measured setting has its own reading)
+        pred = np.where(self._free_mask(self._taken()), pred, -np.inf)
+        if top <= 0 or not pred.size or not np.isfinite(np.max(pred)):
             return None
         j = int(np.argmax(pred))
         ratio = float(pred[j]) / top
