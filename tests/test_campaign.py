@@ -554,6 +554,22 @@ def test_a_replay_warns_when_its_target_fit_explains_the_table_poorly():
     assert _reference_misfit(plain, table) == ""
 
 
+def test_a_campaign_whose_weighted_fit_cannot_beat_a_constant_fits_its_readings_equally():
+    """A foreign material (a Lafortune lobe peaking off the mirror at grazing): from its
+    14th reading the range-weighted fit could not beat a constant on the readings (the
+    peak's four readings stand for a sliver of the range), and the campaign had no fit for
+    the rest of its 25 readings, proposing opening readings and never stopping. The
+    readings are then fitted equally weighted, and the campaign goes on."""
+    from irreflect.synthetic import foreign_material
+
+    dense = foreign_material(602).measurements
+    curve, verdicts, _ = replay_adaptive(DenseInstrument(dense), n_max=16)
+    assert sorted(curve.r2) == list(range(8, 17))
+    assert all(np.isfinite(curve.r2[n]) for n in range(8, 17))
+    assert not any("no usable fit" in " ".join(verdicts[n].reasons) for n in range(8, 17))
+    assert max(curve.r2.values()) > 0.4  # all points: 0.52
+
+
 def test_the_verdict_dict_is_strict_json_before_any_reading():
     # r2_band and stability are NaN before a fit: to_dict held NaN (json allow_nan=False failed)
     v = Campaign(Instrument(gammas_deg=(-30,))).verdict()

@@ -357,6 +357,15 @@ class Campaign:
                 state.extra["weighted"] = weighted
             except (FitError, DataError) as exc:
                 state.error = " ".join(str(exc).split())
+                try:
+                    # the readings equally weighted: the range's weights can leave a few
+                    # peak readings with no say, and then no fit beats a constant on them
+                    state.fit, weighted = self._fit_weighted(meas, np.ones(meas.n_points),
+                                                             self._warm)
+                    state.extra["weighted"] = weighted
+                    state.error = None
+                except (FitError, DataError):
+                    pass
         if state.fit is not None:
             g = np.concatenate([self._settings[:, 0], meas.gamma_deg])
             t = np.concatenate([self._settings[:, 1], meas.theta_deg])
