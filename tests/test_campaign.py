@@ -568,6 +568,8 @@ def test_a_campaign_whose_weighted_fit_cannot_beat_a_constant_fits_its_readings_
     assert all(np.isfinite(curve.r2[n]) for n in range(8, 17))
     assert not any("no usable fit" in " ".join(verdicts[n].reasons) for n in range(8, 17))
     assert max(curve.r2.values()) > 0.4  # all points: 0.52
+    said = [n for n in verdicts if "fitted equally weighted" in verdicts[n].text]
+    assert said and min(said) >= 14  # and the verdict says so
 
 
 def test_the_verdict_dict_is_strict_json_before_any_reading():

@@ -363,6 +363,7 @@ class Campaign:
                     state.fit, weighted = self._fit_weighted(meas, np.ones(meas.n_points),
                                                              self._warm)
                     state.extra["weighted"] = weighted
+                    state.extra["equal_weights"] = True
                     state.error = None
                 except (FitError, DataError):
                     pass
@@ -795,6 +796,9 @@ class Campaign:
             why += (f"the model explains the readings only to R^2 {res.r2:.3f}: it may "
                     "lack an effect of this material (irreflect diagnose on the readings "
                     "names it)",)
+        if state.extra.get("equal_weights"):
+            why += ("the readings are fitted equally weighted: weighted by the share of the "
+                    "range each stands for, no fit beats a constant on them",)
         if outside and spent and not reasons:
             # the instrument can set no other angle: the stop stands, with what it leaves
             why += (f"extrapolated to |gamma| {short_list([f'{abs(g):g}' for g in outside], 4)}"
