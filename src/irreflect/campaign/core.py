@@ -364,7 +364,7 @@ class Campaign:
                                                              self._warm)
                     state.extra["weighted"] = weighted
                     state.extra["equal_weights"] = True
-                    state.error = None
+                    state.error = ""
                 except (FitError, DataError):
                     pass
         if state.fit is not None:
@@ -841,10 +841,10 @@ class Campaign:
 
     def _overshooting(self, state: _State) -> tuple[int, float] | None:
         """The setting where the fit predicts most, in units of the largest reading, when
-        that is more than :data:`TEST_OVERSHOOT` and nothing is measured there (the continuation
-        of the previous fit overshot as well, or there was none): ``(index, ratio)``;
-        else None. Such a prediction is a claim one reading tests, and the verdict does not
-        stop on it."""
+        that is more than :data:`TEST_OVERSHOOT` at a setting a reading can still be taken
+        at (the continuation of the previous fit overshot as well, or there was none):
+        ``(index, ratio)``; else None. Such a prediction is a claim one reading tests, and
+        the verdict does not stop on it."""
         if "overshooting" in state.extra:
             return state.extra["overshooting"]
         state.extra["overshooting"] = None

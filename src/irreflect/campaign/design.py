@@ -154,11 +154,11 @@ def opening_design(instrument, n: int) -> list[tuple[float, float, str]]:
     Three angles of incidence spanning the instrument's (its smallest and largest, and the
     one nearest their middle whose mirror direction it can reach; fewer if it has fewer or
     ``max_gamma_settings`` says so, and then the smallest and largest whose mirror direction
-    it reaches), so that no later fit extrapolates in gamma; at each
-    the mirror direction (the specular peak: its height, and whether there is a lobe at
-    all; where no receiver reaches it, the setting nearest it); a reading on the lobe's body a degree (or 1.5 receiver steps, or the
-    receiver's resolution, whichever is largest) from the mirror at the largest and the
-    smallest angle, which starts bracketing the lobe's width;
+    it reaches), so that no later fit extrapolates in gamma; at each the mirror direction
+    (the specular peak: its height, and whether there is a lobe at all; where no receiver
+    reaches it, the setting nearest it); a reading on the lobe's body a degree (or 1.5
+    receiver steps, or the receiver's resolution, whichever is largest) from the mirror at
+    the largest and the smallest angle, which starts bracketing the lobe's width;
     and the diffuse lobe away from the mirror: on the source side, near the normal at
     grazing incidence, and on the far side beyond the lobe.
     """
