@@ -633,27 +633,12 @@ class Campaign:
                            for q in state.extra.get("rivals", ())]
         rows = []
         extra_rows, extra_noise = [], []
-        open_gap = self._settled_gap(state)
-        outside = None if open_gap else self._settled_outside(state)
-        over = self._overshooting(state)
         for _ in range(k):
             free = self._free_mask(taken)
             if not free.any():
                 break
             gains = post.gains()
-            j, because = self._gap_setting(open_gap, free) if open_gap else (None, "")
-            open_gap = None
-            if j is None and over is not None and free[over[0]]:
-                j, because = over[0], (f"tests the fit's prediction of {over[1]:.3g} times "
-                                       "the largest reading here, where nothing is measured")
-            over = None
-            if j is None and outside is not None:
-                at = free & (np.abs(s[:, 0] - outside) < 1e-6)
-                if at.any():
-                    j = int(np.argmax(np.where(at, gains, -np.inf)))
-                    because = ("the curve has settled on the measured angles of incidence; "
-                               "this one lies outside their span")
-            outside = None
+            j, because = self._first_setting(state, free, gains) if not rows else (None, "")
             if j is None:
                 new = ~np.isin(np.round(s[:, 0], 6), list(measured_g))
                 gains = np.where(new, gains / (1.0 + self.instrument.gamma_change_cost), gains)
@@ -838,6 +823,30 @@ class Campaign:
         v = self.verdict()
         only = all(r.startswith("the specular share saturates") for r in v.reasons)
         return gap if (not v.stop and only) else None
+
+    def _first_setting(self, state: _State, free: np.ndarray,
+                       gains: np.ndarray) -> tuple[int | None, str]:
+        """The first proposal when something other than the gains decides it, and why:
+        the saturated gap once the curve has settled elsewhere, a prediction far above
+        every reading, or the angle of incidence outside the measured span once it is all
+        the verdict waits for; (None, "") otherwise."""
+        gap = self._settled_gap(state)
+        if gap:
+            j, because = self._gap_setting(gap, free)
+            if j is not None:
+                return j, because
+        over = self._overshooting(state)
+        if over is not None and free[over[0]]:
+            return over[0], (f"tests the fit's prediction of {over[1]:.3g} times the largest "
+                             "reading here, where nothing is measured")
+        outside = None if gap else self._settled_outside(state)
+        if outside is not None:
+            at = free & (np.abs(self._settings[:, 0] - outside) < 1e-6)
+            if at.any():
+                return (int(np.argmax(np.where(at, gains, -np.inf))),
+                        "the curve has settled on the measured angles of incidence; this one "
+                        "lies outside their span")
+        return None, ""
 
     def _overshooting(self, state: _State) -> tuple[int, float] | None:
         """The setting where the fit predicts most, in units of the largest reading, when
