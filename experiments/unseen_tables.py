@@ -12,6 +12,7 @@ floor, a gain drift per angle of incidence, one table with a sigma column; peaks
 to 1e4. Seeded: the same tables every time. Usage::
 
     .venv/bin/python experiments/unseen_tables.py [--out out/unseen]
+    .venv/bin/python experiments/unseen_tables.py --random 30 --out out/unseen2
     .venv/bin/python experiments/bench_campaign.py --real-only --data-dir out/unseen \
         --generations 30 --workers 2
 
@@ -223,13 +224,74 @@ def measure(label, gamma, theta, rng):
     return y
 
 
+_KINDS = ("ggx", "beckmann_on", "fresnel_sat", "ashikhmin", "clearcoat", "minnaert_gauss",
+          "lambert", "sheen", "retro", "offspec")
+_GRIDS = (G10, G5U, G3, G7, [-5, -25, -45, -65, -80], [0, -20, -40, -60, -80])
+
+
+def _random_params(kind, rng):
+    """One draw of a model's parameters (a second held-out set, stop 39)."""
+    u = rng.uniform
+    draws = {
+        "ggx": lambda: dict(a=u(0.02, 0.4), f0=u(0.03, 0.3), ks=1.0, kd=u(0.05, 1)),
+        "beckmann_on": lambda: dict(m=u(0.05, 0.4), n=u(1.3, 1.8), ks=1.0, kd=u(0.1, 1),
+                                    sigma=u(0, 0.8)),
+        "fresnel_sat": lambda: dict(a=u(0.03, 0.3), n=u(1.3, 1.8), kd=u(0.1, 1)),
+        "ashikhmin": lambda: dict(n=10 ** u(1.5, 3.5), rs=u(0.03, 0.2), rd=u(0.2, 0.9)),
+        "clearcoat": lambda: dict(ac=u(0.01, 0.06), ab=u(0.15, 0.4), f0=u(0.1, 0.4), kc=1.0,
+                                  kb=u(0.3, 1), kd=u(0.1, 0.6)),
+        "minnaert_gauss": lambda: dict(kd=u(0.3, 1), k=u(0.5, 1.0), ks=u(0.1, 0.6), s=u(2, 10)),
+        "lambert": lambda: dict(sigma=u(0.1, 0.9)),
+        "sheen": lambda: dict(kd=u(0.3, 1), sigma=u(0.2, 0.8), ksh=u(0.1, 0.5), e=u(2, 5)),
+        "retro": lambda: dict(kd=u(0.3, 1), ks=u(0.1, 0.6), w=u(3, 10), kr=u(0.05, 0.5),
+                              wr=u(5, 15)),
+        "offspec": lambda: dict(kd=u(0.3, 1), ks=u(0.3, 1), n=10 ** u(1.5, 3), k=u(0.05, 0.3),
+                                s0=u(0, 4)),
+    }
+    p = {k: float(v) for k, v in draws[kind]().items()}
+    if rng.random() < 0.3:
+        p["irr"] = 1
+    return p
+
+
+def write_random(out: Path, count: int, first_seed: int) -> None:
+    """``count`` tables of random draws of the models, grids and noise above, seeded
+    ``first_seed + i`` (``--random``: the second held-out set of stop 39)."""
+    for i in range(count):
+        rng = np.random.default_rng(first_seed + i)
+        kind = _KINDS[i % len(_KINDS)]
+        p = _random_params(kind, rng)
+        gammas = _GRIDS[int(rng.integers(len(_GRIDS)))]
+        tmin = float(rng.choice([-85, -85, -30]))
+        step = float(rng.choice([0.5, 1, 2, 3]))
+        ring = bool(rng.random() < 0.4)
+        hole = float(rng.choice([3, 5, 8]))
+        G, T = grid(gammas, tmin, 85, step, ring, hole)
+        y0 = make_model(kind, p)(G, T)
+        y0 = y0 / np.max(y0) * float(10 ** rng.uniform(-3, 4))
+        rel = float(rng.uniform(0.005, 0.03))
+        add = float(rng.choice([0, 1e-4, 1e-3])) * y0.max()
+        y = y0 * (1 + rel * rng.standard_normal(y0.shape)) + add * rng.standard_normal(y0.shape)
+        with open(out / f"{kind}-{i}.csv", "w") as fh:
+            fh.write("gamma_deg,theta_deg,power\n")
+            for k in range(len(G)):
+                fh.write(f"{G[k]:g},{T[k]:g},{y[k]:.6g}\n")
+    print(f"wrote {count} random tables to {out}")
+
+
 def main(argv=None):
     import argparse
 
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--out", default="out/unseen", help="folder of the tables")
-    out = Path(parser.parse_args(argv).out)
+    parser.add_argument("--random", type=int, default=0, metavar="N",
+                        help="write N tables of random draws instead (seeds 9000 + i)")
+    args = parser.parse_args(argv)
+    out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
+    if args.random:
+        write_random(out, args.random, 9000)
+        return
     rows = []
     for i, (lab, kind, p, gammas, (tmin, tmax, step, ring, hole), noise) in enumerate(SPECS):
         rng = np.random.default_rng(1000 + i)
