@@ -287,6 +287,8 @@ def main(argv=None):
     parser.add_argument("--random", type=int, default=0, metavar="N",
                         help="write N tables of random draws instead (seeds 9000 + i)")
     args = parser.parse_args(argv)
+    if args.random < 0:
+        parser.error(f"--random N: expected a count of 0 or more, found {args.random}")
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     if args.random:
