@@ -254,6 +254,15 @@ def _random_params(kind, rng):
     return p
 
 
+def _write_table(path: Path, G, T, y, sigma=None) -> None:
+    """One table as CSV (``gamma_deg, theta_deg, power`` and, given, ``sigma``)."""
+    with open(path, "w") as fh:
+        fh.write("gamma_deg,theta_deg,power" + (",sigma" if sigma is not None else "") + "\n")
+        for k in range(len(G)):
+            fh.write(f"{G[k]:g},{T[k]:g},{y[k]:.6g}"
+                     + (f",{sigma[k]:.4g}" if sigma is not None else "") + "\n")
+
+
 def write_random(out: Path, count: int, first_seed: int) -> None:
     """``count`` tables of random draws of the models, grids and noise above, seeded
     ``first_seed + i`` (``--random``: the second held-out set of stop 39)."""
@@ -272,11 +281,7 @@ def write_random(out: Path, count: int, first_seed: int) -> None:
         rel = float(rng.uniform(0.005, 0.03))
         add = float(rng.choice([0, 1e-4, 1e-3])) * y0.max()
         y = y0 * (1 + rel * rng.standard_normal(y0.shape)) + add * rng.standard_normal(y0.shape)
-        with open(out / f"{kind}-{i}.csv", "w") as fh:
-            fh.write("gamma_deg,theta_deg,power\n")
-            for k in range(len(G)):
-                fh.write(f"{G[k]:g},{T[k]:g},{y[k]:.6g}\n")
-    print(f"wrote {count} random tables to {out}")
+        _write_table(out / f"{kind}-{i}.csv", G, T, y)
 
 
 def main(argv=None):
@@ -289,11 +294,23 @@ def main(argv=None):
     args = parser.parse_args(argv)
     if args.random < 0:
         parser.error(f"--random N: expected a count of 0 or more, found {args.random}")
-    out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
-    if args.random:
-        write_random(out, args.random, 9000)
-        return
+    from irreflect._atomic import atomic_directory
+    from irreflect.errors import IrreflectError
+
+    # written whole or not at all, into a folder no input is in (claim_output)
+    try:
+        with atomic_directory(Path(args.out), command="experiments/unseen_tables.py") as tmp:
+            if args.random:
+                write_random(tmp, args.random, 9000)
+            else:
+                _write_fixed(tmp)
+    except IrreflectError as exc:
+        parser.error(str(exc))
+    print(f"wrote {args.random or len(SPECS)} tables to {args.out}")
+
+
+def _write_fixed(out: Path) -> None:
+    """The 25 tables of :data:`SPECS` and their ``index.json``."""
     rows = []
     for i, (lab, kind, p, gammas, (tmin, tmax, step, ring, hole), noise) in enumerate(SPECS):
         rng = np.random.default_rng(1000 + i)
@@ -308,19 +325,13 @@ def main(argv=None):
         sig = np.sqrt((noise.get("rel", 0) * y0) ** 2 + (noise.get("add", 0) * peak) ** 2)
         y = y0 * gain * (1 + noise.get("rel", 0) * rng.standard_normal(y0.shape))
         y = y + noise.get("add", 0) * peak * rng.standard_normal(y0.shape)
-        path = out / f"{lab}.csv"
-        with open(path, "w") as fh:
-            fh.write("gamma_deg,theta_deg,power" + (",sigma" if noise.get("sigma") else "") + "\n")
-            for k in range(len(G)):
-                fh.write(f"{G[k]:g},{T[k]:g},{y[k]:.6g}"
-                         + (f",{sig[k]:.4g}" if noise.get("sigma") else "") + "\n")
+        _write_table(out / f"{lab}.csv", G, T, y, sig if noise.get("sigma") else None)
         rows.append(dict(label=lab, kind=kind, points=len(G), peak=float(peak),
                          gammas=list(gammas), theta=[tmin, tmax, step], ring=ring, hole=hole,
                          noise=noise, params=p))
     (out / "index.json").write_text(json.dumps(rows, indent=1))
     for r in rows:
         print(f"{r['label']:28s} {r['points']:5d} peak {r['peak']:.3g}")
-    print(f"wrote {len(rows)} tables to {out}")
 
 
 if __name__ == "__main__":
