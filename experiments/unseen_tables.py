@@ -13,6 +13,7 @@ to 1e4. Seeded: the same tables every time. Usage::
 
     .venv/bin/python experiments/unseen_tables.py [--out out/unseen]
     .venv/bin/python experiments/unseen_tables.py --random 30 --out out/unseen2
+    .venv/bin/python experiments/unseen_tables.py --random 30 --first-seed 9100 --out out/unseen3
     .venv/bin/python experiments/bench_campaign.py --real-only --data-dir out/unseen \
         --generations 30 --workers 2
 
@@ -290,10 +291,15 @@ def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--out", default="out/unseen", help="folder of the tables")
     parser.add_argument("--random", type=int, default=0, metavar="N",
-                        help="write N tables of random draws instead (seeds 9000 + i)")
+                        help="write N tables of random draws instead (seeds FIRST + i)")
+    parser.add_argument("--first-seed", type=int, default=9000, metavar="FIRST",
+                        help="the first seed of --random (default 9000: the set of stop 39; "
+                             "9100: the third held-out set, drawn at stop 40)")
     args = parser.parse_args(argv)
     if args.random < 0:
         parser.error(f"--random N: expected a count of 0 or more, found {args.random}")
+    if args.first_seed < 0:
+        parser.error(f"--first-seed: expected a seed of 0 or more, found {args.first_seed}")
     from irreflect._atomic import atomic_directory
     from irreflect.errors import IrreflectError
 
@@ -301,7 +307,7 @@ def main(argv=None):
     try:
         with atomic_directory(Path(args.out), command="experiments/unseen_tables.py") as tmp:
             if args.random:
-                write_random(tmp, args.random, 9000)
+                write_random(tmp, args.random, args.first_seed)
             else:
                 _write_fixed(tmp)
     except IrreflectError as exc:
