@@ -807,8 +807,11 @@ def test_next_saves_the_campaign_fit_as_a_material_file(tmp_path):
     assert "wrote" in stdout and "campaign's fit of 10 readings" in stdout
     saved = json.loads(material.read_text())
     assert saved["format"] == "irreflect-material" and "verdict" in saved
-    expected = Campaign(tool, measured, seed=0).fit.values
-    assert np.allclose(list(saved["params"].values()), expected)
+    campaign = Campaign(tool, measured, seed=0)
+    assert np.allclose(list(saved["params"].values()), campaign.fit.values)
+    # its notes say which fit it is
+    said = "quadrature estimate" if campaign.estimated else "readings weighted by the share"
+    assert said in json.dumps(saved)
     # never onto the input
     code, _, err = _run(["next", measured, *args, "--save", measured])
     assert code == 2 and "input" in err
@@ -999,7 +1002,8 @@ def test_a_stop_on_a_model_that_misfits_its_readings_says_so():
     table = foreign_material(107)
     assert table.model == "lafortune"
     source = DenseInstrument(table.measurements)
-    curve, verdicts, _ = replay_adaptive(source, 20, seed=0)
+    # (the reported estimate keeps moving between two optima until 24 readings: stop 40)
+    curve, verdicts, _ = replay_adaptive(source, 25, seed=0)
     stop = min(n for n, v in verdicts.items() if v.stop)
     verdict = verdicts[stop]
     assert curve.r2[stop] < 0.7  # far below the model's best, 0.77: what the text must flag
@@ -1325,3 +1329,148 @@ def test_a_fit_with_the_receivers_resolution_warns_of_its_own_result_only(tmp_pa
     code, _, err = _run(["plot", path, "--fit", "--model", "phong@10", "--resolution", "4",
                          "--out", tmp_path / "r.png"])
     assert code != 0 and "drop '@G' or --resolution" in err and not (tmp_path / "r.png").exists()
+
+
+# ----------------------------------------------------------------------------- the estimate
+#: the first 12 settings the campaign chose on the RGL golden yellow paint (seed 0, the
+#: weighted fit's campaign of stop 39)
+GOLDEN12 = [(0.0, 0.0), (-31.6178, 31.6178), (-66.3495, 66.3495), (0.0, -50.0),
+            (-66.3495, 0.0), (-66.3495, 65.3495), (-31.6178, 67.0), (0.0, 1.0),
+            (-45.3703, 48.6203), (-45.3703, 46.8703), (-56.4581, -1.0), (-45.3703, 40.0)]
+
+
+def _rule(**knobs):
+    import dataclasses
+
+    from irreflect.campaign import DesignRule
+
+    return dataclasses.replace(DesignRule(), **knobs)
+
+
+def test_the_quadrature_estimate_reaches_the_all_points_fit_where_the_weighted_fit_does_not(
+        real_dir):
+    # the golden yellow paint's 12 readings: the weighted fit of the readings gives R^2
+    # 0.969 against all points, the model fitted to the posterior's picture of the whole
+    # range 0.977, within 0.01 of the all-points fit (0.985) and above the paper's 12
+    # points (0.9755)
+    import irreflect
+
+    dense = read_measurements(real_dir / "rgl_epfl" / "rgl_vch_golden_yellow.csv")
+    source = DenseInstrument(dense)
+    s = np.array(GOLDEN12)
+    power = source.read(s[:, 0], s[:, 1], np.random.default_rng(0))
+    rows = pd.DataFrame({"gamma_deg": s[:, 0], "theta_deg": s[:, 1], "power": power})
+    reference = irreflect.fit(dense, seed=0).r2
+    weighted = Campaign(source.instrument(), rows, seed=0, rule=_rule(quadrature=False))
+    estimate = Campaign(source.instrument(), rows, seed=0)
+    assert weighted.r2_against(dense) < reference - 0.01
+    assert estimate.r2_against(dense) >= reference - 0.01
+    assert estimate.r2_against(dense) > weighted.r2_against(dense) + 0.004
+    # an estimate must stay a refinement of the weighted fit's curve: asked to agree with
+    # it to R^2 0.9999 over the range, this one does not, and the weighted fit is reported
+    strict = Campaign(source.instrument(), rows, seed=0, rule=_rule(quadrature_agree=0.9999))
+    assert strict.fit is strict._current().fit
+    assert strict.r2_against(dense) == pytest.approx(weighted.r2_against(dense), abs=1e-9)
+    # it is still a fit of these readings: its residuals are theirs
+    assert np.allclose(estimate.fit.fitted + estimate.fit.residuals, power)
+    assert estimate.fit.r2 == pytest.approx(
+        1.0 - np.sum(estimate.fit.residuals ** 2) / np.sum((power - power.mean()) ** 2))
+
+
+def test_the_quadrature_estimate_of_every_setting_measured_is_the_all_points_fit():
+    # with a reading at every setting the posterior's picture of the range is the readings
+    # themselves, and the estimate is the all-points fit (a bump the model lacks included)
+    import irreflect
+
+    rng = np.random.default_rng(1)
+    g, t = np.meshgrid([-15.0, -40.0, -65.0], np.arange(-80.0, 81.0, 8.0), indexing="ij")
+    g, t = g.ravel(), t.ravel()
+    clean = two_lobe_power(np.radians(g), np.radians(t), 0.3, -0.5, 1.2, 0.3, 200.0, 0.4,
+                           1.0) * (1.0 + 0.3 * np.exp(-((t - 30.0) / 15.0) ** 2))
+    power = clean * (1.0 + 0.01 * rng.standard_normal(clean.size))
+    dense = Measurements(gamma_deg=g, theta_deg=t, power=power)
+    tool = Instrument(gammas_deg=(-15, -40, -65), theta_min=-80, theta_max=80, theta_step=8)
+    rows = pd.DataFrame({"gamma_deg": g, "theta_deg": t, "power": power})
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        reference = irreflect.fit(dense, seed=0)
+    campaign = Campaign(tool, rows, seed=0)
+    assert campaign._current().estimate is not None
+    assert campaign.r2_against(dense) == pytest.approx(reference.r2, abs=1e-5)
+    assert campaign.fit.values[-1] == pytest.approx(reference.values[-1], rel=1e-3)
+
+
+#: a clear coat of the held-out tables (experiments/unseen_tables.py --random 30
+#: --first-seed 9100, clearcoat-14): the campaign's 15 readings (gamma, theta, power)
+CLEARCOAT = [(0.0, -9.0, 8.08894e-05), (-40.0, 40.0, 0.00104917), (-80.0, 80.0, 0.00838744),
+             (0.0, -30.0, 4.50673e-05), (-80.0, 0.0, 8.19703e-06),
+             (-80.0, 79.0, 0.00670245), (-40.0, 75.0, 1.37981e-05), (0.0, 9.0, 8.10285e-05),
+             (-70.0, 70.25, 0.00372789), (-70.0, 68.25, 0.002232),
+             (-80.0, 80.75, 0.00771758), (-80.0, 82.0, 0.00521366),
+             (-60.0, 60.5, 0.00190607), (-60.0, 62.75, 0.00089311),
+             (-20.0, 19.25, 0.000855746)]
+
+
+@pytest.mark.parametrize("quadrature", [True, False])
+def test_a_needle_of_the_fit_is_not_what_the_campaign_reports(quadrature):
+    # at 15 readings every fit of the clear coat's readings sends the diffuse index law to
+    # a needle at the normal at grazing incidence, 150 times the largest reading, where
+    # nothing is measured (R^2 -1468 against all points); the estimate, taken around the
+    # previous estimate there, does not, and the next reading still tests the needle
+    from irreflect.campaign.core import OVERSHOOT, TEST_OVERSHOOT
+
+    tool = Instrument(gammas_deg=(0, -10, -20, -30, -40, -50, -60, -70, -80), theta_min=-30,
+                      theta_max=85, theta_step=0.25, source_clearance=0.0)
+    rows = pd.DataFrame(CLEARCOAT, columns=["gamma_deg", "theta_deg", "power"])
+    campaign = Campaign(tool, rows.iloc[:8], seed=0, rule=_rule(quadrature=quadrature))
+    for i in range(8, 15):  # one reading at a time, the verdict read after each
+        campaign.verdict()
+        campaign.add(rows.iloc[i:i + 1])
+    top = float(rows["power"].max())
+    assert campaign._overshoot(campaign._current().fit.values, top) > TEST_OVERSHOOT
+    reported = campaign._overshoot(campaign.fit.values, top)
+    if quadrature:
+        assert reported <= OVERSHOOT
+    else:
+        assert reported > TEST_OVERSHOOT
+    verdict = campaign.verdict()
+    assert not verdict.stop and any("times the largest reading" in r for r in verdict.reasons)
+    assert "tests the fit's prediction" in campaign.propose(1)["why"].iloc[0]
+
+
+def test_the_quadrature_knobs_are_checked_and_a_strict_ratio_keeps_the_weighted_fit():
+    from irreflect.campaign import DesignRule
+
+    with pytest.raises(IrreflectError, match="quadrature_ratio"):
+        DesignRule(quadrature_ratio=-1.0)
+    with pytest.raises(IrreflectError, match="quadrature_agree"):
+        DesignRule(quadrature_agree=1.5)
+    # a ratio below 1 refuses any estimate that explains the readings worse than the
+    # weighted fit does: the reported fit is then the weighted fit itself
+    dense = _material(GLOSSY, step=4.0, noise=0.02, name="gloss")
+    source = DenseInstrument(dense)
+    campaign, _ = _campaign_until_stop(source, rule=_rule(quadrature_ratio=1e-9), n_max=12)
+    state = campaign._current()
+    assert state.estimate is None and campaign.fit is state.fit
+
+
+def test_readings_given_at_once_give_what_they_give_one_at_a_time(real_dir):
+    # `irreflect next` reads every reading from a file: the campaign fits, reports and
+    # judges as the scripted loop that took them one at a time (before stop 40 the verdict
+    # refitted the earlier readings afresh: its curve had moved by 310 % of its variance
+    # on these 12 readings, against 4.9 % one at a time)
+    dense = read_measurements(real_dir / "rgl_epfl" / "rgl_vch_golden_yellow.csv")
+    source = DenseInstrument(dense)
+    s = np.array(GOLDEN12)
+    power = source.read(s[:, 0], s[:, 1], np.random.default_rng(0))
+    rows = pd.DataFrame({"gamma_deg": s[:, 0], "theta_deg": s[:, 1], "power": power})
+    stepwise = Campaign(source.instrument(), rows.iloc[:8], seed=0)
+    for i in range(8, 12):
+        stepwise.verdict()
+        stepwise.add(rows.iloc[i:i + 1])
+    at_once = Campaign(source.instrument(), rows, seed=0)
+    a, b = stepwise.verdict(), at_once.verdict()
+    assert np.isfinite(a.stability) and np.isfinite(b.stability)
+    assert b.stability == pytest.approx(a.stability, rel=1e-6)
+    assert b.stop == a.stop
+    np.testing.assert_allclose(at_once.fit.values, stepwise.fit.values, rtol=1e-6)

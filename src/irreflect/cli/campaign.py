@@ -104,13 +104,7 @@ def _next(args) -> int:
         from ..room.materials import save_material
 
         save_material(campaign.fit, args.save, data_file=args.measured,
-                      notes=f"adaptive campaign (irreflect next), {verdict.text}; the "
-                            "readings weighted by the share of the instrument's range each "
-                            "stands for" + (
-                                f"; fitted as the model averaged over the receiver's "
-                                f"{tool.resolution:g} deg resolution (the coefficients are the "
-                                "material's, as a point receiver would see it)"
-                                if tool.resolution else ""))
+                      notes=_save_notes(campaign, verdict, tool))
     if args.out is not None:
         table = proposals[["gamma_deg", "theta_deg", "why"]].copy()
         table["new_gamma"] = proposals["new_gamma"].map({True: "yes", False: "no"})
@@ -448,3 +442,14 @@ def register(sub) -> None:
                         "(default: print only)")
     p.add_argument("--json", action="store_true", help="one JSON object on stdout")
     p.set_defaults(handler=_cmd_campaign)
+
+
+def _save_notes(campaign, verdict, tool) -> str:
+    """The notes of the material file ``next --save`` writes: which fit it holds."""
+    what = ("the quadrature estimate: the model fitted to the instrument's range as the "
+            "design's posterior pictures it between the readings" if campaign.estimated else
+            "the readings weighted by the share of the instrument's range each stands for")
+    blur = (f"; fitted as the model averaged over the receiver's {tool.resolution:g} deg "
+            "resolution (the coefficients are the material's, as a point receiver would see "
+            "it)" if tool.resolution else "")
+    return f"adaptive campaign (irreflect next), {verdict.text}; {what}{blur}"
