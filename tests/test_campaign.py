@@ -297,6 +297,17 @@ SATIN = [(0.0, 0.0), (-39.7407, 39.7407), (-68.7703, 68.7703), (0.0, -50.0),
          (-68.7703, 62.0)]
 
 
+def _replayed(real_dir, name, settings):
+    """A real table of the RGL set as the instrument, and its readings at ``settings``
+    (seeded): ``(dense, source, rows)`` with ``rows`` a table of gamma, theta, power."""
+    dense = read_measurements(real_dir / "rgl_epfl" / f"{name}.csv")
+    source = DenseInstrument(dense)
+    s = np.array(settings)
+    power = source.read(s[:, 0], s[:, 1], np.random.default_rng(0))
+    return dense, source, pd.DataFrame({"gamma_deg": s[:, 0], "theta_deg": s[:, 1],
+                                        "power": power})
+
+
 def test_the_campaign_fit_is_not_dragged_by_one_reading_where_the_model_misfits(real_dir):
     # equally weighted, the satin's 25 readings give R^2 0.963 on all points, below the
     # all-points fit's 0.976 - 0.01: the last reading pulls the fit as much as a whole row
@@ -304,11 +315,8 @@ def test_the_campaign_fit_is_not_dragged_by_one_reading_where_the_model_misfits(
     import irreflect
     from irreflect import metrics
 
-    dense = read_measurements(real_dir / "rgl_epfl" / "rgl_satin_rosaline.csv")
-    source = DenseInstrument(dense)
-    s = np.array(SATIN)
-    power = source.read(s[:, 0], s[:, 1], np.random.default_rng(0))
-    readings = pd.DataFrame({"gamma_deg": s[:, 0], "theta_deg": s[:, 1], "power": power})
+    dense, source, readings = _replayed(real_dir, "rgl_satin_rosaline", SATIN)
+    s, power = np.array(SATIN), readings["power"].to_numpy()
     reference = irreflect.fit(dense, seed=0).r2
     plain = irreflect.fit(Measurements(gamma_deg=s[:, 0], theta_deg=s[:, 1], power=power),
                           seed=0)
@@ -338,11 +346,8 @@ def test_a_fit_that_overshoots_where_nothing_is_measured_gives_way(real_dir, con
     from irreflect.campaign import DesignRule
     from irreflect.campaign.core import OVERSHOOT
 
-    dense = read_measurements(real_dir / "rgl_epfl" / "rgl_vch_golden_yellow.csv")
-    source = DenseInstrument(dense)
-    s = np.array(GOLDEN)
-    power = source.read(s[:, 0], s[:, 1], np.random.default_rng(0))
-    rows = pd.DataFrame({"gamma_deg": s[:, 0], "theta_deg": s[:, 1], "power": power})
+    dense, source, rows = _replayed(real_dir, "rgl_vch_golden_yellow", GOLDEN)
+    s, power = np.array(GOLDEN), rows["power"].to_numpy()
     # the readings and the weights of the campaign that met it (stop 31: power_cap 10; with
     # the default of 5 since stop 33 the continuation of these readings overshoots too)
     rule = dataclasses.replace(DesignRule(), continuation=continuation, power_cap=10.0)
@@ -1355,11 +1360,8 @@ def test_the_quadrature_estimate_reaches_the_all_points_fit_where_the_weighted_f
     # points (0.9755)
     import irreflect
 
-    dense = read_measurements(real_dir / "rgl_epfl" / "rgl_vch_golden_yellow.csv")
-    source = DenseInstrument(dense)
-    s = np.array(GOLDEN12)
-    power = source.read(s[:, 0], s[:, 1], np.random.default_rng(0))
-    rows = pd.DataFrame({"gamma_deg": s[:, 0], "theta_deg": s[:, 1], "power": power})
+    dense, source, rows = _replayed(real_dir, "rgl_vch_golden_yellow", GOLDEN12)
+    power = rows["power"].to_numpy()
     reference = irreflect.fit(dense, seed=0).r2
     weighted = Campaign(source.instrument(), rows, seed=0, rule=_rule(quadrature=False))
     estimate = Campaign(source.instrument(), rows, seed=0)
@@ -1459,11 +1461,7 @@ def test_readings_given_at_once_give_what_they_give_one_at_a_time(real_dir):
     # judges as the scripted loop that took them one at a time (before stop 40 the verdict
     # refitted the earlier readings afresh: its curve had moved by 310 % of its variance
     # on these 12 readings, against 4.9 % one at a time)
-    dense = read_measurements(real_dir / "rgl_epfl" / "rgl_vch_golden_yellow.csv")
-    source = DenseInstrument(dense)
-    s = np.array(GOLDEN12)
-    power = source.read(s[:, 0], s[:, 1], np.random.default_rng(0))
-    rows = pd.DataFrame({"gamma_deg": s[:, 0], "theta_deg": s[:, 1], "power": power})
+    _, source, rows = _replayed(real_dir, "rgl_vch_golden_yellow", GOLDEN12)
     stepwise = Campaign(source.instrument(), rows.iloc[:8], seed=0)
     for i in range(8, 12):
         stepwise.verdict()
