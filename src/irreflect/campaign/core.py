@@ -484,21 +484,16 @@ class Campaign:
             return self.model.predict_deg(state.estimate.values, self._settings[:, 0],
                                           self._settings[:, 1])
 
-    def _reported_prediction(self, n: int) -> np.ndarray | None:
-        """The range prediction of what :attr:`fit` reported after the first ``n``
-        readings (None before the first fit)."""
-        return self._reported.get(n)
-
     def _catch_up(self) -> None:
         """The states of the first m readings for every m the campaign skipped (readings
         added several at once, or given at once: a file read by ``irreflect next``), in
         order, from the fourth before the last on. A campaign then fits, reports and judges
         as one that took its readings one at a time: each fit starts from the one before, a
         fit that overshoots gives way to the continuation of the previous one, and the
-        verdict's earlier curves are those it would have reported. (Before stop 40 the verdict on readings given at once refitted
-        the earlier readings afresh: on the golden yellow paint's 12 readings its curve had
-        moved by 310 % of its variance, where the same readings taken one at a time gave
-        4.9 %.)"""
+        verdict's earlier curves are those it would have reported. (Before stop 40 the
+        verdict on readings given at once refitted the earlier readings afresh: on the
+        golden yellow paint's 12 readings its curve had moved by 310 % of its variance,
+        where the same readings taken one at a time gave 4.9 %.)"""
         if self._catching:
             return
         n = self.n_measured
@@ -955,10 +950,8 @@ class Campaign:
             measured = np.unique(np.round(self.measurements.gamma_deg, 6))
             where = np.isin(np.round(self._settings[:, 0], 6), measured)
         # the curve the campaign reports (rule.quadrature_hold), or the weighted fit's
-        curve = self._reported_prediction if self.rule.quadrature_hold else \
-            self._range_prediction
-        f = self._reported_curve(state) if self.rule.quadrature_hold else state.range_pred
-        f = f[where]
+        curve = self._reported.get if self.rule.quadrature_hold else self._range_prediction
+        f = curve(n)[where]
         ss_pred = float(np.sum((f - f.mean()) ** 2))
         moves = []
         for back in range(1, STOP_HOLD + 2):
