@@ -611,8 +611,8 @@ class Campaign:
         center = np.asarray(state.fit.values, float)
         center_range, center_read = state.range_pred, state.fit.fitted
         # with a receiver that averages, the picture is of the material's own curve (the
-        # readings' departures added to it) and the point model is fitted to it: the
-        # average's fit on every setting took 5 s a reading
+        # readings' departures added to it) and the point model is fitted to it: on 900
+        # settings the average's fit takes 0.24 s, the point model's 0.01 s
         own = self.point_model
         if own is not self.model:
             with np.errstate(all="ignore"):
@@ -876,9 +876,10 @@ class Campaign:
         prior = self._prior(state)
         noise_m = (meas.sigma ** 2 if meas.sigma is not None
                    else (self.rule.noise * prior.scale[len(s_):]) ** 2)
+        # of the curve the campaign reports (the estimate's, when there is one)
+        full = self._reported[n]
         expected = posterior_error(prior, len(s_), np.maximum(noise_m, 1e-300),
-                                   meas.power - res.fitted)
-        full = state.range_pred
+                                   meas.power - res.fitted, offset=full - state.range_pred)
         denom = float(np.sum((full - full.mean()) ** 2)) + expected
         if denom > 0:
             r2_mid = 1.0 - expected / denom

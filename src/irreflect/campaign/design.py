@@ -567,11 +567,12 @@ def posterior_mean(prior: Prior, n_settings: int, measured_noise: np.ndarray,
 
 
 def posterior_error(prior: Prior, n_settings: int, measured_noise: np.ndarray,
-                    residuals: np.ndarray) -> float:
+                    residuals: np.ndarray, offset=None) -> float:
     """The expected summed squared difference, over the first ``n_settings`` settings,
     between the material and the current fit (the prior's mean), given the readings'
     ``residuals`` from the fit: the posterior's variance plus its mean's squared
-    departure from the fit."""
+    departure from the fit; or from another curve, the fit plus ``offset`` (the
+    campaign's quadrature estimate)."""
     s = np.arange(n_settings)
     m = np.arange(n_settings, len(prior.gamma))
     var = np.clip(np.einsum("ij,ij->i", prior.features[s], prior.features[s])
@@ -589,6 +590,8 @@ def posterior_error(prior: Prior, n_settings: int, measured_noise: np.ndarray,
         sol = np.linalg.lstsq(a, np.column_stack([k_sm.T, residuals]), rcond=None)[0]
     reduce = np.einsum("ij,ji->i", k_sm, sol[:, :-1])
     mean = k_sm @ sol[:, -1]
+    if offset is not None:
+        mean = mean - offset
     return float(np.sum(np.clip(var - reduce, 0.0, None) + mean ** 2))
 
 
