@@ -128,8 +128,10 @@ def render(ctx: ReportContext, res: CampaignResults) -> Section:
         "whole range), **the paper's 12-point protocol**, the **glossy-aware protocol** "
         "(designed from the dense table itself: a pilot scan a new user does not have), "
         "**random readings** and, as the bound, `select`'s **best subsets** found with "
-        "every reading known (hindsight). After each reading the two-lobe model is fitted on "
-        "the readings only and judged by R^2 against all points. `N within 0.01` is the "
+        "every reading known (hindsight). After each reading the two-lobe model is fitted "
+        "from the readings only (the adaptive campaign reports its quadrature estimate: the "
+        "model fitted to the whole range as its design's posterior pictures it from the "
+        "readings) and judged by R^2 against all points. `N within 0.01` is the "
         "first N from which R^2 stays within 0.01 of the all-points fit up to N = "
         f"{n_max}; the verdict is the campaign's own stopping rule (`irreflect next` prints "
         "it). `irreflect campaign DATA` replays one table.",
