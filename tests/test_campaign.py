@@ -1373,6 +1373,15 @@ def test_the_quadrature_estimate_reaches_the_all_points_fit_where_the_weighted_f
     strict = Campaign(source.instrument(), rows, seed=0, rule=_rule(quadrature_agree=0.9999))
     assert strict.fit is strict._current().fit
     assert strict.r2_against(dense) == pytest.approx(weighted.r2_against(dense), abs=1e-9)
+    # the verdict's flags are the reported fit's, checked on its own values
+    assert estimate.verdict().at_bound == estimate.fit.at_bound
+    assert estimate.verdict().ill_determined == estimate.fit.ill_determined
+    from irreflect.models import get_model
+
+    bounds = {p.name: (p.lower, p.upper) for p in get_model("two-lobe").params}
+    for name, value in zip(estimate.fit.param_names, estimate.fit.values, strict=True):
+        near = min(abs(value - b) for b in bounds[name]) <= 1e-6 * max(1.0, abs(value))
+        assert (name in estimate.fit.at_bound) == near, (name, value, bounds[name])
     # it is still a fit of these readings: its residuals are theirs
     assert np.allclose(estimate.fit.fitted + estimate.fit.residuals, power)
     assert estimate.fit.r2 == pytest.approx(

@@ -51,6 +51,7 @@ from .design import (
     specular_half_width,
 )
 from .instrument import MAX_SETTINGS, Instrument, thin_settings
+from .quadrature import accepted_estimate
 
 #: The verdict stops when the fits without the last readings (see :data:`STOP_HOLD`)
 #: predict the whole range within this share of the current fit's variance over it. With
@@ -297,6 +298,7 @@ class Campaign:
         self._previous: dict[int, np.ndarray | None] = {}  # range predictions by readings
         self._reported: dict[int, np.ndarray | None] = {}  # the same of what fit reports
         self._catching = False  # in _catch_up
+        self._setting_count: np.ndarray | None = None  # range points per design setting
         self._est_values: np.ndarray | None = None  # the latest quadrature estimate's
         self._warm: np.ndarray | None = None  # the latest fit's shape coordinates
         self._values: dict[int, np.ndarray] = {}  # the fits' coefficients by readings
@@ -633,8 +635,10 @@ class Campaign:
                               meas.power - center_read)
         # never above both the centre's prediction and the largest reading
         surrogate = np.clip(center_range + mean, 0.0, cap)
-        near, size = range_cells(self._range, s[:, 0], s[:, 1])
-        count = np.bincount(near, minlength=size).astype(float)
+        if self._setting_count is None:  # the range's points nearest each setting
+            near, size = range_cells(self._range, s[:, 0], s[:, 1])
+            self._setting_count = np.bincount(near, minlength=size).astype(float)
+        count = self._setting_count
         keep = (count > 0) & np.isfinite(surrogate)
         table = Measurements(gamma_deg=s[keep, 0], theta_deg=s[keep, 1],
                              power=surrogate[keep], sigma=None, name=meas.name)
@@ -648,30 +652,11 @@ class Campaign:
             return None
         if top > 0 and self._overshoot(res.values, top) > OVERSHOOT:
             return None
-        values = np.asarray(res.values, float)
-        with np.errstate(all="ignore"):
-            fitted = self.model.predict_deg(values, meas.gamma_deg, meas.theta_deg)
-        resid = meas.power - fitted
-        if not np.all(np.isfinite(resid)):
-            return None
-        ratio = float(self.rule.quadrature_ratio)
-        if ratio and np.sum(resid ** 2) > ratio * np.sum((meas.power - center_read) ** 2):
-            return None
-        agree = float(self.rule.quadrature_agree)
-        if agree:
-            # a refinement of the centre's curve over the range, not another curve
-            r = self._range
-            with np.errstate(all="ignore"):
-                mine = own.predict_deg(values, r[:, 0], r[:, 1])
-                theirs = own.predict_deg(center, r[:, 0], r[:, 1])
-            if not float(metrics.r2(theirs, mine)) >= agree:
-                return None
-        base = state.fit
-        self._est_values = values
-        return dataclasses.replace(base, values=values, residuals=resid,
-                                   r2=float(metrics.r2(meas.power, fitted)),
-                                   rmse=float(np.sqrt(np.mean(resid ** 2))),
-                                   mse=float(np.mean(resid ** 2)))
+        estimate = accepted_estimate(self.model, own, state.fit, res, meas, center,
+                                     center_read, self._range, self.rule)
+        if estimate is not None:
+            self._est_values = np.asarray(estimate.values, float)
+        return estimate
 
     # ------------------------------------------------------------------ proposals
     def propose(self, k: int = 1) -> pd.DataFrame:
@@ -937,8 +922,9 @@ class Campaign:
             why += (f"extrapolated to |gamma| {short_list([f'{abs(g):g}' for g in outside], 4)}"
                     f" deg: the {limit} angle{'s' if limit != 1 else ''} of incidence the instrument "
                     f"allows {'are' if limit != 1 else 'is'} set",)
+        shown = state.estimate if state.estimate is not None else res  # what fit reports
         return Verdict(not reasons, n, (float(r2_lo), float(r2_hi)), stability,
-                       tuple(res.ill_determined), tuple(res.at_bound), why)
+                       tuple(shown.ill_determined), tuple(shown.at_bound), why)
 
     def _stability(self, state: _State, n: int, spent: bool) -> float:
         """How far the fits on the first n - 1, n - 2 and n - 3 readings lie from the current

@@ -537,14 +537,20 @@ def posterior(prior: Prior, n_settings: int, measured_noise: np.ndarray,
     noise = np.maximum((rule.noise * prior.scale[s]) ** 2, 1e-300)
     if m.size:
         k_sm = prior.block(s, m)
-        k_mm = prior.block(m, m) + np.diag(measured_noise)
-        jitter = 1e-10 * max(float(np.max(np.diag(k_mm))), 1e-300)
-        try:
-            sol = np.linalg.solve(k_mm + jitter * np.eye(m.size), k_sm.T)
-        except np.linalg.LinAlgError:
-            sol = np.linalg.lstsq(k_mm, k_sm.T, rcond=None)[0]
-        k_ss = k_ss - k_sm @ sol
+        k_ss = k_ss - k_sm @ _solve_readings(prior, m, measured_noise, k_sm.T)
     return Posterior(cov=k_ss, noise=noise)
+
+
+def _solve_readings(prior: Prior, m: np.ndarray, measured_noise: np.ndarray,
+                    rhs: np.ndarray) -> np.ndarray:
+    """``K_mm^-1 rhs`` for the prior covariance of the readings ``m`` plus their noise
+    (with a jitter of 1e-10 of its largest diagonal; least squares if still singular)."""
+    k_mm = prior.block(m, m) + np.diag(measured_noise)
+    a = k_mm + 1e-10 * max(float(np.max(np.diag(k_mm))), 1e-300) * np.eye(m.size)
+    try:
+        return np.linalg.solve(a, rhs)
+    except np.linalg.LinAlgError:
+        return np.linalg.lstsq(a, rhs, rcond=None)[0]
 
 
 def posterior_mean(prior: Prior, n_settings: int, measured_noise: np.ndarray,
@@ -556,14 +562,7 @@ def posterior_mean(prior: Prior, n_settings: int, measured_noise: np.ndarray,
     m = np.arange(n_settings, len(prior.gamma))
     if not m.size:
         return np.zeros(n_settings)
-    k_mm = prior.block(m, m) + np.diag(measured_noise)
-    jitter = 1e-10 * max(float(np.max(np.diag(k_mm))), 1e-300)
-    a = k_mm + jitter * np.eye(m.size)
-    try:
-        sol = np.linalg.solve(a, residuals)
-    except np.linalg.LinAlgError:
-        sol = np.linalg.lstsq(a, residuals, rcond=None)[0]
-    return prior.block(s, m) @ sol
+    return prior.block(s, m) @ _solve_readings(prior, m, measured_noise, residuals)
 
 
 def posterior_error(prior: Prior, n_settings: int, measured_noise: np.ndarray,
@@ -581,13 +580,7 @@ def posterior_error(prior: Prior, n_settings: int, measured_noise: np.ndarray,
     if not m.size:
         return float(np.sum(var))
     k_sm = prior.block(s, m)
-    k_mm = prior.block(m, m) + np.diag(measured_noise)
-    jitter = 1e-10 * max(float(np.max(np.diag(k_mm))), 1e-300)
-    a = k_mm + jitter * np.eye(m.size)
-    try:
-        sol = np.linalg.solve(a, np.column_stack([k_sm.T, residuals]))
-    except np.linalg.LinAlgError:
-        sol = np.linalg.lstsq(a, np.column_stack([k_sm.T, residuals]), rcond=None)[0]
+    sol = _solve_readings(prior, m, measured_noise, np.column_stack([k_sm.T, residuals]))
     reduce = np.einsum("ij,ji->i", k_sm, sol[:, :-1])
     mean = k_sm @ sol[:, -1]
     if offset is not None:
