@@ -111,8 +111,9 @@ def _print_protocol_verdict(result, methods: dict) -> None:
           f"material: R^2 = {r2_12:.4g} against all points{worse} (the all-points fit's "
           f"{r2_a:.4g}{best}); cause: {causes}; remedy: "
           + "".join(f"{r}; " for r in specific)
-          + "measure the points in optimal_points.csv (the best 12 points for this "
-          "material), or " + adaptive_remedy(m), file=sys.stderr)
+          + ("measure the points in optimal_points.csv (the best 12 points for this "
+             "material), or " if r2_b is not None and r2_b > r2_12 else "")
+          + adaptive_remedy(m), file=sys.stderr)
 
 
 def _cmd_select(args) -> int:
