@@ -1481,3 +1481,21 @@ def test_readings_given_at_once_give_what_they_give_one_at_a_time(real_dir):
     assert b.stability == pytest.approx(a.stability, rel=1e-6)
     assert b.stop == a.stop
     np.testing.assert_allclose(at_once.fit.values, stepwise.fit.values, rtol=1e-6)
+
+
+def test_a_campaign_that_goes_on_says_when_the_model_explains_its_readings_poorly():
+    # a foreign (Lafortune) material the model fits to R^2 0.77 on all points: its curve
+    # keeps moving, and the verdict says why more readings will not mend it (a held-out
+    # sheen table never stopped in 25 readings with no word on the model)
+    from irreflect import metrics
+    from irreflect.synthetic import foreign_material
+
+    dense = foreign_material(107).measurements
+    _, verdicts, _ = replay_adaptive(DenseInstrument(dense), 12, seed=0)
+    v = verdicts[12]
+    hint = [r for r in v.reasons if r.startswith("the model explains the readings only")]
+    assert not v.stop and len(hint) == 1
+    r2_readings = float(hint[0].split("R^2 ")[1].split(":")[0])
+    assert r2_readings < metrics.MISFIT_R2
+    # before the fewest readings a stop needs, no such word: a first fit is rough
+    assert not any("explains the readings only" in r for r in verdicts[9].reasons)
