@@ -1499,3 +1499,27 @@ def test_a_campaign_that_goes_on_says_when_the_model_explains_its_readings_poorl
     assert r2_readings < metrics.MISFIT_R2
     # before the fewest readings a stop needs, no such word: a first fit is rough
     assert not any("explains the readings only" in r for r in verdicts[9].reasons)
+
+
+def test_the_hindsight_curve_says_when_select_thorough_fits_are_no_bound(monkeypatch):
+    # a noisy matte table (held-out lambert-16): the thorough fits of select's best subsets
+    # gave R^2 -235.6 against all points, the search's own fits of the same 12 points 0.9156
+    from types import SimpleNamespace
+
+    import irreflect.selection as selection
+    from irreflect.campaign.replay import replay_hindsight
+
+    dense = _material(MATTE, step=5.0, name="matte wall")
+    mask = np.zeros(dense.n_points, bool)
+    mask[:12] = True
+
+    def fake(search_r2):
+        front = pd.DataFrame({"n_points": [10, 12], "r2": [-244.06, -235.6]})
+        return SimpleNamespace(front=front, search_best={12: (1.0 - search_r2, mask)},
+                               best_mask=lambda n: mask if n == 12 else None, knee_n=12)
+
+    for search_r2, flagged in ((0.9156, True), (-235.58, False)):
+        monkeypatch.setattr(selection, "run_selection", lambda *a, s=search_r2, **k: fake(s))
+        curve = replay_hindsight(DenseInstrument(dense), 14, generations=1)
+        assert curve.r2[12] == -235.6 and curve.r2[11] == -244.06
+        assert ("no bound here" in curve.note) is flagged
