@@ -1507,7 +1507,7 @@ def test_the_hindsight_curve_says_when_select_thorough_fits_are_no_bound(monkeyp
     from types import SimpleNamespace
 
     import irreflect.selection as selection
-    from irreflect.campaign.replay import replay_hindsight
+    from irreflect.campaign.replay import NO_BOUND, replay_hindsight
 
     dense = _material(MATTE, step=5.0, name="matte wall")
     mask = np.zeros(dense.n_points, bool)
@@ -1522,4 +1522,14 @@ def test_the_hindsight_curve_says_when_select_thorough_fits_are_no_bound(monkeyp
         monkeypatch.setattr(selection, "run_selection", lambda *a, s=search_r2, **k: fake(s))
         curve = replay_hindsight(DenseInstrument(dense), 14, generations=1)
         assert curve.r2[12] == -235.6 and curve.r2[11] == -244.06
-        assert ("no bound here" in curve.note) is flagged
+        assert (NO_BOUND in curve.note) is flagged
+        # and the figure's legend says it
+        from irreflect.campaign.replay import ReplayResult
+        from irreflect.plots.campaign import plot_campaign
+        from irreflect.plots.common import plt
+
+        ax = plot_campaign(ReplayResult("matte wall", dense.n_points, 0.9156,
+                                        {"hindsight": curve}))
+        labels = ax.get_legend_handles_labels()[1]
+        plt.close(ax.figure)
+        assert any(NO_BOUND in label for label in labels) is flagged

@@ -46,6 +46,9 @@ from .core import Campaign
 from .design import DEFAULT_RULE, DesignRule
 from .instrument import Instrument
 
+#: what the hindsight curve's note says when select's thorough fits are no bound
+#: (:func:`replay_hindsight`)
+NO_BOUND = "no bound here"
 STRATEGIES = ("adaptive", "paper", "glossy", "random", "hindsight")
 #: The most readings a replayed campaign takes (``next`` reads at most as many).
 MAX_REPLAY_READINGS = 2000
@@ -440,7 +443,7 @@ def replay_hindsight(source: DenseInstrument, n_max: int = 25, *, model="two-lob
     if quick is not None and 12 in r2 and 1.0 - quick[0] > r2[12] + 0.05:
         # select's thorough fits of its subsets settled where they have no point (a noisy
         # matte table: -235.6, while the search's own fits of the same 12 gave 0.9154)
-        note += (f"; no bound here: the thorough fit of its best 12 points gives R^2 "
+        note += (f"; {NO_BOUND}: the thorough fit of its best 12 points gives R^2 "
                  f"{r2[12]:.4g}, the search's own fit of them {1.0 - quick[0]:.4g} (12 points "
                  "leave the model's optimum free where they have no point)")
     return StrategyCurve("hindsight", r2, pts, time.perf_counter() - t0, note=note)

@@ -6,6 +6,7 @@ from __future__ import annotations
 import matplotlib.ticker
 import numpy as np
 
+from ..campaign.replay import NO_BOUND
 from .common import plt
 
 _STYLE = {
@@ -56,6 +57,8 @@ def plot_campaign(result, ax=None, *, title=None, span: float = 0.25):
         shown = np.where(np.isfinite(r2), np.maximum(r2, bottom), np.nan)
         reached = curve.reached(target)
         label = _LABEL.get(name, name) + (f" (holds from N = {reached})" if reached else "")
+        if NO_BOUND in curve.note:  # see replay_hindsight
+            label += f" ({NO_BOUND}: their thorough fits settle elsewhere)"
         ax.plot(ns, shown, label=label, **style)
         low = np.isfinite(r2) & (r2 < bottom)
         if low.any():
