@@ -306,14 +306,21 @@ def _score(model, meas: Measurements, dense: Measurements, seed: int,
            resolution: float = 0.0) -> float:
     """R^2 against all of ``dense`` of the model fitted to ``meas`` (averaged over a
     receiver of ``resolution`` degrees, as the dense table's readings are)."""
+    return _fit_and_score(model, meas, dense, seed, resolution)[0]
+
+
+def _fit_and_score(model, meas: Measurements, dense: Measurements, seed: int,
+                   resolution: float = 0.0) -> tuple[float, FitResult | None]:
+    """:func:`_score` and the fit it scored (None when the fit failed)."""
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", FitWarning)
             res = fit_averaged(meas, model, resolution, seed=seed)
     except (FitError, IrreflectError):
-        return float("nan")
+        return float("nan"), None
     with np.errstate(all="ignore"):
-        return float(metrics.r2(dense.power, res.predict(dense.gamma_deg, dense.theta_deg)))
+        r2 = metrics.r2(dense.power, res.predict(dense.gamma_deg, dense.theta_deg))
+    return float(r2), res
 
 
 def replay_adaptive(source: DenseInstrument, n_max: int = 25, *, model="two-lobe",
@@ -381,10 +388,21 @@ def replay_protocol(source: DenseInstrument, kind: str, *, model="two-lobe",
                             power=source.disturb(meas.gamma_deg, meas.theta_deg, meas.power,
                                                  rng),
                             sigma=meas.sigma, name=meas.name)
-    r2 = _score(model, meas, dense, seed, resolution)
+    r2, res = _fit_and_score(model, meas, dense, seed, resolution)
     gammas = "/".join(f"{g:g}" for g in proto.settings.get("gammas_deg", proto.gammas))
+    note = f"gammas {gammas} deg"
+    moved = int(np.sum(frame["source"] == "interpolated")) if "source" in frame else 0
+    if moved:  # as evaluate-protocol reads them; select's Method 12 snaps them instead
+        note += (f"; {moved} of {len(frame)} readings interpolated along theta (select's "
+                 "Method 12 snaps them to measured points)")
+    if res is not None and (res.ill_determined or res.at_bound):
+        # a fit these points do not pin down: small changes of its readings move it far
+        flags = [f"{len(res.ill_determined)} of {len(res.param_names)} coefficients "
+                 "ill-determined"] if res.ill_determined else []
+        flags += [f"at a bound: {', '.join(res.at_bound)}"] if res.at_bound else []
+        note += f"; its fit: {'; '.join(flags)}"
     return StrategyCurve(kind, {meas.n_points: r2}, meas.to_frame(),
-                         time.perf_counter() - t0, note=f"gammas {gammas} deg")
+                         time.perf_counter() - t0, note=note)
 
 
 def replay_random(source: DenseInstrument, n_max: int = 25, *, model="two-lobe", seed: int = 0,
