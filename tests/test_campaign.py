@@ -1557,3 +1557,37 @@ def test_a_replayed_protocol_says_how_its_readings_were_read_and_what_its_fit_le
     ill = f"{len(res.ill_determined)} of 7 coefficients ill-determined"
     assert (ill in curve.note) is bool(res.ill_determined)
     assert ("at a bound: " + ", ".join(res.at_bound) in curve.note) is bool(res.at_bound)
+
+
+def _sigma_campaign(effect, seed, n):
+    """A campaign replayed on a hidden-effect table (the benchmark's draws), its readings
+    given with the table's noise as a sigma column: the verdicts by N."""
+    from irreflect.diagnose.hidden import hidden_case
+
+    case = hidden_case(effect, seed, sigma_column=False)
+    dense, sigma = case.measurements, case.truth["sigma0"]
+    source = DenseInstrument(dense)
+    rng = np.random.default_rng([0, 11])
+    campaign = Campaign(source.instrument(), seed=0,
+                        noise_floor=max(0.0, -float(np.min(dense.power))))
+    verdicts = {}
+    while campaign.n_measured < n:
+        p = campaign.propose(1)
+        power = source.read(p["gamma_deg"], p["theta_deg"], rng)
+        campaign.add(p[["gamma_deg", "theta_deg"]].assign(power=power, sigma=sigma))
+        verdicts[campaign.n_measured] = campaign.verdict()
+    return campaign, verdicts
+
+
+def test_readings_with_sigma_say_when_they_depart_from_the_fit_beyond_their_noise():
+    # a hidden retroreflection: its readings are fitted to R^2 0.98, above the R^2 rule,
+    # but at chi^2/dof 70-160 against their noise; diagnose on them names it (test_diagnose)
+    campaign, verdicts = _sigma_campaign("retroreflection", 100, 15)
+    assert campaign.fit is not None and campaign.fit.r2 > 0.9
+    hint = [r for r in verdicts[15].reasons if r.startswith("the readings depart")]
+    assert len(hint) == 1 and "irreflect diagnose on the readings names it" in hint[0]
+    assert float(hint[0].split("chi^2/dof ")[1].split()[0]) > 10
+    # the same campaign on a table with nothing hidden: readings within their noise
+    _, clean = _sigma_campaign(None, 1, 15)
+    assert not any("depart" in r or "explains the readings only" in r
+                   for v in clean.values() for r in v.reasons)

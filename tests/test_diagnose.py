@@ -494,3 +494,50 @@ def test_a_diagnosis_that_could_test_no_extension_says_so():
         result = diagnose(meas.subset(keep))
     assert "no candidate extension could be tested: every one failed (fit failed:" in \
         result.summary
+
+
+def _campaign_readings(n: int, tmp_path: Path) -> tuple[Path, Path]:
+    """The first ``n`` readings of a campaign replayed as the benchmark replays it on a
+    table with a hidden retroreflection, written without and with its noise as sigma."""
+    from irreflect.campaign import Campaign
+    from irreflect.campaign.replay import DenseInstrument
+
+    case = hidden_case("retroreflection", 100, sigma_column=False)
+    dense = case.measurements
+    source = DenseInstrument(dense)
+    rng = np.random.default_rng([0, 11])
+    campaign = Campaign(source.instrument(), seed=0,
+                        noise_floor=max(0.0, -float(np.min(dense.power))))
+    while campaign.n_measured < n:
+        p = campaign.propose(1)
+        power = source.read(p["gamma_deg"], p["theta_deg"], rng)
+        campaign.add(p[["gamma_deg", "theta_deg"]].assign(power=power))
+    rows = campaign.measurements.to_frame()[["gamma_deg", "theta_deg", "power"]]
+    bare, given = tmp_path / "readings.csv", tmp_path / "readings_sigma.csv"
+    rows.to_csv(bare, index=False)
+    rows.assign(sigma=case.truth["sigma0"]).to_csv(given, index=False)
+    return bare, given
+
+
+def test_diagnose_asks_for_the_noise_of_a_campaigns_scattered_readings(tmp_path, capsys):
+    """A campaign's readings are a few runs of three receiver angles 10-60 deg apart: the
+    differences along theta take the model's misfit for noise. Before stop 42 diagnose
+    then said "no missing effect" on a hidden retroreflection (its noise estimate had 2.4
+    effective degrees of freedom), and on a table lacking an incidence law gave a sigma of
+    1.6e14 and an error about a sigma column the table did not have. Now it asks for the
+    noise; given it, it names the effect from the same 15 readings."""
+    bare, given = _campaign_readings(15, tmp_path)
+    with pytest.raises(IrreflectError, match="effective degrees of freedom") as err:
+        diagnose(read_measurements(bare))
+    assert "add a sigma column" in str(err.value)
+    assert main(["diagnose", str(bare)]) != 0
+    out = capsys.readouterr()
+    assert "Traceback" not in out.err
+    assert "cannot estimate the measurement noise of readings" in out.err
+    assert len([line for line in out.err.splitlines() if "error" in line]) == 1
+    result = diagnose(read_measurements(given))
+    assert result.verdict == EFFECTS_FOUND
+    assert [e.name for e in result.effects] == ["retroreflection"]
+    # a dense table's own noise estimate is not refused (every real one has 44+ dof)
+    dense = hidden_case("retroreflection", 100, sigma_column=False).measurements
+    assert estimate_noise(dense, residuals=fit(dense, "two-lobe", seed=0).residuals).dof > 20

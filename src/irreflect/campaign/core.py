@@ -51,6 +51,7 @@ from .design import (
     specular_half_width,
 )
 from .instrument import MAX_SETTINGS, Instrument, thin_settings
+from .misfit import misfit_note
 from .quadrature import accepted_estimate
 
 #: The verdict stops when the fits without the last readings (see :data:`STOP_HOLD`)
@@ -907,15 +908,14 @@ class Campaign:
         why = tuple(reasons) or (
             f"the last {STOP_HOLD + 1} readings moved the predicted curve by {stability:.2%} "
             f"of its variance (below {100 * self.stop_tolerance:.2g}%)",)
-        if n >= need and np.isfinite(res.r2) and res.r2 < metrics.MISFIT_R2:
+        note = misfit_note(res, meas, state.extra["weighted"], self.model.n_params)
+        if n >= need and note:
             # a fit that explains its own readings poorly: more readings will not mend the
             # model (a foreign Lafortune material, all-points R^2 0.77, stops at 0.57
             # against all points and 0.56 on its readings). Said while the campaign goes
             # on too: a held-out sheen table (all points 0.21) never stopped in 25 readings,
             # its curve moving by 3-67 % of its variance, with no word on why
-            why += (f"the model explains the readings only to R^2 {res.r2:.3f}: it may "
-                    "lack an effect of this material (irreflect diagnose on the readings "
-                    "names it)",)
+            why += (note,)
         if state.extra.get("equal_weights"):
             why += ("the readings are fitted equally weighted: weighted by the share of the "
                     "range each stands for, no fit beats a constant on them",)

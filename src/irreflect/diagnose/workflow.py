@@ -85,6 +85,12 @@ MAX_CONTENDERS = 3
 #: at most this many times the noise is estimated again from a chosen explanation's
 #: residual and the explanations judged again
 MAX_NOISE_PASSES = 2
+#: the fewest effective degrees of freedom of an estimated noise the diagnosis judges by:
+#: a campaign's 15-20 scattered readings give 2-3 (a few runs of three receiver angles
+#: 10-60 deg apart, whose differences take the model's misfit for noise: "no missing
+#: effect" on a retroreflective table, or a sigma of 1.6e14 on one that lacked an
+#: incidence law), every dense real table 44 or more
+MIN_NOISE_DOF = 10.0
 
 __all__ = [
     "AMBIGUOUS", "EFFECTS_FOUND", "NO_MISSING_EFFECT", "UNEXPLAINED", "Assessment",
@@ -772,6 +778,16 @@ def _base_fit_and_noise(meas, base_model, seed, alpha):
     base_fit = _base_fit(meas, base_model, seed)
     noise = estimate_noise(meas, residuals=base_fit.residuals, fitted=base_fit.fitted,
                            seed=seed, alpha=alpha)
+    if noise.source == "estimated" and not noise.dof >= MIN_NOISE_DOF:
+        runs = difference_weights(meas.gamma_deg, meas.theta_deg).shape[0]
+        raise IrreflectError(
+            f"cannot estimate the measurement noise of {meas.name} from its own readings: "
+            f"expected runs of closely spaced receiver angles at one angle of incidence "
+            f"giving at least {MIN_NOISE_DOF:g} effective degrees of freedom, found {runs} "
+            f"runs giving {noise.dof:.1f} (between sparse readings the model's misfit "
+            "would pass for noise and hide a missing effect); add a sigma column (the "
+            "instrument's 1-sigma noise of each reading) or measure a run of receiver "
+            "angles a few degrees apart")
     work = meas
     if noise.source == "estimated":
         work = dataclasses.replace(meas, sigma=noise.sigma)
