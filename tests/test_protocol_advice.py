@@ -432,3 +432,29 @@ def test_a_protocol_file_that_is_not_a_table_gets_one_line_without_parser_intern
     assert "C error" not in text and "\n" not in text
     assert text.endswith("expected a CSV or JSON file as 'irreflect protocol --out' writes, "
                          "with columns gamma_deg, theta_deg")
+
+
+def test_a_lobe_point_in_the_source_shadow_is_not_blamed_on_the_receiver_step():
+    """A held-out off-specular pilot, receivers 1 deg apart but none from -11 to 1 deg at
+    gamma -5 (around the source): the lobe-width point 10 deg from the mirror toward the
+    normal (theta -5) stood 16 deg from it, and the warning asked for a receiver step of 10
+    deg, which the pilot had. Now it names the source's gap and offers the campaign; a gap
+    away from the source keeps the step advice."""
+    from irreflect.protocol.core import _placement_problem, lobe_placement
+
+    arm = np.arange(-85.0, 85.5, 1.0)
+    shadowed = {-5.0: arm[(arm <= -11.0) | (arm >= 1.0)]}
+    placed = lobe_placement([-5.0, -5.0, -5.0], [5.0, -11.0, 15.0],
+                            ["mirror", "lobe_width", "lobe_width"])
+    text, step = _placement_problem({-5.0: 10.0}, placed, shadowed)
+    assert step is None
+    assert "gap from -11 to 1 deg around the source direction" in text
+    assert "theta -5" in text and "irreflect next" in text
+    assert "receiver step of at most" not in text
+    # the same misplacement with the gap on the grazing side (no receiver 9-23 deg at
+    # gamma -5, the target 15): the receivers there are too sparse, and a step is asked for
+    holed = {-5.0: arm[(arm <= 8.0) | (arm >= 24.0)]}
+    placed = lobe_placement([-5.0, -5.0, -5.0], [5.0, -5.0, 24.0],
+                            ["mirror", "lobe_width", "lobe_width"])
+    text, step = _placement_problem({-5.0: 10.0}, placed, holed)
+    assert step == 10.0 and "receiver step of at most 10 deg" in text

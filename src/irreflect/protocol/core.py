@@ -704,7 +704,7 @@ def glossy_protocol(gammas_deg, theta_min: float = -70.0, theta_max: float = 70.
             text, step = problem
             notes.append(text)
             settings["placement_warning"] = text
-            settings["receiver_step_needed_deg"] = floor_sig(step)
+            settings["receiver_step_needed_deg"] = None if step is None else floor_sig(step)
     return Protocol(
         gamma_deg=gamma_arr,
         theta_deg=theta_arr,
@@ -741,7 +741,7 @@ def lobe_placement(gamma_deg, theta_deg, purpose) -> dict[float, dict]:
 
 
 def _placement_problem(designed: dict, placed: dict, available: dict):
-    """``(warning, receiver step needed)`` when a pilot's receivers cannot place the designed
+    """``(warning, receiver step needed or None)`` when a pilot's receivers cannot place the designed
     points (a lobe-width point outside ``[w/2, 3w/2]`` of the mirror, or a mirror point more
     than ``w/2`` off it, ``w`` the designed offset), else None. A receiver grid of step
     ``w`` has a receiver within ``w/2`` of any target, so ``w`` is the step needed."""
@@ -775,6 +775,21 @@ def _placement_problem(designed: dict, placed: dict, available: dict):
         lo, hi = f"{min(values):.{digits}g}", f"{max(values):.{digits}g}"
         return lo if lo == hi else f"{lo}-{hi}"
 
+    shadow = _source_shadow(designed, available, bad)
+    if shadow and all(gap <= designed[g] + _EPS for g, gap in zip(bad, gaps, strict=False)) \
+            and len(shadow) == len(bad) and len(gaps) == len(bad):
+        # the receivers are fine near the mirror: a lobe-width point falls where the source
+        # stands (theta = gamma), and no finer receiver step places it there
+        where = "; ".join(f"at gamma {g:g} the point designed at theta {t:g} falls in the "
+                          f"pilot's gap from {a:g} to {b:g} deg around the source direction "
+                          f"(theta = gamma), where no receiver can stand"
+                          for g, t, a, b in shadow)
+        text = (f"the designed lobe-width points cannot all be placed: {where}; they stand "
+                + span(lobes) + " deg from the mirror, designed " + span(w_bad) + " deg. A "
+                "finer receiver step does not mend it; the adaptive campaign (irreflect "
+                "next) chooses readings the instrument can take. The file holds the placed "
+                "points")
+        return text, None
     text = (f"the pilot's receiver grid cannot place the designed points at gamma "
             f"{', '.join(f'{g:g}' for g in bad)}: lobe-width points designed {span(w_bad)} deg "
             "from the mirror stand " + (f"{span(lobes)} deg from it" if lobes else "nowhere")
@@ -784,6 +799,29 @@ def _placement_problem(designed: dict, placed: dict, available: dict):
             + f"; placing them needs a receiver step of at most {floor_sig(step):g} deg within "
             f"+-{2 * max(w_bad):.2g} deg of the mirror. The file holds the placed points")
     return text, step
+
+
+def _source_shadow(designed: dict, available: dict, bad) -> list:
+    """The lobe-width targets (mirror -+ the designed offset) of the ``bad`` angles of
+    incidence that no pilot receiver comes within half the offset of, and whose gap
+    between receivers holds the source direction (theta = gamma): ``(gamma, target, gap
+    start, gap end)`` each. A held-out off-specular table's pilot, receivers 1 deg apart,
+    had none from -11 to 1 deg at gamma -5, so the point 10 deg from the mirror toward the
+    normal (theta -5) stood 16 deg from it; the warning asked for a finer receiver step."""
+    out = []
+    for g in bad:
+        w = designed[g]
+        thetas = next((np.sort(np.asarray(v, float)) for k, v in available.items()
+                       if abs(float(k) - g) <= 1e-6), None)
+        if thetas is None or thetas.size < 2:
+            continue
+        for target in (-g - w, -g + w):
+            if np.min(np.abs(thetas - target)) <= 0.5 * w + _EPS:
+                continue
+            i = int(np.searchsorted(thetas, target))
+            if 0 < i < thetas.size and thetas[i - 1] < g < thetas[i]:
+                out.append((float(g), _clean(target), float(thetas[i - 1]), float(thetas[i])))
+    return out
 
 
 def _gap_at(thetas: np.ndarray, target: float) -> float:
