@@ -458,3 +458,28 @@ def test_a_lobe_point_in_the_source_shadow_is_not_blamed_on_the_receiver_step():
                             ["mirror", "lobe_width", "lobe_width"])
     text, step = _placement_problem({-5.0: 10.0}, placed, holed)
     assert step == 10.0 and "receiver step of at most 10 deg" in text
+
+
+def test_a_pilot_whose_third_angle_lies_beyond_70_deg_is_told_to_raise_theta_max(
+        tmp_path, capsys):
+    """A held-out pilot at |gamma| 15, 45, 75 with receivers to 85 deg: --lobe-from keeps
+    the paper's tool's 70 deg, saw two angles, and was told to measure three. The error now
+    names the option that uses the third; with it the design is made."""
+    def arm(_gamma):
+        return np.arange(-30.0, 85.1, 1.0)
+
+    pilot = write_table(table(GLOSSY, (15, 45, 75), arm, name="pilot"), tmp_path / "p.csv")
+    out = tmp_path / "g.csv"
+    assert main(["protocol", "--lobe-from", str(pilot), "--out", str(out)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()[-1]
+    assert "found 2 within the receiver range (|gamma| <= 70 deg)" in err
+    assert "pass --theta-max 85" in err and "|gamma| 75 deg" in err
+    assert not out.exists()
+    assert main(["protocol", "--lobe-from", str(pilot), "--theta-max", "85",
+                 "--out", str(out)]) == 0
+    assert sorted(set(pd.read_csv(out)["gamma_deg"])) == [-75.0, -45.0, -15.0]
+    # a pilot with only two angles at all is still told to measure a third
+    two = write_table(table(GLOSSY, (15, 45), arm, name="two"), tmp_path / "two.csv")
+    assert main(["protocol", "--lobe-from", str(two), "--out", str(out)]) == 2
+    assert capsys.readouterr().err.strip().endswith("measure the scan at three or more "
+                                                    "angles of incidence")

@@ -465,8 +465,17 @@ def _check_three_levels(dense, levels, what: str, hi=None) -> None:
         return
     within = "" if hi is None else f" within the receiver range (|gamma| <= {hi:g} deg)"
     found = short_list(levels, fmt=lambda g: f"{g:g}") if levels else "none"
+    fix = "measure the scan at three or more angles of incidence"
+    beyond = sorted({float(abs(g)) for g in dense.gammas} - set(levels))
+    reach = float(np.max(np.abs(dense.theta_deg)))
+    if hi is not None and len(levels) + len(beyond) >= 3 and beyond and beyond[0] <= reach:
+        # the scan has the angles, beyond the paper's tool's 70 deg: its receivers reach
+        # them (a held-out pilot at |gamma| 15, 45, 75 with receivers to 85 deg was told
+        # to measure three angles of incidence)
+        fix = (f"the scan's receivers reach {reach:g} deg: pass --theta-max {reach:g} "
+               f"(theta_max={reach:g} in Python) to use |gamma| {short_list(beyond, fmt=lambda g: f'{g:g}')}"
+               " deg, or measure a third angle of incidence within the range")
     raise IrreflectError(
         f"{dense.name}: a {what} needs three angles of incidence; found {len(levels)}"
-        f"{within} (|gamma| = {found} deg): measure the scan at three or more angles of "
-        "incidence"
+        f"{within} (|gamma| = {found} deg): {fix}"
     )
