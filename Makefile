@@ -33,6 +33,7 @@ pip-check: $(STAMP)
 
 bench: $(STAMP)
 	$(BIN)/python experiments/bench_fit.py
+	$(BIN)/python experiments/bench_single_fit.py
 	$(BIN)/python experiments/bench_select.py
 	$(BIN)/python experiments/bench_room.py
 

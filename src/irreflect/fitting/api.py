@@ -19,7 +19,7 @@ from ..models import (
     parse_spec,
 )
 from ..validation import check_fit_options, check_seed, check_starts, short_list
-from .engine import _kernel_codes, _kernel_geometry
+from .engine import NUMPY_FIRST_POINTS, _kernel_codes, _kernel_geometry
 from .finish import finish, finished_by_kernel
 from .options import (
     FIT_SETTINGS,
@@ -86,7 +86,7 @@ def fit(measurements, model="two-lobe", options: FitOptions | None = None,
         Any field of :class:`~irreflect.fitting.options.FitOptions` by name: ``seed``
         (the same seed gives the same result), ``n_random_starts``, ``n_screen``,
         ``n_keep``, ``n_data_starts``, ``use_sigma``, ``max_iter``, ``max_rounds``,
-        ``polish``, ``engine`` (``"compiled"`` or ``"numpy"``), ``extra_starts``,
+        ``polish``, ``engine`` (``"compiled"``, ``"numpy"`` or ``"numpy-first"``), ``extra_starts``,
         ``n_hops``, ``retry`` (search a second time, more widely, when the result looks
         like a local optimum: :func:`retry_reasons`; the result's ``retried`` says why).
 
@@ -254,8 +254,11 @@ def _search_again(meas, model, t0, first, failure, reasons, opts: FitOptions):
         model_obj = first.model_object
         z_first = model_obj.from_natural(first.values[None])[0]
         n_nonlinear = model_obj.n_nonlinear
+    wide = opts.widened(meas.n_points, z_first, n_nonlinear)
+    if wide.engine == "numpy-first" and meas.n_points > NUMPY_FIRST_POINTS:
+        wide = dataclasses.replace(wide, engine="compiled")  # the second search compiled
     try:
-        second = _fit_search(meas, model, t0, opts.widened(meas.n_points, z_first, n_nonlinear))
+        second = _fit_search(meas, model, t0, wide)
     except FitError:
         if first is None:
             raise failure from None

@@ -81,7 +81,16 @@ def _kernel_geometry(gamma, theta):
 #: Which implementation fits: "compiled" (the numba kernel, for the models it covers;
 #: numpy for the others) or "numpy" (the reference implementation everywhere).
 ENGINE = "compiled"
-ENGINES = ("compiled", "numpy")
+#: "numpy-first": numpy for the first search, the compiled kernel for a second one
+#: (:func:`~irreflect.fitting.fit`'s retry), for a command that fits one table once: the
+#: kernel's load (about a second) costs more than it saves on a search, but a second,
+#: wider search is several times the work, and the kernel does it 8-14 times faster (a
+#: held-out 2880-point table that the model misfits: 11.7 s with numpy, 0.8 s compiled)
+ENGINES = ("compiled", "numpy", "numpy-first")
+#: "numpy-first" runs the second search compiled on tables of more than this many points;
+#: on smaller ones numpy's second search (0.2-0.8 s on 108-198 points) costs less than the
+#: kernel's load (experiments/bench_single_fit.py)
+NUMPY_FIRST_POINTS = 500
 
 
 def _kernel_codes(model_obj, engine=None):

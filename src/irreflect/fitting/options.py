@@ -49,9 +49,11 @@ class FitOptions:
         Iteration limit of each local search; rounds of coordinate scans (default 3).
     polish : bool
         Finish a local search that crawled with scipy's trust-region least squares.
-    engine : ``"compiled"``, ``"numpy"`` or None
+    engine : ``"compiled"``, ``"numpy"``, ``"numpy-first"`` or None
         The compiled kernel (the two-lobe model and its extensions) or the numpy
-        reference implementation; None: :data:`~irreflect.fitting.engine.ENGINE`.
+        reference implementation; ``"numpy-first"``: numpy, and the compiled kernel for
+        the retry's second search on tables of more than
+        :data:`~irreflect.fitting.engine.NUMPY_FIRST_POINTS` points; None: :data:`~irreflect.fitting.engine.ENGINE`.
     extra_starts : array (S, P) or None
         More starting points of the nonlinear coordinates, tried first (a warm start).
     n_hops : int or None
