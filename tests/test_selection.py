@@ -504,3 +504,18 @@ def test_failing_protocol_warning_offers_the_best_12_only_when_they_beat_it(
         err = capsys.readouterr().err
         assert "PROTOCOL FAILS" not in err and "irreflect next" in err
         assert ("optimal_points.csv" in err) is offered
+
+
+def test_select_warns_when_its_best_12_points_fall_below_the_papers(capsys):
+    """A held-out noisy matte table: the best 12 points, fitted thoroughly, gave R^2 -235.6
+    against all points where the paper's 12 gave 0.8828, and optimal_points.csv held them
+    with no word. A tie or a win says nothing."""
+    from irreflect.cli.select import _warn_b_below_12
+
+    for r2_b, r2_12, warned in ((-235.6, 0.8828, True), (0.8750, 0.8828, False),
+                                (0.95, 0.8828, False), (None, 0.8828, False)):
+        _warn_b_below_12("lambert-16", {"B": {"r2": r2_b}, "12": {"r2": r2_12}})
+        err = capsys.readouterr().err
+        assert ("optimal_points.csv holds" in err) is warned
+        if warned:
+            assert "R^2 -235.6" in err and "0.8828" in err and len(err.splitlines()) == 1
