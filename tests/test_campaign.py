@@ -5,6 +5,7 @@ the stopping verdict, and the commands ``irreflect next`` and ``irreflect campai
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import io
 import json
 import warnings
@@ -1591,3 +1592,31 @@ def test_readings_with_sigma_say_when_they_depart_from_the_fit_beyond_their_nois
     _, clean = _sigma_campaign(None, 1, 15)
     assert not any("depart" in r or "explains the readings only" in r
                    for v in clean.values() for r in v.reasons)
+
+
+def test_a_replay_on_a_table_with_sigma_gives_every_strategys_readings_its_sigma():
+    # the protocols' and the hindsight subsets' readings carried the table's sigma, the
+    # adaptive and random ones did not: on a table with sigma the strategies' fits were
+    # weighted differently (foam board: the adaptive verdict stopped at 16, 2 readings
+    # after the target held; with the sigma, at 14)
+    from irreflect.campaign.replay import replay_random
+
+    dense = read_measurements(TERRAZZO)
+    source = DenseInstrument(dense)
+    curve, verdicts, _ = replay_adaptive(source, 10, seed=0)
+    pts = curve.points
+    assert "sigma" in pts and len(pts) == 10
+    look = dense.to_frame().set_index(["gamma_deg", "theta_deg"])["sigma"]
+    expected = [look[(g, t)] for g, t in zip(pts.gamma_deg, pts.theta_deg, strict=True)]
+    np.testing.assert_allclose(pts["sigma"], expected)
+    np.testing.assert_allclose(source.sigma_at(pts.gamma_deg, pts.theta_deg), expected)
+    # a table without sigma: none is invented
+    bare = dataclasses.replace(dense, sigma=None)
+    assert DenseInstrument(bare).sigma_at([-10.0], [0.0]) is None
+    assert "sigma" not in replay_adaptive(DenseInstrument(bare), 9, seed=0)[0].points
+    # the random readings are weighted as the others: their R^2 differs from unweighted
+    # fits when the sigma is not one constant
+    noisy = dataclasses.replace(dense, sigma=dense.sigma * (1 + 5 * dense.power / dense.power.max()))
+    weighted = replay_random(DenseInstrument(noisy), 12, seed=0, n_draws=1).r2[12]
+    plain = replay_random(DenseInstrument(bare), 12, seed=0, n_draws=1).r2[12]
+    assert weighted != pytest.approx(plain, abs=1e-6)

@@ -137,6 +137,25 @@ class DenseInstrument:
         order = np.argsort(d.theta_deg[sel])
         return d.theta_deg[sel][order], d.power[sel][order]
 
+    def sigma_at(self, gamma_deg, theta_deg) -> np.ndarray | None:
+        """The table's sigma at the given settings (degrees), read as its power is (the
+        nearest reading, or interpolated along theta); None when the table has none. The
+        readings of every strategy carry it, as the protocols' and the hindsight subsets'
+        always did: a replay on a table with sigma weights every strategy's fit alike
+        (before stop 42 the adaptive and the random readings were fitted unweighted)."""
+        d = self.dense
+        if d.sigma is None:
+            return None
+        out = []
+        for gi, ti in zip(np.atleast_1d(np.asarray(gamma_deg, float)),
+                          np.atleast_1d(np.asarray(theta_deg, float)), strict=True):
+            sel = np.abs(d.gamma_deg - gi) < 1e-6
+            order = np.argsort(d.theta_deg[sel])
+            th, sg = d.theta_deg[sel][order], d.sigma[sel][order]
+            out.append(sg[int(np.argmin(np.abs(th - ti)))] if self.method == "nearest"
+                       else float(np.interp(ti, th, sg)))
+        return np.asarray(out, float)
+
     def coarse_peaks(self) -> str:
         """With ``method="interpolate"``: a warning when, at half or more of the angles of
         incidence, the table's own readings next to its brightest reading (the specular
@@ -347,7 +366,9 @@ def replay_adaptive(source: DenseInstrument, n_max: int = 25, *, model="two-lobe
         if not len(proposal):
             break
         power = source.read(proposal["gamma_deg"], proposal["theta_deg"], rng)
-        campaign.add(proposal[["gamma_deg", "theta_deg"]].assign(power=power))
+        rows = proposal[["gamma_deg", "theta_deg"]].assign(power=power)
+        sigma = source.sigma_at(proposal["gamma_deg"], proposal["theta_deg"])
+        campaign.add(rows if sigma is None else rows.assign(sigma=sigma))
         n = campaign.n_measured
         start = time.perf_counter()
         v = campaign.verdict()
@@ -421,11 +442,12 @@ def replay_random(source: DenseInstrument, n_max: int = 25, *, model="two-lobe",
         order = rng.permutation(len(settings))[:n_max]
         s = settings[order]
         power = source.read(s[:, 0], s[:, 1], rng)
+        sigma = source.sigma_at(s[:, 0], s[:, 1])
         if first is None:
             first = pd.DataFrame({"gamma_deg": s[:, 0], "theta_deg": s[:, 1], "power": power})
         for n in range(model_obj.n_params + 1, len(order) + 1):
             meas = Measurements(gamma_deg=s[:n, 0], theta_deg=s[:n, 1], power=power[:n],
-                                name=dense.name)
+                                sigma=None if sigma is None else sigma[:n], name=dense.name)
             per_n.setdefault(n, []).append(_score(model_obj, meas, dense, seed, resolution))
     r2 = {n: float(np.nanmedian(v)) if np.isfinite(v).any() else float("nan")
           for n, v in per_n.items()}
