@@ -1620,3 +1620,8 @@ def test_a_replay_on_a_table_with_sigma_gives_every_strategys_readings_its_sigma
     weighted = replay_random(DenseInstrument(noisy), 12, seed=0, n_draws=1).r2[12]
     plain = replay_random(DenseInstrument(bare), 12, seed=0, n_draws=1).r2[12]
     assert weighted != pytest.approx(plain, abs=1e-6)
+    # with the instrument's own noise on top, the readings' sigma says so
+    loud = DenseInstrument(dense, noise=0.05)
+    power = np.array([0.05, 1.0])
+    np.testing.assert_allclose(loud.reading_sigma([-10.0, -10.0], [-70.0, -60.0], power),
+                               np.sqrt(0.006 ** 2 + (0.05 * power) ** 2))

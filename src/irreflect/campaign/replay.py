@@ -156,6 +156,15 @@ class DenseInstrument:
                        else float(np.interp(ti, th, sg)))
         return np.asarray(out, float)
 
+    def reading_sigma(self, gamma_deg, theta_deg, power) -> np.ndarray | None:
+        """The sigma of readings of ``power`` at the given settings: the table's
+        (:meth:`sigma_at`) and this instrument's relative noise added in quadrature; None
+        when the table has no sigma."""
+        sigma = self.sigma_at(gamma_deg, theta_deg)
+        if sigma is None or not self.noise:
+            return sigma
+        return np.sqrt(sigma ** 2 + (self.noise * np.asarray(power, float)) ** 2)
+
     def coarse_peaks(self) -> str:
         """With ``method="interpolate"``: a warning when, at half or more of the angles of
         incidence, the table's own readings next to its brightest reading (the specular
@@ -367,7 +376,7 @@ def replay_adaptive(source: DenseInstrument, n_max: int = 25, *, model="two-lobe
             break
         power = source.read(proposal["gamma_deg"], proposal["theta_deg"], rng)
         rows = proposal[["gamma_deg", "theta_deg"]].assign(power=power)
-        sigma = source.sigma_at(proposal["gamma_deg"], proposal["theta_deg"])
+        sigma = source.reading_sigma(proposal["gamma_deg"], proposal["theta_deg"], power)
         campaign.add(rows if sigma is None else rows.assign(sigma=sigma))
         n = campaign.n_measured
         start = time.perf_counter()
@@ -405,10 +414,11 @@ def replay_protocol(source: DenseInstrument, kind: str, *, model="two-lobe",
                              note=f"not available: {textwrap.shorten(str(exc), 400, placeholder=' ...')}")
     if source.noise or source.angle_error_deg:  # the instrument's errors, as every reading
         rng = np.random.default_rng([check_seed(seed), 37, ("paper", "glossy").index(kind)])
+        power = source.disturb(meas.gamma_deg, meas.theta_deg, meas.power, rng)
+        sigma = (None if meas.sigma is None else
+                 np.sqrt(meas.sigma ** 2 + (source.noise * power) ** 2))
         meas = Measurements(gamma_deg=meas.gamma_deg, theta_deg=meas.theta_deg,
-                            power=source.disturb(meas.gamma_deg, meas.theta_deg, meas.power,
-                                                 rng),
-                            sigma=meas.sigma, name=meas.name)
+                            power=power, sigma=sigma, name=meas.name)
     r2, res = _fit_and_score(model, meas, dense, seed, resolution)
     gammas = "/".join(f"{g:g}" for g in proto.settings.get("gammas_deg", proto.gammas))
     note = f"gammas {gammas} deg"
@@ -442,7 +452,7 @@ def replay_random(source: DenseInstrument, n_max: int = 25, *, model="two-lobe",
         order = rng.permutation(len(settings))[:n_max]
         s = settings[order]
         power = source.read(s[:, 0], s[:, 1], rng)
-        sigma = source.sigma_at(s[:, 0], s[:, 1])
+        sigma = source.reading_sigma(s[:, 0], s[:, 1], power)
         if first is None:
             first = pd.DataFrame({"gamma_deg": s[:, 0], "theta_deg": s[:, 1], "power": power})
         for n in range(model_obj.n_params + 1, len(order) + 1):
