@@ -125,7 +125,7 @@ def load_data(args, command: str | None = None, path=None):
 #: Up to this many points, a command that fits once uses the numpy fitter: loading the
 #: compiled kernel (about a second) costs more than it saves on one search. A second
 #: search (the retry) runs compiled ("numpy-first"): on tables the model misfits it took
-#: 8-12 s with numpy (held-out tables of 1668-2880 points), 0.8 s compiled.
+#: 7.7-10.7 s with numpy (held-out tables of 1668-2880 points), 2.1-2.4 s so.
 SINGLE_FIT_NUMPY_POINTS = 5000
 
 

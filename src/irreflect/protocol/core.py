@@ -776,8 +776,9 @@ def _placement_problem(designed: dict, placed: dict, available: dict):
         return lo if lo == hi else f"{lo}-{hi}"
 
     shadow = _source_shadow(designed, available, bad)
-    if shadow and all(gap <= designed[g] + _EPS for g, gap in zip(bad, gaps, strict=False)) \
-            and len(shadow) == len(bad) and len(gaps) == len(bad):
+    fine = len(gaps) == len(bad) and all(  # receivers close enough at every mirror
+        gap <= designed[g] + _EPS for g, gap in zip(bad, gaps, strict=True))
+    if fine and len(shadow) == len(bad):
         # the receivers are fine near the mirror: a lobe-width point falls where the source
         # stands (theta = gamma), and no finer receiver step places it there
         where = "; ".join(f"at gamma {g:g} the point designed at theta {t:g} falls in the "
