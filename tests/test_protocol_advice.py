@@ -483,3 +483,17 @@ def test_a_pilot_whose_third_angle_lies_beyond_70_deg_is_told_to_raise_theta_max
     assert main(["protocol", "--lobe-from", str(two), "--out", str(out)]) == 2
     assert capsys.readouterr().err.strip().endswith("measure the scan at three or more "
                                                     "angles of incidence")
+
+
+@pytest.mark.real
+def test_ptfe_mirror_at_normal_incidence_is_named_as_the_source_direction(real_dir):
+    """NIST's PTFE pilot has no receiver from -5.7 to 5.7 deg at gamma 0, where the mirror
+    direction is the source's: the warning asked for a 10-deg receiver step near the
+    mirror; it now names the source's gap."""
+    meas = read_measurements(real_dir / "ptfe_nist" / "ptfe_sintered_1064nm.csv")
+    proto = glossy_protocol_for(meas)
+    warning = proto.settings["placement_warning"]
+    assert "at gamma 0 the point designed at theta 0 falls in the pilot's gap from -5.739 " \
+           "to 5.739 deg around the source direction" in warning
+    assert "receiver step of at most" not in warning
+    assert proto.settings["receiver_step_needed_deg"] is None

@@ -776,17 +776,21 @@ def _placement_problem(designed: dict, placed: dict, available: dict):
         return lo if lo == hi else f"{lo}-{hi}"
 
     shadow = _source_shadow(designed, available, bad)
+    mirror_shadowed = {g for g, t, _a, _b in shadow if abs(t + g) <= _EPS}
     fine = len(gaps) == len(bad) and all(  # receivers close enough at every mirror
-        gap <= designed[g] + _EPS for g, gap in zip(bad, gaps, strict=True))
-    if fine and len(shadow) == len(bad):
+        gap <= designed[g] + _EPS or g in mirror_shadowed
+        for g, gap in zip(bad, gaps, strict=True))
+    if fine and {g for g, *_ in shadow} == set(bad):
         # the receivers are fine near the mirror: a lobe-width point falls where the source
         # stands (theta = gamma), and no finer receiver step places it there
         where = "; ".join(f"at gamma {g:g} the point designed at theta {t:g} falls in the "
                           f"pilot's gap from {a:g} to {b:g} deg around the source direction "
                           f"(theta = gamma), where no receiver can stand"
                           for g, t, a, b in shadow)
-        text = (f"the designed lobe-width points cannot all be placed: {where}; they stand "
-                + span(lobes) + " deg from the mirror, designed " + span(w_bad) + " deg. A "
+        text = (f"the designed points cannot all be placed: {where}; the lobe-width points "
+                "stand " + span(lobes) + " deg from the mirror, designed " + span(w_bad)
+                + " deg" + (f", mirror points up to {max(mirrors):.3g} deg off it"
+                            if mirrors and max(mirrors) > _EPS else "") + ". A "
                 "finer receiver step does not mend it; the adaptive campaign (irreflect "
                 "next) chooses readings the instrument can take. The file holds the placed "
                 "points")
@@ -803,12 +807,14 @@ def _placement_problem(designed: dict, placed: dict, available: dict):
 
 
 def _source_shadow(designed: dict, available: dict, bad) -> list:
-    """The lobe-width targets (mirror -+ the designed offset) of the ``bad`` angles of
-    incidence that no pilot receiver comes within half the offset of, and whose gap
-    between receivers holds the source direction (theta = gamma): ``(gamma, target, gap
-    start, gap end)`` each. A held-out off-specular table's pilot, receivers 1 deg apart,
-    had none from -11 to 1 deg at gamma -5, so the point 10 deg from the mirror toward the
-    normal (theta -5) stood 16 deg from it; the warning asked for a finer receiver step."""
+    """The targets (the mirror, and the mirror -+ the designed offset) of the ``bad``
+    angles of incidence that no pilot receiver comes within half the offset of, and whose
+    gap between receivers holds the source direction (theta = gamma): ``(gamma, target,
+    gap start, gap end)`` each. A held-out off-specular table's pilot, receivers 1 deg
+    apart, had none from -11 to 1 deg at gamma -5, so the point 10 deg from the mirror
+    toward the normal (theta -5) stood 16 deg from it; the warning asked for a finer
+    receiver step. At normal incidence the mirror is the source direction (NIST's PTFE:
+    no receiver from -5.7 to 5.7 deg at gamma 0)."""
     out = []
     for g in bad:
         w = designed[g]
@@ -816,7 +822,7 @@ def _source_shadow(designed: dict, available: dict, bad) -> list:
                        if abs(float(k) - g) <= 1e-6), None)
         if thetas is None or thetas.size < 2:
             continue
-        for target in (-g - w, -g + w):
+        for target in (-g - w, -g, -g + w):  # the lobe-width points and the mirror point
             if np.min(np.abs(thetas - target)) <= 0.5 * w + _EPS:
                 continue
             i = int(np.searchsorted(thetas, target))
