@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import json
 import re
+from types import SimpleNamespace
 
 import numpy as np
 import pandas as pd
@@ -497,3 +498,20 @@ def test_ptfe_mirror_at_normal_incidence_is_named_as_the_source_direction(real_d
            "to 5.739 deg around the source direction" in warning
     assert "receiver step of at most" not in warning
     assert proto.settings["receiver_step_needed_deg"] is None
+
+
+def test_an_extrapolation_cause_counts_negative_power_beyond_rounding_only():
+    """A held-out table's cause said the model "predicts negative power at 2 point(s)
+    (down to -5.75e-16)": a floating-point zero. Only a prediction below -1e-9 of the
+    largest power counts; a real negative one is still named."""
+    from irreflect.protocol.advice import _extrapolation
+
+    y = np.array([1.0, 0.5, 0.2, 0.1])
+    outside = np.array([False, False, True, True])
+    sp = SimpleNamespace(y=y, mag=np.array([20.0, 40.0, 75.0, 75.0]), outside=outside,
+                         lo=20.0, hi=40.0, s_out=0.9,
+                         share={("outside", True): 0.0, ("outside", False): 0.9})
+    quiet = _extrapolation(sp, np.array([1.0, 0.5, -5.75e-16, 0.1]), "the protocol")
+    assert "negative power" not in quiet.text
+    loud = _extrapolation(sp, np.array([1.0, 0.5, -0.03, 0.1]), "the protocol")
+    assert "negative power at 1 point(s) (down to -0.03)" in loud.text

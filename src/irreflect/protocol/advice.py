@@ -546,6 +546,10 @@ def _model_misfit(dense, r2_a: float) -> Cause:
         "effect, `irreflect compare` tries the other models")
 
 
+#: a predicted power below -this x the table's largest |power| counts as negative
+NEGATIVE_POWER_TOL = 1e-9
+
+
 def _extrapolation(sp: _ErrorSplit, pred_p, what) -> Cause:
     """The share of the extra error beyond the protocol's angles of incidence."""
     y, mag, outside, lo, hi, s_out = sp.y, sp.mag, sp.outside, sp.lo, sp.hi, sp.s_out
@@ -553,7 +557,9 @@ def _extrapolation(sp: _ErrorSplit, pred_p, what) -> Cause:
     inside = ~outside
     r2_in = (float(metrics.r2(y[inside], pred_p[inside])) if inside.sum() >= 2
              else float("nan"))
-    neg = outside & (pred_p < 0)
+    # negative beyond rounding: a held-out table's cause said "negative power at 2
+    # point(s) (down to -5.75e-16)", a zero in floating point
+    neg = outside & (pred_p < -NEGATIVE_POWER_TOL * float(np.max(np.abs(y))))
     text = (f"extrapolation beyond the measured angles of incidence: {what} measures "
             f"|gamma| {lo:g}-{hi:g} deg, the table is scored at |gamma| = "
             f"{', '.join(f'{m:g}' for m in out_mags)} deg too; {s_out:.0%} of "
