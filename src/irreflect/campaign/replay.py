@@ -129,13 +129,13 @@ class DenseInstrument:
                 " deg: every strategy's fit extrapolates the peak there, and no R^2 below "
                 "scores it (measure the mirror direction there to judge the lobe)")
 
-    def _row(self, gamma: float) -> tuple[np.ndarray, np.ndarray]:
+    def _row(self, gamma: float, values=None) -> tuple[np.ndarray, np.ndarray]:
         """The table's readings at one angle of incidence, ``(theta, power)`` sorted by
-        theta (empty where it has none)."""
+        theta (empty where it has none); ``values``: another column than the power."""
         d = self.dense
         sel = np.abs(d.gamma_deg - gamma) < 1e-6
         order = np.argsort(d.theta_deg[sel])
-        return d.theta_deg[sel][order], d.power[sel][order]
+        return d.theta_deg[sel][order], (d.power if values is None else values)[sel][order]
 
     def sigma_at(self, gamma_deg, theta_deg) -> np.ndarray | None:
         """The table's sigma at the given settings (degrees), read as its power is (the
@@ -149,9 +149,7 @@ class DenseInstrument:
         out = []
         for gi, ti in zip(np.atleast_1d(np.asarray(gamma_deg, float)),
                           np.atleast_1d(np.asarray(theta_deg, float)), strict=True):
-            sel = np.abs(d.gamma_deg - gi) < 1e-6
-            order = np.argsort(d.theta_deg[sel])
-            th, sg = d.theta_deg[sel][order], d.sigma[sel][order]
+            th, sg = self._row(gi, d.sigma)
             out.append(sg[int(np.argmin(np.abs(th - ti)))] if self.method == "nearest"
                        else float(np.interp(ti, th, sg)))
         return np.asarray(out, float)
