@@ -23,7 +23,7 @@ def per_model(model, key: Hashable, make: Callable[[], object]):
     entry = _CACHE.get(id(model))
     if entry is None or entry[0]() is not model:
         ident = id(model)
-        entry = (weakref.ref(model, lambda _ref: _forget(ident, _ref)), {})
+        entry = (weakref.ref(model, _forgetter(_CACHE, ident)), {})
         _CACHE[ident] = entry
     values = entry[1]
     if key not in values:
@@ -33,7 +33,14 @@ def per_model(model, key: Hashable, make: Callable[[], object]):
     return values[key]
 
 
-def _forget(ident: int, ref: weakref.ref) -> None:
-    entry = _CACHE.get(ident)
-    if entry is not None and entry[0] is ref:
-        del _CACHE[ident]
+def _forgetter(cache: dict, ident: int) -> Callable[[weakref.ref], None]:
+    """The weakref callback that drops ``ident``'s entry from ``cache`` once its model is
+    collected. It holds ``cache`` itself, not the module's global: a model collected at
+    interpreter exit, after the module's globals are cleared, still finds it."""
+
+    def forget(ref: weakref.ref) -> None:
+        entry = cache.get(ident)
+        if entry is not None and entry[0] is ref:
+            del cache[ident]
+
+    return forget
