@@ -87,3 +87,24 @@ def least_squares_reference(model, meas, n_starts: int = 50, seed: int = 0,
             continue
         best = min(best, float(res.cost))
     return best
+
+
+def noisy_oren_nayar(seed: int):
+    """A rough matte surface the model does not describe (qualitative Oren-Nayar, facet
+    slope sigma 0.246 rad, times cos(gamma): a held-out table's generator, lambert-6 of
+    experiments/unseen_tables.py --random 30 --first-seed 9400) with 2.9 % noise."""
+    import pandas as pd
+
+    g = np.repeat([-8.0, -23.0, -41.0, -57.0, -72.0], 86)
+    t = np.tile(np.arange(-85.0, 86.0, 2.0), 5)
+    keep = np.abs(t - g) > 8  # the receiver kept off the source
+    g, t = g[keep], t[keep]
+    gi, tr = np.radians(-g), np.radians(t)
+    s2 = 0.2457 ** 2
+    a, b = 1 - 0.5 * s2 / (s2 + 0.33), 0.45 * s2 / (s2 + 0.09)
+    big, small = np.maximum(gi, np.abs(tr)), np.minimum(gi, np.abs(tr))
+    y = (a + b * (tr < 0) * np.sin(big) * np.tan(small)) * np.cos(tr) * np.cos(gi)
+    y = y / y.max() * 19.33
+    rng = np.random.default_rng(seed)
+    y = y * (1 + 0.029 * rng.standard_normal(y.size)) + 1e-4 * y.max() * rng.standard_normal(y.size)
+    return pd.DataFrame({"gamma_deg": g, "theta_deg": t, "power": y})

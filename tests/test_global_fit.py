@@ -19,7 +19,7 @@ from irreflect.errors import DataError, FitError, FitWarning, IrreflectError
 from irreflect.fitting import retry_reasons
 from irreflect.models import get_model, model_names, two_lobe_power
 from irreflect.synthetic import GRIDS, KINDS, synthetic_material, wild_material
-from tests.helpers import least_squares_reference
+from tests.helpers import least_squares_reference, noisy_oren_nayar
 
 SEEDS_PER_CASE = 30  # 2 kinds x 5 grids x 30 seeds = 300 generated materials
 
@@ -367,27 +367,6 @@ def test_a_result_that_looks_local_is_searched_again_and_reaches_the_optimum(see
     assert result.to_dict()["retried"] == result.retried
 
 
-def _noisy_oren_nayar(seed: int):
-    """A rough matte surface the model does not describe (qualitative Oren-Nayar, facet
-    slope sigma 0.246 rad, times cos(gamma): a held-out table's generator, lambert-6 of
-    experiments/unseen_tables.py --random 30 --first-seed 9400) with 2.9 % noise."""
-    import pandas as pd
-
-    g = np.repeat([-8.0, -23.0, -41.0, -57.0, -72.0], 86)
-    t = np.tile(np.arange(-85.0, 86.0, 2.0), 5)
-    keep = np.abs(t - g) > 8  # the receiver kept off the source
-    g, t = g[keep], t[keep]
-    gi, tr = np.radians(-g), np.radians(t)
-    s2 = 0.2457 ** 2
-    a, b = 1 - 0.5 * s2 / (s2 + 0.33), 0.45 * s2 / (s2 + 0.09)
-    big, small = np.maximum(gi, np.abs(tr)), np.minimum(gi, np.abs(tr))
-    y = (a + b * (tr < 0) * np.sin(big) * np.tan(small)) * np.cos(tr) * np.cos(gi)
-    y = y / y.max() * 19.33
-    rng = np.random.default_rng(seed)
-    y = y * (1 + 0.029 * rng.standard_normal(y.size)) + 1e-4 * y.max() * rng.standard_normal(y.size)
-    return pd.DataFrame({"gamma_deg": g, "theta_deg": t, "power": y})
-
-
 @pytest.mark.parametrize("seed", [17, 44])
 def test_the_second_search_looks_beyond_the_models_screening_box(seed):
     """On 6 of 62 noise draws of a rough matte table both searches ended at R^2 0.83
@@ -399,7 +378,7 @@ def test_the_second_search_looks_beyond_the_models_screening_box(seed):
 
     from irreflect.fitting.api import _widened_model
 
-    table = _noisy_oren_nayar(seed)
+    table = noisy_oren_nayar(seed)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", FitWarning)
         first = fit(table, retry=False)
@@ -432,7 +411,7 @@ def test_only_a_table_the_model_still_misfits_is_searched_beyond_the_box(monkeyp
     real = api._widened_model
     monkeypatch.setattr(api, "_widened_model", lambda m: widened.append(m) or real(m))
     glossy = wild_material(1374).measurements
-    table = _noisy_oren_nayar(17)
+    table = noisy_oren_nayar(17)
     small = table.iloc[:: len(table) // 20].head(20)  # 20 readings over the five gammas
     assert len(small) <= SMALL_TABLE_POINTS < min(glossy.n_points, len(table))
     with warnings.catch_warnings():

@@ -13,7 +13,7 @@ from conftest import synthetic
 
 from irreflect import fitting
 from irreflect.cli import main
-from irreflect.data import bundled_dir, load_bundled, write_measurements
+from irreflect.data import as_measurements, bundled_dir, load_bundled, write_measurements
 from irreflect.errors import IrreflectError
 from irreflect.selection import (
     SubsetEvaluator,
@@ -26,6 +26,7 @@ from irreflect.selection import (
     snap_points,
 )
 from irreflect.selection.parallel import run_many
+from tests.helpers import noisy_oren_nayar
 
 SMALL = dict(pop_size=24, generations=12, max_points=20)
 
@@ -519,3 +520,40 @@ def test_select_warns_when_its_best_12_points_fall_below_the_papers(capsys):
         assert ("optimal_points.csv holds" in err) is warned
         if warned:
             assert "R^2 -235.6" in err and "0.8828" in err and len(err.splitlines()) == 1
+
+
+def _selection_warnings(meas, monkeypatch, *, stop_42_fitter: bool):
+    """run_selection on ``meas`` (a small budget), the FitWarnings it printed."""
+    import irreflect.fitting.api as api
+
+    if stop_42_fitter:  # no search beyond the model's screening box: a local all-points fit
+        monkeypatch.setattr(api, "_widened_model", lambda model: model)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        result = run_selection(meas, pop_size=24, generations=8, seed=0)
+    return result, [str(w.message) for w in caught if "least-squares optimum" in str(w.message)]
+
+
+def test_a_subset_that_fits_all_points_better_replaces_a_local_all_points_fit(monkeypatch):
+    """A subset whose fit scores a higher R^2 against all points than the all-points fit
+    proves that fit is not the least-squares optimum (stop 43: a held-out noisy matte
+    table, a 12-point subset at 0.9066 against the all-points fit's 0.8359). With stop
+    42's fitter, which ends in such a local optimum here, select refits all points from
+    the subset's coefficients, warns, and uses the better fit as Method A."""
+    meas = as_measurements(noisy_oren_nayar(17))
+    result, said = _selection_warnings(meas, monkeypatch, stop_42_fitter=True)
+    summary = result.front_summary
+    r2_a = summary.reference_fit.r2
+    assert len(said) == 1 and "(R^2 0.83" in said[0] and "refitted from it" in said[0]
+    assert r2_a > 0.9  # 0.834 before the check
+    assert summary.reference == pytest.approx(1.0 - r2_a, abs=1e-9)
+    assert compare_methods(meas, result)["A"]["r2"] == pytest.approx(r2_a, abs=1e-9)
+    assert result.front["r2"].max() <= r2_a + 1e-6
+
+
+def test_a_global_all_points_fit_is_kept_without_a_warning(monkeypatch):
+    meas = as_measurements(noisy_oren_nayar(17))
+    result, said = _selection_warnings(meas, monkeypatch, stop_42_fitter=False)
+    assert said == []
+    assert result.front_summary.reference_fit.r2 > 0.9  # the third search found it
+    assert result.front["r2"].max() <= result.front_summary.reference_fit.r2 + 1e-6
