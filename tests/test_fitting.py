@@ -388,3 +388,24 @@ def test_a_model_collected_after_the_cache_global_is_cleared_is_forgotten(monkey
     del model
     gc.collect()
     assert raised == [] and ident not in store
+
+
+def test_a_weighted_fit_that_cannot_beat_a_constant_names_the_sigma_column():
+    """sigma = 2 % of each reading with no noise floor, on a table whose readings near zero
+    are noise (some negative): those readings outweigh the rest and the weighted fit's
+    R^2 is below 0 (4 of 300 generated tables). The error names the sigma column, not the
+    angles; the same table with a noise floor in sigma, or without sigma, is fitted."""
+    from irreflect.synthetic import wild_material
+
+    table = wild_material(127).measurements
+    assert table.sigma is None and table.power.min() < 0
+    top = np.abs(table.power).max()
+    bare = dataclasses.replace(table, sigma=0.02 * np.abs(table.power) + 1e-6 * top)
+    with pytest.raises(FitError) as err:
+        fit(bare, seed=0)
+    text = str(err.value)
+    assert "weighted by 1/sigma^2" in text and "drop the sigma column" in text
+    assert "angles follow the convention" not in text
+    floor = dataclasses.replace(table, sigma=0.02 * np.abs(table.power) + 0.01 * top)
+    assert fit(floor, seed=0).r2 > 0.9
+    assert fit(table, seed=0).r2 > 0.9

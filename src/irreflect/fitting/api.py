@@ -352,7 +352,7 @@ def _fit_search(meas, model, t0, opts: FitOptions) -> FitResult:
         )
     zb, ab, cb, converged, message, n_starts, n_evals = out
     if fin is not None:
-        fin = finished_by_kernel(model_obj, fin[0], meas.power, source, *fin[1:])
+        fin = finished_by_kernel(model_obj, fin[0], meas.power, source, *fin[1:], sigma=sigma)
     else:
         if table is None:
             gamma, theta, weights = _radians_and_weights(meas, sigma)

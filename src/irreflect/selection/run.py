@@ -521,6 +521,10 @@ def compare_methods(meas: Measurements, result: SelectionResult | None = None,
         out["order_holds"] = bool(a >= b - tol and b >= c - tol)
         if out["order_holds"]:
             out["note"] = "A >= B >= 12 holds"
+        elif b > a + tol and meas.sigma is not None:
+            out["note"] = ("B above A: the fit on all points is weighted by 1/sigma^2 (the "
+                           "table's sigma column) and minimises chi^2, not the unweighted "
+                           "error that R^2 measures")
         elif b > a + tol:
             out["note"] = ("B above A: the fit on all points did not reach its global optimum "
                            "(a least-squares fit on all points maximises R^2 on them)")
