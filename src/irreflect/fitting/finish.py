@@ -231,8 +231,8 @@ def _check_r2(model, r2, source, sigma=None) -> float:
             f"fit of '{model.name}' to {source}, weighted by 1/sigma^2, cannot beat a "
             f"constant (R^2 = {r2:.4g} <= 0): its sigma spans {np.min(sigma):.3g} to "
             f"{np.max(sigma):.3g}, and the readings with the smallest sigma outweigh the "
-            "rest; check that sigma is the 1-sigma uncertainty of power, the noise floor of "
-            "readings near zero included, or drop the sigma column to fit unweighted"
+            "rest; check that sigma is the 1-sigma uncertainty of power, including that of "
+            "readings near zero, or drop the sigma column to fit unweighted"
         )
     if not np.isfinite(r2) or r2 <= 0:
         raise FitError(
