@@ -375,7 +375,9 @@ def finish_front(meas, evaluator, verified: dict, *, model: str, n_min: int, n_m
 
     cand = np.asarray(candidates, bool)
     n_total = int(cand.sum())
-    reference_fit = fit(meas if cand.all() else meas.subset(cand), model, seed=seed)
+    with warnings.catch_warnings(record=True) as said:  # the fit that stands says them
+        warnings.simplefilter("always")
+        reference_fit = fit(meas if cand.all() else meas.subset(cand), model, seed=seed)
     reference = 1.0 - float(metrics.r2(meas.power, reference_fit.predict(meas.gamma_deg,
                                                                           meas.theta_deg)))
     norm = dict(n_min=n_min, n_total=n_total, reference=reference)
@@ -384,11 +386,19 @@ def finish_front(meas, evaluator, verified: dict, *, model: str, n_min: int, n_m
     verified, fits = complete_front(evaluator, verified, n_min=n_min, n_hi=n_hi,
                                     candidates=cand, verify_fit=verify_fit, seed=seed)
     front, masks = assemble_front(verified, n_min, n_hi)
+    first_fit = reference_fit
     if cand.all():
         reference_fit = global_reference(meas, reference_fit, verified, model, seed)
         reference = 1.0 - float(metrics.r2(meas.power, reference_fit.predict(
             meas.gamma_deg, meas.theta_deg)))
         norm["reference"] = reference
+    if reference_fit is first_fit:
+        for w in said:
+            warnings.warn(w.message, stacklevel=2)
+    else:  # the first fit's warnings are not the refitted one's
+        for text in reference_fit.warnings:
+            warnings.warn(FitWarning(f"{meas.name}, {reference_fit.model}: {text}"),
+                          stacklevel=2)
     knee = knee_point(front, **norm)
     enough, note = None, ""
     if with_enough:
