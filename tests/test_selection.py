@@ -582,3 +582,32 @@ def test_b_above_a_is_explained_by_the_weights_on_a_table_with_sigma(noisy, smal
     assert note.startswith("B above A")
     assert ("weighted by 1/sigma^2" in note) == weighted
     assert ("did not reach its global optimum" in note) == (not weighted)
+
+
+def test_a_subset_no_fit_describes_leaves_the_all_points_fit(monkeypatch):
+    """global_reference tries the subsets' fits as starts; one that cannot be fitted (a
+    FitError, not an IrreflectError) is passed over, not raised out of select."""
+    from irreflect.errors import FitError
+    from irreflect.selection import front
+
+    meas = as_measurements(noisy_oren_nayar(17))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        local = fitting.fit(meas, seed=0, retry=False)  # R^2 0.83: subsets can score above
+    mask = np.zeros(meas.n_points, bool)
+    mask[:: meas.n_points // 12][:12] = True
+    real = front.fit
+
+    def no_subset(table, *args, **kwargs):
+        if table.n_points < meas.n_points:
+            raise FitError("fit of 'two-lobe' to a subset cannot beat a constant")
+        return real(table, *args, **kwargs)
+
+    monkeypatch.setattr(front, "fit", no_subset)
+    assert front.global_reference(meas, local, {12: (0.05, mask)}, "two-lobe", 0) is local
+    monkeypatch.setattr(front, "fit", real)  # the same subset, fitted: the refit is kept
+    with warnings.catch_warnings(record=True) as said:
+        warnings.simplefilter("always")
+        kept = front.global_reference(meas, local, {12: (0.05, mask)}, "two-lobe", 0)
+    assert kept.cost <= local.cost
+    assert (kept is local) == (not any("least-squares optimum" in str(w.message) for w in said))

@@ -48,7 +48,7 @@ from scipy import special
 
 from .. import metrics
 from ..diagnose.workflow import estimate_noise
-from ..errors import FitWarning, IrreflectError
+from ..errors import FitError, FitWarning, IrreflectError
 from ..fitting import RETRY_GAIN, fit, fit_subsets
 from ..models import get_model
 from .problem import PointMasks
@@ -443,7 +443,7 @@ def global_reference(meas, reference_fit, verified: dict, model: str, seed: int)
                 sub = fit(meas.subset(verified[k][1]), model, seed=seed)
                 start = model_obj.from_natural(np.asarray(sub.values, float)[None])[0]
                 again = fit(meas, model, seed=seed, extra_starts=start)
-        except IrreflectError:
+        except (IrreflectError, FitError):  # a subset no fit can describe: the next
             continue
         if again.cost < best.cost * (1.0 - RETRY_GAIN):
             best, found = again, (k, 1.0 - score)
