@@ -460,3 +460,23 @@ def test_wild_material_is_seeded_and_refuses_a_negative_seed():
     assert not np.array_equal(a.measurements.power[:3], wild_material(6).measurements.power[:3])
     with pytest.raises(IrreflectError, match="seed must be an integer >= 0; found -1"):
         wild_material(-1)
+
+
+def test_a_model_whose_screening_box_is_its_bounds_is_not_searched_a_third_time(monkeypatch):
+    """phong screens its whole bounds already: a third search would repeat the second."""
+    import warnings
+
+    from irreflect.fitting import RETRY_R2, api
+
+    calls = []
+    search = api._fit_search
+    monkeypatch.setattr(api, "_fit_search",
+                        lambda *a: calls.append(a[1]) or search(*a))
+    table = noisy_oren_nayar(17)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", FitWarning)
+        phong = fit(table, "phong")
+        assert phong.retried and phong.r2 < RETRY_R2 and len(calls) == 2
+        calls.clear()
+        fit(table, "two-lobe")  # its box is narrower than its bounds: searched beyond it
+    assert len(calls) == 3

@@ -268,7 +268,9 @@ def _search_again(meas, model, t0, first, failure, reasons, opts: FitOptions):
         # the model fits costs no third search, and a few readings keep the box: beyond
         # it they find needles that fit them and miss the rest (a campaign's 8 opening
         # readings of Cornell Krylon: R^2 -4466 against all points, 0.967 within the box)
-        third = _wider_search(meas, _widened_model(base), t0, best, opts, compiled=True)
+        wider = _widened_model(base)  # the model itself when its box is its bounds
+        third = (None if wider is base
+                 else _wider_search(meas, wider, t0, best, opts, compiled=True))
         if third is not None:
             third = dataclasses.replace(third, model_object=base)
             spent.append(third)
