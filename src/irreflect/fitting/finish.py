@@ -167,7 +167,7 @@ def finish(model, z, alpha, cost, table, absolute_sigma, engine, kgeo, source) -
         fin = tl_finish(_w(z), _w(alpha), tuple(kgeo.geo), kgeo.glcg, _w(weights), _w(power),
                         absolute_sigma, cost, model.n_params)
         return finished_by_kernel(model, fin, power, source,
-                                  sigma=_sigma_of(weights) if absolute_sigma else None)
+                                  weights=weights if absolute_sigma else None)
     values = model.to_natural(z[None], alpha[None])[0]
     _check_values(model, values, True, source)
     fitted, jfull = _fitted_and_jacobian(model, z, alpha, gamma, theta, weights, engine, kgeo)
@@ -177,7 +177,7 @@ def finish(model, z, alpha, cost, table, absolute_sigma, engine, kgeo, source) -
                                   atol=1e-9 * np.max(np.abs(alpha))))
     _check_values(model, values, round_trip, source)
     r2 = _check_r2(model, metrics.r2(power, fitted), source,
-                   _sigma_of(weights) if absolute_sigma else None)
+                   weights=weights if absolute_sigma else None)
     cov, singular = _covariance(model, z, alpha, jfull, absolute_sigma, cost, power.size)
     return Finished(values, np.sqrt(np.clip(np.diag(cov), 0, None)), cov, singular, r2,
                     float(metrics.rmse(power, fitted)), float(metrics.mse(power, fitted)),
@@ -185,13 +185,13 @@ def finish(model, z, alpha, cost, table, absolute_sigma, engine, kgeo, source) -
 
 
 def finished_by_kernel(model, fin, power, source, stderr=None, residuals=None, *,
-                       sigma=None) -> Finished:
+                       sigma=None, weights=None) -> Finished:
     """The kernel's finish (:class:`~.kernel_types.Finish` of
     :func:`~.finish_kernel.tl_finish`) as :func:`finish` returns it, checked; ``stderr``
-    and ``residuals`` when the kernel computed them too; ``sigma``: the table's, when the
-    fit was weighted by it."""
+    and ``residuals`` when the kernel computed them too; ``sigma`` or ``weights`` (``1 /
+    sigma^2``): the table's, when the fit was weighted by its sigma."""
     _check_values(model, fin.values, fin.round_trip, source)
-    r2 = _check_r2(model, fin.r2, source, sigma)
+    r2 = _check_r2(model, fin.r2, source, sigma, weights)
     if stderr is None:
         stderr = np.sqrt(np.clip(np.diag(fin.covariance), 0, None))
     if residuals is None:
@@ -215,18 +215,16 @@ def _check_values(model, values, round_trip, source) -> None:
         )
 
 
-def _sigma_of(weights) -> np.ndarray:
-    return 1.0 / np.sqrt(np.asarray(weights, float))
-
-
-def _check_r2(model, r2, source, sigma=None) -> float:
-    """``r2``, refused when it cannot beat a constant. A fit weighted by ``sigma`` (the
-    table's) that cannot is most often told by a sigma far below the noise on some
-    readings (2 % of each reading, with nothing for the noise floor, on readings near
-    zero: 4 of 300 generated tables, R^2 -0.15 to -0.0005), and the error says so."""
+def _check_r2(model, r2, source, sigma=None, weights=None) -> float:
+    """``r2``, refused when it cannot beat a constant. A fit weighted by the table's
+    ``sigma`` (or ``weights``, 1 / sigma^2; sigma is derived only for the error) that
+    cannot is most often told by a sigma far below the noise on some readings (2 % of
+    each reading, with nothing for the noise floor, on readings near zero: 4 of 300
+    generated tables, R^2 -0.15 to -0.0005), and the error says so."""
     r2 = float(r2)
-    if (not np.isfinite(r2) or r2 <= 0) and sigma is not None:
-        sigma = np.asarray(sigma, float)
+    if (not np.isfinite(r2) or r2 <= 0) and (sigma is not None or weights is not None):
+        sigma = (np.asarray(sigma, float) if sigma is not None
+                 else 1.0 / np.sqrt(np.asarray(weights, float)))
         raise FitError(
             f"fit of '{model.name}' to {source}, weighted by 1/sigma^2, cannot beat a "
             f"constant (R^2 = {r2:.4g} <= 0): its sigma spans {np.min(sigma):.3g} to "
