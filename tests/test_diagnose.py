@@ -27,7 +27,7 @@ from irreflect.diagnose import (
 )
 from irreflect.diagnose.blind import blind_case
 from irreflect.diagnose.hidden import hidden_case
-from irreflect.errors import IrreflectError, UnknownNameError
+from irreflect.errors import FitWarning, IrreflectError, UnknownNameError
 from irreflect.models import Geometry, get_model, two_lobe_power
 
 TERRAZZO = (0.01713, -2.379, 1.021, 0.4283, 34.55, -0.3772, 0.4142)
@@ -361,6 +361,33 @@ def test_noise_proportional_to_the_power_is_estimated_and_a_misfit_is_not_taken_
     assert est.sigma[low] == pytest.approx(case.truth["noise"]["a"], rel=0.35)
     peaks = case.clean > 100 * np.median(case.clean)
     assert np.all(est.sigma[peaks] > 10 * case.truth["noise"]["a"])
+
+
+def test_a_weighted_fit_that_fails_on_the_diagnosis_own_sigma_gives_no_advice_about_it(
+        monkeypatch):
+    """The proportional noise the diagnosis finds is its own sigma. When the fit weighted by
+    it cannot beat a constant (Cornell Cayman), the warning says why and takes the noise as
+    constant, without the fit's advice to check or drop a sigma column the user never gave."""
+    from irreflect.diagnose import workflow
+    from irreflect.fitting.finish import _check_r2
+
+    case = blind_case(20, effects=(), base="matte", noise="proportional", sigma_column=False,
+                      saturate=False)
+    real_fit = workflow.fit
+
+    def fit_failing_when_weighted(meas, model, **kw):
+        if meas.sigma is not None:  # the weighted refit: refused as the fitter refuses it
+            _check_r2(model, -0.0064, meas.name, sigma=meas.sigma)
+        return real_fit(meas, model, **kw)
+
+    monkeypatch.setattr(workflow, "fit", fit_failing_when_weighted)
+    with pytest.warns(FitWarning, match="model weighted by it fails") as seen:
+        d = diagnose(case.measurements, max_effects=0)
+    text = " ".join(str(w.message) for w in seen)
+    assert "cannot beat a constant (R^2 = -0.0064 <= 0): its sigma spans" in text
+    assert "drop the sigma column" not in text and "check that sigma" not in text
+    assert "takes the noise as constant" in text
+    assert d.noise.relative == 0
 
 
 def test_restrict_undoes_embed():

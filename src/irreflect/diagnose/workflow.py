@@ -49,6 +49,7 @@
 from __future__ import annotations
 
 import dataclasses
+import re
 import time
 import warnings
 from collections.abc import Callable, Sequence
@@ -801,10 +802,13 @@ def _base_fit_and_noise(meas, base_model, seed, alpha):
                 # weighted by a noise proportional to the power, the model cannot follow
                 # the table at all (a sub-degree lobe that the weights make invisible):
                 # the proportional part is not usable; the noise is taken as additive
+                # the fit's advice (check the sigma column, or drop it) is not the user's
+                # to follow here: the diagnosis made that sigma itself
+                reason = re.split(r"[:;] check", str(exc))[0]
                 warnings.warn(
                     f"{meas.name}: a noise proportional to the power was found, but the "
-                    f"model weighted by it fails ({str(exc).split(': check')[0]}); the diagnosis takes the noise as "
-                    "constant: give a sigma column to settle it", FitWarning, stacklevel=3)
+                    f"model weighted by it fails ({reason}); the diagnosis takes the noise "
+                    "as constant: give a sigma column to settle it", FitWarning, stacklevel=3)
                 noise = estimate_noise(meas, residuals=base_fit.residuals, seed=seed,
                                        alpha=alpha)
             else:
