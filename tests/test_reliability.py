@@ -209,6 +209,23 @@ def test_budgets_of_fit_and_select(monkeypatch, tmp_path):
         assert "132 measured points is more than" in line and "(100 points)" in line
 
 
+def test_a_pilot_scan_is_held_to_a_fit_budget_not_to_the_design_search_budget(monkeypatch):
+    """'protocol --lobe-from' fits its pilot once: a 2,976-point held-out scan was refused
+    by the 2,000 points of '--design-from' (which searches subsets of it). Its own budget is
+    named in its error, with its own variable."""
+    assert validation.point_budget("protocol-lobe-from") == validation.POINT_BUDGET["fit"]
+    validation.check_points_budget(10_010, "protocol-lobe-from")  # accepted: no error
+    with pytest.raises(validation.DataError, match="2,000|2000"):
+        validation.check_points_budget(10_010, "protocol")
+    monkeypatch.setitem(validation.POINT_BUDGET, "protocol-lobe-from", 100)
+    line = _one_error(["protocol", "--lobe-from", TERRAZZO])
+    assert "132 measured points is more than 'protocol --lobe-from' handles" in line
+    assert "(100 points)" in line and "IRREFLECT_BUDGET_POINTS_PROTOCOL_LOBE_FROM=N" in line
+    monkeypatch.setenv("IRREFLECT_BUDGET_POINTS_PROTOCOL_LOBE_FROM", "150")
+    code, out, err = _run(["protocol", "--lobe-from", TERRAZZO])
+    assert code == 0 and "glossy-aware protocol designed from terrazzo" in err
+
+
 def test_caller_side_chunks_bound_each_subset_batch(monkeypatch):
     """Each fit_subsets call gets at most MAX_BATCH_VALUES (subsets x points x values per
     point), and the scores do not depend on the split (beyond rounding)."""

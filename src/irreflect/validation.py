@@ -259,6 +259,9 @@ POINT_BUDGET = {
     "diagnose": 10_000,
     "select": 50_000,
     "protocol": 2_000,
+    # a pilot scan is fitted once (0.43 GB at 112,000 points, as 'fit'): the 2,000 of
+    # 'protocol --design-from', which searches subsets, refused a 2,976-point pilot
+    "protocol-lobe-from": 200_000,
     "reproduce": 10_000,
 }
 #: ``select``: largest subset size searched on a table of more than
@@ -305,8 +308,9 @@ def check_points_budget(n_points: int, command: str, source: str = "") -> None:
     if limit is not None and n_points > limit:
         where = f"{source}: " if source else ""
         env = "IRREFLECT_BUDGET_POINTS_" + command.upper().replace("-", "_")
+        shown = {"protocol-lobe-from": "protocol --lobe-from"}.get(command, command)
         raise DataError(
-            f"{where}{n_points} measured points is more than '{command}' handles within its "
+            f"{where}{n_points} measured points is more than '{shown}' handles within its "
             f"memory budget ({limit} points): {_SUBSAMPLE}{_OTHERWISE.get(command, '')} "
             f"(or raise the budget: {env}=N)"
         )

@@ -61,7 +61,7 @@ def _protocol(args, fmt: str) -> int:
         if args.n is not None or args.gamma_settings is not None:
             raise IrreflectError("--n and --gamma-settings apply to --design-from, not to "
                                  "--lobe-from (which always gives 12 points)")
-        pilot = load_data(args, "protocol", args.lobe_from)
+        pilot = load_data(args, "protocol-lobe-from", args.lobe_from)
         protocol = glossy_protocol_for(pilot, theta_min=args.theta_min,
                                        theta_max=args.theta_max, seed=args.seed,
                                        wide_offset=args.wide_offset,
