@@ -486,6 +486,38 @@ def test_a_pilot_whose_third_angle_lies_beyond_70_deg_is_told_to_raise_theta_max
                                                     "angles of incidence")
 
 
+def test_a_design_that_falls_short_on_its_own_pilot_says_so_with_the_cause(tmp_path, capsys):
+    """A held-out pilot with |gamma| 72 deg beyond the tool's 70 got a design scoring R^2
+    0.52 on the pilot's points (its own fit: 0.95) with only a note. The design is now judged
+    on its pilot as evaluate-protocol judges it: a warning, the cause (extrapolation to the
+    angle left out), the option that uses that angle, and the campaign as the remedy."""
+    def arm(_gamma):
+        return np.arange(-30.0, 85.1, 2.5)
+
+    m = table([0.05, -1.0, 1.0, 0.3, 60.0, 0.0, 1.0], (15, 30, 45, 60, 75), arm, boost=1.0,
+              name="pilot")
+    pilot = write_table(m, tmp_path / "pilot.csv")
+    out = tmp_path / "g.csv"
+    assert main(["protocol", "--lobe-from", str(pilot), "--out", str(out)]) == 0
+    err = capsys.readouterr().err
+    warned = [x for x in err.splitlines() if x.startswith("irreflect: warning: on its own pilot")]
+    assert len(warned) == 1 and re.search(r"verdict: (MARGINAL|PROTOCOL FAILS)", warned[0])
+    drop = float(re.search(r"has R\^2 [\d.]+ on all points, ([\d.]+) below", warned[0])[1])
+    assert drop > 0.01
+    assert "cause: extrapolation beyond the measured angles of incidence" in err
+    assert "the table is scored at |gamma| = 60, 75 deg too" in err
+    assert ("the pilot's |gamma| 75 deg lies beyond the receiver range (|gamma| <= 70 deg" in err
+            and "pass --theta-max 85" in err)
+    no_maker(err)
+    # the option it names: the design uses 75 deg, and passes on its pilot
+    assert main(["protocol", "--lobe-from", str(pilot), "--theta-max", "85",
+                 "--out", str(tmp_path / "g85.csv")]) == 0
+    err = capsys.readouterr().err
+    assert "on its own pilot" not in err and "-75" in err.split("gammas ")[1].split(" deg")[0]
+    proto = glossy_protocol_for(m, theta_max=85.0)
+    assert proto.settings["pilot_status"] == "pass" and proto.settings["pilot_r2"] > 0.99
+
+
 @pytest.mark.real
 def test_ptfe_mirror_at_normal_incidence_is_named_as_the_source_direction(real_dir):
     """NIST's PTFE pilot has no receiver from -5.7 to 5.7 deg at gamma 0, where the mirror

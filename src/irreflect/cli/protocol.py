@@ -104,9 +104,10 @@ def _protocol(args, fmt: str) -> int:
             mirror_offset=args.mirror_offset, wide_offset=args.wide_offset,
             central_offset=args.central_offset, min_separation=args.min_separation,
         )
-    warning = protocol.settings.get("placement_warning")
+    warning = {protocol.settings.get("placement_warning"),
+               protocol.settings.get("pilot_warning")} - {None}
     for note in protocol.notes:
-        kind = "warning" if note == warning else "note"
+        kind = "warning" if note in warning else "note"
         print(f"irreflect: {kind}: {note}", file=sys.stderr)
     if args.out:
         write_protocol(protocol, args.out, fmt)
