@@ -410,3 +410,21 @@ def test_a_weighted_fit_that_cannot_beat_a_constant_names_the_sigma_column():
     floor = dataclasses.replace(table, sigma=0.02 * np.abs(table.power) + 0.01 * top)
     assert fit(floor, seed=0).r2 > 0.9
     assert fit(table, seed=0).r2 > 0.9
+
+
+@pytest.mark.parametrize("scale", [1e-15, 1e-12, 1e9])
+def test_a_fit_says_the_same_in_any_unit_of_power(scale):
+    """Readings in picoamperes (Krylon times 1e-12) had K = 2.4e-13 called "at a bound of
+    the physical range (lower bound 0)": an absolute tolerance of 1e-12 at K's bound. The
+    scale's bound is now 0 itself; the coefficients and every flag are those of the table
+    in its own units."""
+    from irreflect.data import load_bundled
+
+    m = dataclasses.replace(load_bundled("terrazzo"), sigma=None)
+    ref = fit(m)
+    r = fit(dataclasses.replace(m, power=m.power * scale))
+    assert r.values[:-1] == pytest.approx(ref.values[:-1], rel=1e-6)
+    assert r.values[-1] == pytest.approx(ref.values[-1] * scale, rel=1e-6)
+    assert r.r2 == pytest.approx(ref.r2, abs=1e-9)
+    assert (r.at_bound, r.ill_determined, r.warnings) == (ref.at_bound, ref.ill_determined,
+                                                          ref.warnings)

@@ -223,11 +223,15 @@ def _fmt_bound(b):
 
 
 def _bound_checks(model) -> tuple:
-    """Per parameter of ``model``: (name, ((side, bound, tolerance) per finite bound))."""
+    """Per parameter of ``model``: (name, ((side, bound, tolerance) per finite bound)).
+    A scale in power units (bounds 0 and infinity: K) is at its bound only at 0 itself: an
+    absolute tolerance has no meaning in the table's units (Krylon's readings times 1e-12,
+    picoampere photocurrents, had K = 2.4e-13 called at its lower bound)."""
     def make():
         out = []
         for p in model.params:
-            checks = tuple((side, b, 1e-6 * abs(b) if b != 0 else 1e-12)
+            scale = not (math.isfinite(p.lower) and math.isfinite(p.upper))
+            checks = tuple((side, b, 1e-6 * abs(b) if b != 0 else (0.0 if scale else 1e-12))
                            for side, b in (("lower", p.lower), ("upper", p.upper))
                            if math.isfinite(b))
             out.append((p.name, checks))
