@@ -1625,3 +1625,22 @@ def test_a_replay_on_a_table_with_sigma_gives_every_strategys_readings_its_sigma
     power = np.array([0.05, 1.0])
     np.testing.assert_allclose(loud.reading_sigma([-10.0, -10.0], [-70.0, -60.0], power),
                                np.sqrt(0.006 ** 2 + (0.05 * power) ** 2))
+
+
+def test_next_takes_jittered_readings_at_the_instrument_s_angles(tmp_path):
+    """Readings at -69.96 and -40.12 for the instrument's -70 and -40 were fitted as angles
+    it does not list, and the proposals and the verdict's range left them out. Within
+    0.25 deg they are taken at the listed angle, with a note; farther off they stay."""
+    tool = Instrument(gammas_deg=(-10, -40, -70), theta_step=1.0)
+    rows = pd.DataFrame({"gamma_deg": [-10.02, -40.12, -69.96, -69.5],
+                         "theta_deg": [10.0, 40.0, 70.0, 60.0], "power": [1.0, 2.0, 3.0, 1.0]})
+    meas = Measurements(gamma_deg=rows.gamma_deg, theta_deg=rows.theta_deg, power=rows.power)
+    snapped, note = tool.snap_gammas(meas)
+    assert snapped.gamma_deg.tolist() == [-10.0, -40.0, -70.0, -69.5]
+    assert note.startswith("3 reading(s) within 0.25 deg of an angle of incidence")
+    assert "-40.12 -> -40" in note and "-69.96 -> -70" in note
+    assert tool.snap_gammas(snapped)[1] is None
+    rows.iloc[:3].to_csv(tmp_path / "r.csv", index=False)
+    code, out, err = _run(["next", tmp_path / "r.csv", "--gammas", "-10", "-40", "-70"])
+    assert code == 0 and "3 reading(s) within 0.25 deg" in err
+    assert "which --gammas does not list" not in err

@@ -227,3 +227,30 @@ def test_any_valid_table_round_trips_exactly(tmp_path_factory, rows, suffix):
     back = read_measurements(path)
     for column in ("gamma_deg", "theta_deg", "power"):
         np.testing.assert_array_equal(getattr(back, column), getattr(meas, column))
+
+
+def test_jittered_angles_of_incidence_are_read_as_their_settings(tmp_path):
+    """A goniometer reporting its encoder (each gamma setting +-0.04 deg) gave 108 angles of
+    incidence in 108 rows: the verdict listed each, the campaign searched 204,156 triples of
+    them (82 s). Runs of close values are read at their mean, with a note; a fine sweep of
+    gamma, and settings 0.3 deg apart, are left as measured."""
+    rng = np.random.default_rng(3)
+    settings_ = np.repeat([-10.0, -40.0, -70.0], 20)
+    theta = np.tile(np.linspace(-60.0, 60.0, 20), 3)
+    frame = pd.DataFrame({"gamma_deg": settings_ + rng.uniform(-0.04, 0.04, 60),
+                          "theta_deg": theta, "power": 1.0 + 0.5 * np.cos(np.radians(theta))})
+    frame.to_csv(tmp_path / "j.csv", index=False)
+    with pytest.warns(DataNotice, match=r"gamma_deg holds 60 distinct values in 3 groups, "
+                                        r"each within 0\.0[0-9]+ deg: .*\(-10, -40, -70 deg\)"):
+        m = read_measurements(tmp_path / "j.csv")
+    assert sorted(set(m.gamma_deg)) == [-70.0, -40.0, -10.0]
+    assert m.theta_deg.tolist() == theta.tolist()
+    # a sweep of gamma in 0.05-deg steps, and two settings 0.3 deg apart: as measured
+    for gammas in (np.repeat(np.arange(-12.0, -9.99, 0.05), 2), np.repeat([-10.0, -10.3], 20)):
+        t = np.resize([-30.0, 30.0], gammas.size) + np.arange(gammas.size) * 1e-3
+        f = pd.DataFrame({"gamma_deg": gammas, "theta_deg": t, "power": np.ones(gammas.size)})
+        f.to_csv(tmp_path / "s.csv", index=False)
+        with warnings.catch_warnings():
+            warnings.simplefilter("error", DataNotice)
+            assert read_measurements(tmp_path / "s.csv").gamma_deg.tolist() == \
+                f["gamma_deg"].tolist()

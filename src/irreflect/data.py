@@ -51,6 +51,11 @@ NEGATIVE_NOISE_MAX = 0.05
 #: The largest |power| of a table must lie in this range (squares and sums of squares of
 #: the fit stay finite and above underflow); any unit can be rescaled into it.
 POWER_RANGE = (1e-100, 1e100)
+#: Angles of incidence closer than this (deg) to the next one are one setting read with
+#: jitter (a goniometer reporting its encoder: -9.98, -10.01, -10.02 for -10), when the
+#: run of them spans at most :data:`GAMMA_JITTER_SPAN`; they are read at the run's mean.
+GAMMA_JITTER_GAP = 0.1
+GAMMA_JITTER_SPAN = 0.25
 
 
 class DataNotice(UserWarning):
@@ -283,6 +288,32 @@ def _numeric(df: pd.DataFrame, col: str, source: str, rows: _Rows) -> np.ndarray
             f"first in {rows(i)}: measure it again or remove the row"
         )
     return arr
+
+
+def _group_jittered_gammas(gamma, source) -> tuple[np.ndarray, str | None]:
+    """Angles of incidence read with jitter, as one setting each: runs of distinct values
+    less than :data:`GAMMA_JITTER_GAP` apart, each spanning at most
+    :data:`GAMMA_JITTER_SPAN`, are read at the run's mean (to 0.01 deg), with a note. A
+    table of 108 rows whose gammas were 7 settings plus +-0.02 deg of noise was read as
+    108 angles of incidence: the fit's verdict listed each, the campaign searched 204,156
+    triples of them for 82 s, and diagnose found no run of receivers to judge the noise on.
+    Runs spanning more (a fine sweep of gamma) are left as measured."""
+    values = np.unique(gamma)
+    if values.size < 2:
+        return gamma, None
+    breaks = np.flatnonzero(np.diff(values) >= GAMMA_JITTER_GAP) + 1
+    runs = np.split(values, breaks)
+    if len(runs) == values.size or any(r[-1] - r[0] > GAMMA_JITTER_SPAN for r in runs):
+        return gamma, None
+    run_of = np.searchsorted(values[breaks], gamma, side="right")
+    means = np.array([np.round(np.mean(gamma[run_of == k]), 2) for k in range(len(runs))])
+    widest = max(r[-1] - r[0] for r in runs)
+    note = (f"{source}: gamma_deg holds {values.size} distinct values in {len(runs)} groups, "
+            f"each within {widest:.3g} deg: read as {len(runs)} angles of incidence with "
+            "jitter, each at its group's mean ("
+            + ", ".join(f"{m:g}" for m in means[np.argsort(np.abs(means), kind='stable')])
+            + " deg); round gamma_deg in the file to the settings to read them otherwise")
+    return means[run_of], note
 
 
 def _merge_duplicates(gamma, theta, power, sigma, source, rows, average):
@@ -542,6 +573,9 @@ def validate_table(df: pd.DataFrame, source: str = "table", *,
     if positive or not partial:
         gamma, theta, frame_notes = _frame(gamma, theta, power, positive, partial, source)
         notes += frame_notes
+    gamma, jitter_note = _group_jittered_gammas(gamma, source)
+    if jitter_note:
+        notes.append(jitter_note)
     material = _one_material(df, source)
     gamma, theta, power, sigma, merged = _merge_duplicates(gamma, theta, power, sigma, source,
                                                            rows, average_duplicates)

@@ -201,6 +201,32 @@ class Instrument:
         """The angles of incidence, by increasing magnitude."""
         return np.asarray(self.gammas_deg, float)
 
+    def snap_gammas(self, readings):
+        """``readings`` (:class:`~irreflect.data.Measurements`) with each angle of incidence
+        within :data:`irreflect.data.GAMMA_JITTER_SPAN` of one the instrument lists read at
+        that one, and a note naming them (None when none moved): a goniometer reporting its
+        encoder (-69.96 for -70) had its readings fitted as at angles the instrument does
+        not list, and the verdict's range left them out."""
+        from dataclasses import replace
+
+        from ..data import GAMMA_JITTER_SPAN
+
+        if readings is None or not readings.n_points or not len(self.gammas):
+            return readings, None
+        g = readings.gamma_deg
+        nearest = self.gammas[np.argmin(np.abs(g[:, None] - self.gammas[None, :]), axis=1)]
+        move = (np.abs(g - nearest) <= GAMMA_JITTER_SPAN) & (g != nearest)
+        if not move.any():
+            return readings, None
+        pairs = sorted({(float(a), float(b)) for a, b in zip(g[move], nearest[move],
+                                                            strict=True)}, key=lambda p: abs(p[1]))
+        note = (f"{int(move.sum())} reading(s) within {GAMMA_JITTER_SPAN:g} deg of an angle of "
+                "incidence of the instrument are taken at it (gamma "
+                + ", ".join(f"{a:.4g} -> {b:g}" for a, b in pairs[:8])
+                + (", ..." if len(pairs) > 8 else "") + " deg): jitter of the goniometer's "
+                "reading; list the angles in --gammas to keep them apart")
+        return replace(readings, gamma_deg=np.where(move, nearest, g)), note
+
     def settings(self) -> np.ndarray:
         """Every (gamma, theta) reading the instrument can take, ``(n, 2)`` degrees, sorted
         by |gamma| then theta."""

@@ -86,6 +86,9 @@ def _next(args) -> int:
     tool = _instrument(args)
     readings = read_readings(args.measured, average_duplicates=args.average_duplicates,
                              max_rows=NEXT_MAX_READINGS)
+    readings, snapped = tool.snap_gammas(readings)
+    if snapped:
+        print(f"irreflect: note: {snapped}", file=sys.stderr)
     name = Path(args.measured).stem
     campaign = Campaign(tool, readings, model=model.name, seed=args.seed, name=name)
     proposals = campaign.propose(args.n)
