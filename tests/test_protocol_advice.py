@@ -547,3 +547,25 @@ def test_an_extrapolation_cause_counts_negative_power_beyond_rounding_only():
     assert "negative power" not in quiet.text
     loud = _extrapolation(sp, np.array([1.0, 0.5, -0.03, 0.1]), "the protocol")
     assert "negative power at 1 point(s) (down to -0.03)" in loud.text
+
+
+@pytest.mark.real
+def test_a_verdict_that_rests_on_where_unmeasured_points_are_read_says_so(real_dir):
+    """Cornell Krylon (a coarse grid) does not measure 9 of the paper's 12 points. Snapped
+    to the nearest measured points they gave R^2 -171 and 'PROTOCOL FAILS' in select and the
+    report's findings; interpolated along theta, as evaluate-protocol and the campaign read
+    them, 0.977, a pass, in the campaign and the report's protocol table. The verdict now
+    says it rests on where those points are read, with both numbers."""
+    from irreflect.protocol.points import assess_subset
+
+    meas = read_measurements(real_dir / "cornell" / "cornell_krylon_blue.csv")
+    v = assess_subset(meas)
+    assert v.failed and v.causes[0].kind == "placement-sensitive"
+    text = v.causes[0].text
+    snapped, interpolated = (float(x) for x in re.findall(r"R\^2 (-?[\d.]+)", text)[:2])
+    assert snapped == pytest.approx(v.judgement.r2, rel=1e-3) and snapped < 0
+    assert interpolated > v.judgement.reference_r2 - 0.01  # a pass
+    assert "9 of the paper's 12-point protocol's 12 points" in text and "which passes" in text
+    # a table that measures every point of the protocol has nothing to say about it
+    terrazzo = load_bundled("terrazzo")
+    assert all(c.kind != "placement-sensitive" for c in assess_subset(terrazzo).causes)

@@ -8,16 +8,19 @@ and the report.
 from __future__ import annotations
 
 import warnings
+from dataclasses import replace
 
 import numpy as np
 import pandas as pd
 
+from .. import metrics
 from ..data import Measurements
-from ..errors import FitWarning, IrreflectError
+from ..errors import FitError, FitWarning, IrreflectError
 from ..fitting import fit
 from ..paper import TABLE1
-from .advice import ProtocolVerdict, assess
-from .evaluate import paper_protocol_for
+from .advice import Cause, ProtocolVerdict, assess, judge
+from .evaluate import paper_protocol_for, sample_protocol
+from .export import as_protocol
 
 
 def paper_protocol_points(meas: Measurements | None = None) -> pd.DataFrame:
@@ -162,4 +165,50 @@ def assess_subset(meas: Measurements, points=None, reference=None, *, subset_fit
         "source": np.where(snapped["distance_deg"] > 1e-9, "snapped", "measured"),
         "gap_deg": snapped["distance_deg"].to_numpy(float),
     })
-    return assess(meas, subset_fit, reference, frame, what=what)
+    verdict = assess(meas, subset_fit, reference, frame, what=what)
+    unstable = _placement_sensitivity(meas, points, snapped, verdict, reference, model, seed,
+                                      what)
+    if unstable is None:
+        return verdict
+    return replace(verdict, causes=(unstable,) + verdict.causes)
+
+
+def _placement_sensitivity(meas, points, snapped, verdict, reference, model, seed,
+                           what) -> Cause | None:
+    """When some of the protocol's points are not measured in the table (snapped to
+    measured points up to :data:`SNAP_LIMIT_DEG` away), the same protocol read as
+    evaluate-protocol and the campaign's replay read it (interpolated along theta to its
+    own angles): a verdict of another status is told as the first cause. On Cornell Krylon
+    (a coarse grid) 9 of the paper's 12 points snapped 0.21-3.7 deg gave R^2 -171 against
+    all points and 'PROTOCOL FAILS', the same points interpolated 0.977, a pass, and select,
+    the campaign and the report each quoted one of the two."""
+    moved = snapped["distance_deg"].to_numpy(float) > 1e-9
+    if not moved.any():
+        return None
+    try:
+        protocol = paper_protocol_for(meas) if points is None else as_protocol(
+            pd.DataFrame(as_points(points), columns=["gamma_deg", "theta_deg"]))
+        sampled, _ = sample_protocol(protocol, meas, tolerance_deg=SNAP_LIMIT_DEG,
+                                     method="interpolate")
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", FitWarning)
+            other = fit(sampled, model, seed=seed)
+    except (IrreflectError, FitError):
+        return None
+    r2 = float(metrics.r2(meas.power, other.predict(meas.gamma_deg, meas.theta_deg)))
+    j = verdict.judgement
+    status = judge(r2, j.reference_r2, n_points=verdict.n_points, n_params=verdict.n_params,
+                   noise_fraction=verdict.extra.get("noise_fraction", 0.0)).status
+    if status == j.status or (status != "fails" and j.status != "fails"):
+        return None
+    gaps = snapped["distance_deg"].to_numpy(float)[moved]
+    return Cause(
+        "placement-sensitive",
+        f"the verdict rests on where {int(moved.sum())} of {what}'s {len(snapped)} points "
+        f"are read: {meas.name} does not measure them, and taken at the nearest measured "
+        f"points ({gaps.min():.2g}-{gaps.max():.2g} deg away) they give R^2 {j.r2:.4g} "
+        f"against all points, interpolated along theta to their own angles (as "
+        f"evaluate-protocol and the campaign's replay read them) R^2 {r2:.4g}, which "
+        f"{status if status != 'pass' else 'passes'}: the {len(snapped)}-point fit is "
+        "unstable on this material; a table measured at the protocol's angles settles it",
+        remedy="")

@@ -127,7 +127,9 @@ def _table2_row(res, name, meas, full, twelve, mask, snaps, t2_paper) -> None:
                          f"angles, up to {far:.2g} deg away" if snaps
                          else "every point measured") +
             f") the model predicts all points with R^2 = {round(r2_12, 4):.4g}, "
-            f"against {round(r2_all, 4):.4g} for the fit on all points"),
+            f"against {round(r2_all, 4):.4g} for the fit on all points"
+            + "".join(f"; but {c.text}" for c in res.verdicts[name].causes
+                      if c.kind == "placement-sensitive")),
             key="paper-protocol"))
 
 
