@@ -611,3 +611,22 @@ def test_a_subset_no_fit_describes_leaves_the_all_points_fit(monkeypatch):
         kept = front.global_reference(meas, local, {12: (0.05, mask)}, "two-lobe", 0)
     assert kept.cost <= local.cost
     assert (kept is local) == (not any("least-squares optimum" in str(w.message) for w in said))
+
+
+def test_the_progress_line_says_when_no_12_point_subset_is_scored_yet():
+    """A short search (protocol --design-from with 2 generations) showed 'best
+    1-R2@12=nan', read as a failed fit."""
+    from types import SimpleNamespace
+
+    from irreflect.selection.run import _Progress
+
+    shown = []
+    bar = SimpleNamespace(total=0, n=0, refresh=lambda: None,
+                          set_postfix_str=lambda text, refresh: shown.append(text))
+    for score in (float("nan"), 0.0123):
+        ev = SimpleNamespace(evaluations=10, best_score_at=lambda n, s=score: s)
+        p = _Progress(False, ev, "t", "gen")
+        p.bar = bar
+        p(1, 2)
+    assert shown[0].startswith("best 1-R2@12=none yet ") and "nan" not in shown[0]
+    assert shown[1].startswith("best 1-R2@12=0.0123 ")

@@ -234,7 +234,10 @@ class _Progress:
         self.bar.n = done
         rate = self.ev.evaluations / max(time.perf_counter() - self.t0, 1e-9)
         best = self.ev.best_score_at(PAPER_N)
-        self.bar.set_postfix_str(f"best 1-R2@{PAPER_N}={best:.4g} fits/s={rate:.0f}",
+        # no 12-point subset scored yet (a short search, or one over other sizes) is said
+        # so; "nan" read as a failed fit
+        shown = f"{best:.4g}" if np.isfinite(best) else "none yet"
+        self.bar.set_postfix_str(f"best 1-R2@{PAPER_N}={shown} fits/s={rate:.0f}",
                                  refresh=False)
         self.bar.refresh()
 
