@@ -254,3 +254,21 @@ def test_jittered_angles_of_incidence_are_read_as_their_settings(tmp_path):
             warnings.simplefilter("error", DataNotice)
             assert read_measurements(tmp_path / "s.csv").gamma_deg.tolist() == \
                 f["gamma_deg"].tolist()
+
+
+def test_a_table_in_radians_is_told_it_may_be(tmp_path):
+    """Angles in radians were read as degrees (a scan of +-1.4 deg) and fitted without a
+    word; a table that sweeps its receiver over degrees is not told so."""
+    theta = np.linspace(-1.38, 1.38, 12)
+    for gammas, told in (([-0.17, -0.52, -0.87], True), ([-10.0, -40.0, -70.0], False)):
+        scale = 1.0 if told else 180 / np.pi
+        f = pd.DataFrame({"gamma_deg": np.repeat(gammas, 12), "theta_deg": np.tile(theta * scale, 3),
+                          "power": np.tile(np.cos(theta), 3)})
+        f.to_csv(tmp_path / "r.csv", index=False)
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            read_measurements(tmp_path / "r.csv")
+        said = [str(w.message) for w in caught if "may give radians" in str(w.message)]
+        assert bool(said) == told
+        if told:
+            assert "every angle lies within +-1.571 (pi/2)" in said[0]

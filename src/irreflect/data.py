@@ -290,6 +290,15 @@ def _numeric(df: pd.DataFrame, col: str, source: str, rows: _Rows) -> np.ndarray
     return arr
 
 
+def _looks_like_radians(gamma, theta) -> bool:
+    """Angles that all lie within +-pi/2 while the receiver sweeps more than 0.5 of them
+    over five or more distinct values: a table in radians (read as degrees, a scan of
+    +-1.5 deg fitted without a word)."""
+    limit = np.pi / 2 + 1e-9
+    return bool(np.all(np.abs(gamma) <= limit) and np.all(np.abs(theta) <= limit)
+                and np.ptp(theta) > 0.5 and np.unique(theta).size >= 5)
+
+
 def _group_jittered_gammas(gamma, source) -> tuple[np.ndarray, str | None]:
     """Angles of incidence read with jitter, as one setting each: runs of distinct values
     less than :data:`GAMMA_JITTER_GAP` apart, each spanning at most
@@ -576,6 +585,11 @@ def validate_table(df: pd.DataFrame, source: str = "table", *,
     gamma, jitter_note = _group_jittered_gammas(gamma, source)
     if jitter_note:
         notes.append(jitter_note)
+    if not partial and _looks_like_radians(gamma, theta):
+        notes.append(f"{source}: every angle lies within +-{np.pi / 2:.4g} (pi/2) and the "
+                     f"receiver angles span only {np.ptp(theta):.3g}: the file may give "
+                     "radians, and irreflect reads degrees (multiply gamma_deg and theta_deg "
+                     "by 180/pi if so)")
     material = _one_material(df, source)
     gamma, theta, power, sigma, merged = _merge_duplicates(gamma, theta, power, sigma, source,
                                                            rows, average_duplicates)
