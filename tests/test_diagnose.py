@@ -568,3 +568,18 @@ def test_diagnose_asks_for_the_noise_of_a_campaigns_scattered_readings(tmp_path,
     # a dense table's own noise estimate is not refused (every real one has 44+ dof)
     dense = hidden_case("retroreflection", 100, sigma_column=False).measurements
     assert estimate_noise(dense, residuals=fit(dense, "two-lobe", seed=0).residuals).dof > 20
+
+
+def test_a_long_diagnosis_shows_progress_in_a_log(capsys):
+    """Off a terminal the diagnosis printed nothing for 157 s on a 2,976-point table; it
+    now prints a line at most every 10 s, and nothing for a short run."""
+    from irreflect.cli.diagnose import _progress
+
+    bar = _progress()
+    ticks = iter([1.0, 12.0, 13.0, 25.0])
+    bar.clock, bar.t0, bar.last = (lambda: next(ticks)), 0.0, 0.0
+    for step in ("trying a", "trying b", "trying c", "trying d"):
+        bar(step)
+    bar.close()
+    lines = capsys.readouterr().err.splitlines()
+    assert lines == ["diagnose: 2 fits, trying b (12 s)", "diagnose: 4 fits, trying d (25 s)"]
