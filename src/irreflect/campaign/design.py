@@ -130,7 +130,8 @@ class DesignRule:
         expected). Tried at stop 44 on the real sets, to let a misfit far from the lobes (a
         retroreflective peak where the fit predicts a diffuse level) draw readings: 0.01,
         0.02, 0.03 and 0.1 gave 10, 10, 10 and 8 of 11 within 0.01 by N <= 15 (the default
-        10); each moved the miss (golden yellow 16, Ibiza 19, Ibiza 19, three sets)
+        10); each moved the miss (golden yellow 16, Ibiza 19, Ibiza 19, three sets) and
+        lost two sets within 0.01 of the hindsight bound (docs/campaign.md, stop 44)
     """
 
     coefficient_prior: float = 1.0
