@@ -76,6 +76,9 @@ class FitResult:
     #: coefficients along a near-singular direction of the information matrix (among
     #: ``ill_determined``): a flag that does not depend on the residuals' scale
     singular: tuple[str, ...] = ()
+    #: a ``MODEL@G`` fit (one angle of incidence) scored on every point of its table:
+    #: ``{"n_points", "r2", "rmse"}`` (None: fitted on all points)
+    on_all_points: dict | None = field(default=None, compare=False)
 
     def __repr__(self) -> str:
         flags = "" if not self.warnings else f", {len(self.warnings)} warning(s)"
