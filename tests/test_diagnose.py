@@ -583,3 +583,28 @@ def test_a_long_diagnosis_shows_progress_in_a_log(capsys):
     bar.close()
     lines = capsys.readouterr().err.splitlines()
     assert lines == ["diagnose: 2 fits, trying b (12 s)", "diagnose: 4 fits, trying d (25 s)"]
+
+
+def test_a_diagnosis_weighted_by_the_noise_it_estimated_says_so_and_gives_the_unweighted_fit():
+    """On a table without sigma whose noise is proportional to the power the diagnosis
+    refits the base model weighted by that noise, so its R^2 is not the fit's: Cornell
+    Krylon blue's base two-lobe was "R^2 0.81014, RMSE 0.1359" where `irreflect fit` gives
+    0.9816 / 0.0423, unlabelled. The report and the JSON say so and give the unweighted
+    fit's numbers; a table with its own sigma column is fitted as `irreflect fit` fits it."""
+    case = blind_case(20, effects=(), base="matte", noise="proportional", sigma_column=False,
+                      saturate=False)
+    d = diagnose(case.measurements, max_effects=0)
+    plain = fit(case.measurements)
+    assert d.reweighted and d.noise.relative > 0
+    assert d.unweighted_base["r2"] == pytest.approx(plain.r2, abs=1e-6)
+    step0 = d.report().splitlines()[d.report().splitlines().index(
+        f"step 0: base model ({d.base_model})") + 2]
+    assert step0 == (f"  (fitted weighted by the estimated noise; unweighted R^2 {plain.r2:.5f}, "
+                     f"RMSE {plain.rmse:.4g})")
+    assert d.report().splitlines()[-1].endswith(", fitted weighted by the estimated noise)")
+    doc = d.to_dict()
+    assert doc["fits_weighted_by_estimated_noise"] is True
+    assert doc["unweighted_base"]["rmse"] == pytest.approx(plain.rmse, rel=1e-6)
+    given = diagnose(load_bundled("terrazzo"), max_effects=0)
+    assert not given.reweighted and "weighted by the estimated noise" not in given.report()
+    assert given.to_dict()["unweighted_base"] is None

@@ -23,7 +23,7 @@ from irreflect.cli import main
 from irreflect.data import Measurements, bundled_dir, load_bundled, read_measurements
 from irreflect.errors import IrreflectError
 from irreflect.fitting import fit
-from irreflect.models import two_lobe_power
+from irreflect.models import get_model, two_lobe_power
 from irreflect.protocol import advice, evaluate_protocol, paper_protocol, write_protocol
 from irreflect.protocol.core import floor_sig, glossy_protocol, protocol_from_frame
 from irreflect.protocol.evaluate import glossy_protocol_for, paper_protocol_for
@@ -569,3 +569,22 @@ def test_a_verdict_that_rests_on_where_unmeasured_points_are_read_says_so(real_d
     # a table that measures every point of the protocol has nothing to say about it
     terrazzo = load_bundled("terrazzo")
     assert all(c.kind != "placement-sensitive" for c in assess_subset(terrazzo).causes)
+
+
+def test_the_fit_and_the_protocol_advice_judge_coefficients_by_one_rule():
+    """An exponent near 0 is judged against 1, a share or index against |value|, by the
+    fit's flags and the protocol advice alike: the fit called v_as = 0.0004 +- 0.0009
+    ill-determined (std. error > |value|) where the advice did not."""
+    from irreflect.fitting.results import judge
+
+    values = np.array([0.02, 0.0004, 1.0, 0.3, 40.0, -2.0, 1.0])
+    stderr = np.array([0.03, 0.0009, 0.1, 2.0, 1.0, 1.5, 0.01])  # u_as and v_nd are loose
+    _, ill, notes = judge(get_model("two-lobe"), values, stderr, np.zeros(7, bool), np.radians([-30.0]),
+                          True, "", validity=False)
+    assert ill == ("u_as", "v_nd")
+    assert "v_nd = 0.3 +- 2 (std. error > 1, its scale near 0)" in notes[0]
+    reasons = advice.ill_determined("two-lobe", values, stderr, np.eye(7))
+    assert [r.split(":")[0] for r in reasons] == list(ill)
+    result = SimpleNamespace(model="two-lobe", model_object=None, values=values, stderr=stderr,
+                             param_names=("u_as", "v_as", "u_nd", "v_nd", "u_ns", "v_ns", "K"))
+    assert sorted(n for n, _ in advice._uncertain(result)) == sorted(ill)

@@ -227,3 +227,28 @@ def test_an_angle_with_one_point_shows_no_polar_area_and_says_why():
         warnings.simplefilter("ignore", FitWarning)
         full = fit(meas).report()
     assert "(-: a polar area" not in full
+
+
+def test_a_fit_at_one_angle_of_incidence_is_judged_there_and_on_all_points(capsys):
+    """``fit terrazzo --model phong@10`` said "verdict: trustworthy ... <= 6.2 %" (the 22
+    points at 10 deg) above its own "on all 132 points: R^2 = 0.224": the verdict says
+    where it judged, and a fit that explains the whole table below MISFIT_R2 (0.9) is not
+    trustworthy. A Phong material fitted at one angle is trustworthy there, and says so."""
+    assert main(["fit", "terrazzo", "--model", "phong@10"]) == 0
+    first = capsys.readouterr().out.splitlines()[1]
+    assert first.startswith("verdict: NOT TRUSTWORTHY (whatever R^2 says): fitted at |gamma| "
+                            "= 10 deg only, it explains all 132 points to R^2 0.224 (below "
+                            "0.9): it misses the other angles of incidence")
+    g = np.repeat([-10.0, -30, -50], 61)
+    t = np.tile(np.linspace(-80, 80, 61), 3)
+    from irreflect.models import get_model
+
+    clean = get_model("phong").predict_deg(np.array([0.3, 20.0, 1.0]), g, t)
+    noisy = clean * (1 + 0.01 * np.random.default_rng(0).standard_normal(clean.size))
+    res = fit(Measurements(g, t, noisy), "phong@30")
+    v = res.verdict()
+    assert v.trustworthy and v.fitted_at_deg == 30 and v.on_all_points["n_points"] == g.size
+    assert v.summary().startswith("verdict: trustworthy at |gamma| = 30 deg only (R^2 0.99")
+    assert v.to_dict()["fitted_at_gamma_deg"] == 30
+    assert fit(Measurements(g, t, noisy), "phong").verdict().summary().startswith(
+        "verdict: trustworthy: every coefficient")

@@ -18,7 +18,11 @@ verdict looks at each angle of incidence:
   :data:`POLAR_ERROR_LIMIT` percent, or the second exceeds the first by more than
   :data:`UNMEASURED_LIMIT` points (the curve has structure no receiver saw);
 * **the coefficients**: at a bound of their physical range, ill-determined, or a search
-  that did not converge (the fit's own checks).
+  that did not converge (the fit's own checks);
+* **a fit at one angle of incidence** (``MODEL@G``, the paper's Phong at 10 deg): it is
+  judged at that angle only and says so, and it is not trustworthy when it explains all
+  the table's points below :data:`irreflect.metrics.MISFIT_R2` (Phong at 10 deg on
+  terrazzo: 6.2 % at 10 deg, R^2 0.224 on all 132 points).
 
 A fit is *trustworthy* when none of these is flagged. The summary line leads every fit
 report and is written into material files (``irreflect fit --save``).
@@ -94,6 +98,18 @@ class FitVerdict:
     ill_determined: tuple[str, ...]
     converged: bool
     saturated_gammas_deg: tuple[float, ...]
+    #: a ``MODEL@G`` fit: the |gamma| it was fitted to and judged at, and its score on all
+    #: the table's points (``{"n_points", "r2", "rmse"}``); None for a fit of all points
+    fitted_at_deg: float | None = None
+    on_all_points: dict | None = None
+
+    @property
+    def misses_other_angles(self) -> bool:
+        """A fit at one angle of incidence that explains the whole table below
+        :data:`irreflect.metrics.MISFIT_R2`."""
+        if not self.on_all_points:
+            return False
+        return not self.on_all_points["r2"] >= metrics.MISFIT_R2
 
     @property
     def unresolved(self) -> tuple[AngleVerdict, ...]:
@@ -106,11 +122,17 @@ class FitVerdict:
     @property
     def trustworthy(self) -> bool:
         return (self.converged and not self.at_bound and not self.ill_determined
-                and not self.unresolved and not self.misshapen)
+                and not self.unresolved and not self.misshapen
+                and not self.misses_other_angles)
 
     def problems(self) -> list[str]:
         """One phrase per kind of problem (empty when trustworthy)."""
         out = []
+        if self.misses_other_angles:
+            out.append(f"fitted at |gamma| = {self.fitted_at_deg:g} deg only, it explains all "
+                       f"{self.on_all_points['n_points']} points to R^2 "
+                       f"{self.on_all_points['r2']:.3g} (below {metrics.MISFIT_R2:g}): it "
+                       "misses the other angles of incidence")
         if self.unresolved:
             parts = [f"{a.gamma_deg:g} deg ({a.lobe_points_1hw} point(s) within its half width "
                      f"of {a.lobe_half_width_deg:.2g} deg)" for a in self.unresolved]
@@ -136,8 +158,10 @@ class FitVerdict:
             worst = max((a.polar_error_pct for a in self.angles
                          if np.isfinite(a.polar_error_pct)), default=float("nan"))
             lobes = [a for a in self.angles if a.lobe_matters]
-            text = ("verdict: trustworthy: every coefficient determined, polar-area error of "
-                    f"the whole curve <= {worst:.3g} % at every angle of incidence")
+            at = "every angle" if self.fitted_at_deg is None else "that angle"
+            text = ("verdict: trustworthy" + self._where() + ": every coefficient determined, "
+                    f"polar-area error of the whole curve <= {worst:.3g} % at {at} of "
+                    "incidence")
             if lobes:
                 text += (", the specular lobe resolved wherever it matters (>= "
                          f"{min(a.lobe_points_2hw for a in lobes)} points within two half "
@@ -147,6 +171,16 @@ class FitVerdict:
         if self.saturated_gammas_deg:
             text += ("; the specular share is 1 (all specular) at |gamma| = "
                      + ", ".join(f"{g:g}" for g in self.saturated_gammas_deg) + " deg")
+        return text
+
+    def _where(self) -> str:
+        """What a fit at one angle of incidence was judged on ("" for a fit of all points)."""
+        if self.fitted_at_deg is None:
+            return ""
+        text = f" at |gamma| = {self.fitted_at_deg:g} deg only"
+        if self.on_all_points:
+            text += (f" (R^2 {self.on_all_points['r2']:.3g} on all "
+                     f"{self.on_all_points['n_points']} points)")
         return text
 
     def table(self) -> list[str]:
@@ -168,10 +202,13 @@ class FitVerdict:
         return rows
 
     def to_dict(self) -> dict:
+        # a fit at one angle of incidence (which no material file holds) says so
+        at = ({} if self.fitted_at_deg is None else
+              {"fitted_at_gamma_deg": self.fitted_at_deg, "on_all_points": self.on_all_points})
         return {"trustworthy": self.trustworthy, "summary": self.summary(),
                 "problems": self.problems(), "at_bound": list(self.at_bound),
                 "ill_determined": list(self.ill_determined), "converged": self.converged,
-                "saturated_gammas_deg": list(self.saturated_gammas_deg),
+                "saturated_gammas_deg": list(self.saturated_gammas_deg), **at,
                 "angles": [a.to_dict() for a in self.angles]}
 
 
@@ -231,8 +268,11 @@ def fit_verdict(result) -> FitVerdict:
             lobe_points_1hw=int(np.sum(off <= hw)) if np.isfinite(hw) else 0,
             lobe_points_2hw=int(np.sum(off <= 2 * hw)) if np.isfinite(hw) else 0,
             lobe_matters=matters))
+    on_all = getattr(result, "on_all_points", None)
     return FitVerdict(angles=tuple(angles), at_bound=tuple(result.at_bound),
                       ill_determined=tuple(result.ill_determined),
                       converged=bool(result.converged),
                       saturated_gammas_deg=tuple(float(x) for x in
-                                                 result.saturated_gammas_deg))
+                                                 result.saturated_gammas_deg),
+                      fitted_at_deg=float(g_abs[0]) if on_all and g_abs.size == 1 else None,
+                      on_all_points=dict(on_all) if on_all else None)

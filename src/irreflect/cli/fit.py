@@ -74,13 +74,7 @@ def _cmd_fit(args) -> int:
         text = unresolved(widths, args.resolution)
         if text:
             print(f"irreflect: warning: {meas.name}: {text}", file=sys.stderr)
-    on_all = None
-    if result.n_points < meas.n_points:  # 'MODEL@G': fitted on one incidence, judged on all
-        from .. import metrics
-
-        pred = result.predict(meas.gamma_deg, meas.theta_deg)
-        on_all = {"n_points": meas.n_points, "r2": metrics.r2(meas.power, pred),
-                  "rmse": metrics.rmse(meas.power, pred)}
+    on_all = result.on_all_points  # 'MODEL@G': fitted on one incidence, scored on all
     if args.json:
         d = result.to_dict()
         print_json({k: d[k] for k in ("model", "params", "stderr", "r2", "rmse", "mse",

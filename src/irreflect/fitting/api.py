@@ -12,6 +12,7 @@ from warnings import warn
 
 import numpy as np
 
+from .. import metrics
 from ..data import as_measurements
 from ..errors import FitError, FitWarning, IrreflectError
 from ..models import (
@@ -53,6 +54,15 @@ def points_at_incidence(measurements, gamma_abs_deg: float, label: str = "the fi
             "choose one of them after '@'"
         )
     return meas.subset(sel)
+
+
+def _on_all_points(result, meas) -> dict:
+    """A fit at one angle of incidence scored on every point of its table (unweighted)."""
+    model = result.model_object or get_model(result.model)
+    with np.errstate(all="ignore"):
+        pred = model.predict_deg(result.values, meas.gamma_deg, meas.theta_deg)
+    return {"n_points": int(meas.n_points), "r2": float(metrics.r2(meas.power, pred)),
+            "rmse": float(metrics.rmse(meas.power, pred))}
 
 
 def fit(measurements, model="two-lobe", options: FitOptions | None = None,
@@ -109,7 +119,8 @@ def fit(measurements, model="two-lobe", options: FitOptions | None = None,
     spec = parse_spec(model) if isinstance(model, str) and "@" in model else None
     opts = _checked(opts, spec.model_text if spec is not None else model)
     if spec is not None and spec.at_gamma_deg is not None:  # 'phong@10': one incidence
-        sub = points_at_incidence(as_measurements(measurements), spec.at_gamma_deg, str(spec))
+        meas = as_measurements(measurements)
+        sub = points_at_incidence(meas, spec.at_gamma_deg, str(spec))
         with warnings.catch_warnings(record=True) as caught:  # said under the label asked for
             warnings.simplefilter("always")
             inner = fit(sub, spec.model_text, opts)
@@ -118,7 +129,8 @@ def fit(measurements, model="two-lobe", options: FitOptions | None = None,
             if isinstance(message, FitWarning):
                 message = FitWarning(str(message).replace(f", {inner.model}: ", f", {spec}: ", 1))
             warn(message, stacklevel=2)
-        return dataclasses.replace(inner, model=str(spec))
+        return dataclasses.replace(inner, model=str(spec),
+                                   on_all_points=_on_all_points(inner, meas))
     t0 = time.perf_counter()
     meas = as_measurements(measurements)  # a path is read once, for both searches
     if np.any(meas.gamma_deg > 0):  # only a Measurements built by hand keeps them

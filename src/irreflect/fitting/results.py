@@ -76,6 +76,9 @@ class FitResult:
     #: coefficients along a near-singular direction of the information matrix (among
     #: ``ill_determined``): a flag that does not depend on the residuals' scale
     singular: tuple[str, ...] = ()
+    #: a ``MODEL@G`` fit (one angle of incidence) scored on every point of its table:
+    #: ``{"n_points", "r2", "rmse"}`` (None: fitted on all points)
+    on_all_points: dict | None = field(default=None, compare=False)
 
     def __repr__(self) -> str:
         flags = "" if not self.warnings else f", {len(self.warnings)} warning(s)"
@@ -244,6 +247,9 @@ def _bound_checks(model) -> tuple:
 #: determines it whatever its value: an exponent fitted as 0 +- 4e-17 on noise-free data
 #: (a share or an index constant in gamma) was called ill-determined by std. error > |value|.
 NEGLIGIBLE_STDERR = 1e-6
+#: A coefficient whose standard error (or Monte Carlo spread) exceeds this multiple of its
+#: scale (:func:`coefficient_scale`) is ill-determined.
+RELATIVE_ERROR_LIMIT = 1.0
 
 
 def _negligible(model) -> tuple:
@@ -252,6 +258,37 @@ def _negligible(model) -> tuple:
     return per_model(model, "negligible stderr", lambda: tuple(
         NEGLIGIBLE_STDERR * (p.upper - p.lower) if math.isfinite(p.upper - p.lower) else 0.0
         for p in model.params))
+
+
+def coefficient_scale(model, values) -> np.ndarray:
+    """Scale against which a coefficient's uncertainty is judged: ``|value|``, but at least
+    the parameter's :attr:`~irreflect.models.base.Parameter.zero_scale` (1 for the exponents
+    ``v_*`` of ``cos^v(gamma)``, which are naturally 0: ``v_as = 0.0004 +- 0.0009`` is
+    determined, ``0.3 +- 2`` is not)."""
+    model = get_model(model)
+    floor = per_model(model, "zero scale", lambda: np.array([p.zero_scale for p in model.params]))
+    return np.maximum(np.abs(np.asarray(values, float)), floor)
+
+
+def uncertain_mask(model, values, spread, relative_limit=RELATIVE_ERROR_LIMIT) -> np.ndarray:
+    """Per coefficient, whether ``spread`` (standard errors or Monte Carlo spreads) leaves it
+    ill-determined: not finite, or above ``relative_limit`` times its
+    :func:`coefficient_scale` and above a millionth of its physical range. The one rule of
+    the fit's flags, its verdict, the campaign and the protocol advice."""
+    model = get_model(model)
+    s = np.asarray(spread, float)
+    with np.errstate(invalid="ignore"):
+        loose = (s > relative_limit * coefficient_scale(model, values)) & (s > _negligible(model))
+    return ~np.isfinite(s) | loose
+
+
+def _why_ill(p, value: float, singular: bool) -> str:
+    if singular:
+        return "near-singular covariance"
+    if abs(value) >= p.zero_scale:
+        return "std. error > |value|"
+    unit = "" if p.unit == "1" else f" {p.unit}"
+    return f"std. error > {p.zero_scale:g}{unit}, its scale near 0"
 
 
 def judge(model, values, stderr, singular, gamma_rad, converged, message,
@@ -266,13 +303,12 @@ def judge(model, values, stderr, singular, gamma_rad, converged, message,
                 at_bound.append(name)
                 detail.append(f"{name} = {v:.4g} ({side} bound {_fmt_bound(b)})")
     ill, ill_detail = [], []
-    for p, v, s, sing, tiny in zip(model.params, values_f, np.asarray(stderr, float).tolist(),
-                                   np.asarray(singular, bool).tolist(), _negligible(model),
-                                   strict=True):
-        if not math.isfinite(s) or (s > abs(v) and s > tiny) or sing:
+    loose = uncertain_mask(model, values, stderr).tolist()
+    for p, v, s, sing, bad in zip(model.params, values_f, np.asarray(stderr, float).tolist(),
+                                  np.asarray(singular, bool).tolist(), loose, strict=True):
+        if bad or sing:
             ill.append(p.name)
-            why = "near-singular covariance" if sing else "std. error > |value|"
-            ill_detail.append(f"{p.name} = {v:.4g} +- {s:.2g} ({why})")
+            ill_detail.append(f"{p.name} = {v:.4g} +- {s:.2g} ({_why_ill(p, v, sing)})")
     warnings = []
     if not converged:
         warnings.append(f"not converged: {message}; the coefficients may not be the optimum")

@@ -41,6 +41,22 @@ class Parameter:
     upper: float
     description: str
 
+    @property
+    def zero_scale(self) -> float:
+        """The scale an uncertainty is judged against when the value is near 0 (0: none).
+
+        A coefficient whose range spans 0 on both sides (the exponents ``v_*`` and ``w`` of
+        ``cos^v(gamma)``, the axes ``t_*`` and ``cx_*``: unit ``"1"``; the angles ``tilt``
+        and ``delta``: unit ``"deg"``) is naturally 0, so ``|value|`` is no scale for it:
+        it is judged against 1 (a change of 1 in ``v`` changes ``cos^v(gamma)`` by a factor
+        of 2 at 60 deg; 1 deg of angle is below a goniometer's step). A share or a
+        roughness that is 0 leaves the lobe it scales unseen, and ``b`` (power) has no
+        scale of its own: those are judged against ``|value|``.
+        """
+        if not (self.lower < 0.0 < self.upper):
+            return 0.0
+        return 1.0 if self.unit in ("1", "deg") else 0.0
+
 
 BasisFn = Callable[[np.ndarray, np.ndarray, np.ndarray, bool], tuple]
 

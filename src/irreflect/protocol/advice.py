@@ -56,6 +56,7 @@ import pandas as pd
 from scipy import stats
 
 from .. import metrics
+from ..fitting.results import RELATIVE_ERROR_LIMIT, coefficient_scale, uncertain_mask
 from ..models import get_model
 from .core import floor_sig
 
@@ -78,9 +79,6 @@ MIN_DOF = 3
 MAX_LOBE_HALF_WIDTH = 10.0
 #: Two fitted coefficients whose |correlation| exceeds this are called ill-determined.
 CORRELATION_LIMIT = 0.99
-#: A coefficient whose standard error (or Monte Carlo spread) exceeds this multiple of
-#: its magnitude is called ill-determined.
-RELATIVE_ERROR_LIMIT = 1.0
 #: Where the adaptive campaign is described.
 CAMPAIGN_DOC = "docs/campaign.md"
 
@@ -88,16 +86,6 @@ STATUSES = ("pass", "marginal", "fails")
 
 
 # ----------------------------------------------------------------------------- coefficients
-def coefficient_scale(model, values) -> np.ndarray:
-    """Scale against which a coefficient's uncertainty is judged: ``|value|``, but at
-    least 1 for dimensionless coefficients that may change sign (the exponents ``v_*``,
-    orientations ``t_*``), for which a value near 0 is not a small quantity."""
-    model = get_model(model)
-    values = np.abs(np.asarray(values, float))
-    floor = np.array([1.0 if (p.unit == "1" and p.lower < 0) else 0.0 for p in model.params])
-    return np.maximum(values, floor)
-
-
 def ill_determined(model, values, spread, correlation, *, relative_limit=RELATIVE_ERROR_LIMIT,
                    correlation_limit=CORRELATION_LIMIT) -> list[str]:
     """Reasons why coefficients are ill-determined (empty list if none).
@@ -110,9 +98,11 @@ def ill_determined(model, values, spread, correlation, *, relative_limit=RELATIV
     scale = coefficient_scale(model, values)
     with np.errstate(divide="ignore", invalid="ignore"):
         rel = np.asarray(spread, float) / scale
-    for name, r in zip(names, rel, strict=True):
-        if not np.isfinite(r) or r > relative_limit:
-            reasons.append(f"{name}: uncertainty {r * 100:.0f}% of its value" if np.isfinite(r)
+    loose = uncertain_mask(model, values, spread, relative_limit)
+    for name, r, bad, v, p in zip(names, rel, loose, values, model.params, strict=True):
+        if bad:
+            of = "its value" if abs(v) >= p.zero_scale else f"{p.zero_scale:g}, its scale near 0"
+            reasons.append(f"{name}: uncertainty {r * 100:.0f}% of {of}" if np.isfinite(r)
                            else f"{name}: uncertainty not finite")
     corr = np.asarray(correlation, float)
     k = len(names)
@@ -128,14 +118,17 @@ def _uncertain(result) -> list[tuple[str, float]]:
     """``(name, relative uncertainty)`` of the coefficients a fit leaves ill-determined
     (standard error above :data:`RELATIVE_ERROR_LIMIT` times the coefficient's scale),
     largest first."""
+    stderr = np.asarray(result.stderr, float)
     try:
-        scale = coefficient_scale(result.model, result.values)
+        model = result.model_object or get_model(result.model)
+        scale = coefficient_scale(model, result.values)
+        loose = uncertain_mask(model, result.values, stderr)
     except Exception:  # noqa: BLE001 - a model outside the registry: plain |value|
         scale = np.abs(np.asarray(result.values, float))
+        loose = ~(stderr <= RELATIVE_ERROR_LIMIT * scale)
     with np.errstate(divide="ignore", invalid="ignore"):
-        rel = np.asarray(result.stderr, float) / scale
-    out = [(n, float(r)) for n, r in zip(result.param_names, rel, strict=True)
-           if not np.isfinite(r) or r > RELATIVE_ERROR_LIMIT]
+        rel = stderr / scale
+    out = [(n, float(r)) for n, r, bad in zip(result.param_names, rel, loose, strict=True) if bad]
     return sorted(out, key=lambda x: -x[1] if np.isfinite(x[1]) else -np.inf)
 
 

@@ -323,10 +323,11 @@ def protocol_robustness(protocol, reference, *, model=None, dense=None, n_trials
             f"only {ok.shape[0]} of {n_trials} Monte Carlo fits succeeded: the protocol cannot "
             "determine this model"
         )
-    scale = coefficient_scale(model_obj, nominal if np.all(np.isfinite(nominal)) else truth)
+    centre = nominal if np.all(np.isfinite(nominal)) else truth
+    scale = coefficient_scale(model_obj, centre)
     corr = _rank_correlation(ok)
     spread = _robust_sd(ok)
-    reasons = ill_determined(model_obj, scale, spread, corr, relative_limit=relative_limit,
+    reasons = ill_determined(model_obj, centre, spread, corr, relative_limit=relative_limit,
                              correlation_limit=correlation_limit)
     reasons += _structural_reasons(model_obj, g0, t0, nominal_power[0], seed, reasons)
     reasons += _bound_reasons(model_obj, ok, reasons)
