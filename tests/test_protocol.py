@@ -529,6 +529,18 @@ def test_cli_protocol_options_that_apply_give_no_warning(capsys):
     assert "warning" not in capsys.readouterr().err
 
 
+@pytest.mark.parametrize("out, fmt", [("p.csv", "json"), ("p.json", "md"), ("p.md", "csv")])
+def test_cli_protocol_format_must_match_the_extension(out, fmt, tmp_path, capsys):
+    # `--out x.csv --format json` wrote JSON into x.csv; evaluate-protocol then failed to
+    # parse it as CSV
+    path = tmp_path / out
+    assert main(["protocol", "--gammas", "-20", "-40", "-60", "--out", str(path),
+                 "--format", fmt]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and f"--format is {fmt}" in err[0] and out[-4:] in err[0]
+    assert not path.exists()
+
+
 def test_cli_evaluate_protocol_warns_of_monte_carlo_options_without_it(capsys):
     assert main(["evaluate-protocol", "missing.csv", "missing2.csv", "--angle-error", "3",
                  "--power-noise", "0.2"]) == 2

@@ -90,8 +90,13 @@ def _cmd_protocol(args) -> int:
     if args.out and Path(args.out).is_dir():
         raise IrreflectError(f"--out {args.out}: is a folder; expected a file name ending in "
                              ".csv, .json or .md")
+    suffix = Path(args.out).suffix.lower() if args.out else ""
+    if fmt is not None and SUFFIXES.get(suffix, fmt) != fmt:
+        raise IrreflectError(
+            f"--out {args.out}: the extension '{suffix}' means {SUFFIXES[suffix]}, but "
+            f"--format is {fmt}: name the file {Path(args.out).with_suffix('.' + fmt)} or "
+            "drop --format (the extension then decides)")
     if args.out and fmt is None:
-        suffix = Path(args.out).suffix.lower()
         if suffix not in SUFFIXES:
             raise IrreflectError(
                 f"--out {args.out}: unknown extension '{suffix or 'none'}': name the file "
