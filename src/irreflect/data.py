@@ -890,8 +890,11 @@ def _bundled_hint(path: Path, kind: str) -> str:
     if stem in names:
         return (f"; the bundled '{stem}' is reachable by name: write '{stem}' instead of a "
                 "path ('irreflect datasets' lists what ships with irreflect)")
+    close = ([] if os.sep in str(path) or "/" in str(path) else
+             difflib.get_close_matches(stem.casefold(), names, n=1))
     return (f" (or the name of a bundled {'dataset' if kind == 'table' else 'scene'}: "
-            f"{', '.join(names)}; 'irreflect datasets' lists them)")
+            f"{', '.join(names)}; 'irreflect datasets' lists them)"
+            + (f". Did you mean '{close[0]}'?" if close else ""))
 
 
 def resolve_scene(scene) -> Path:
