@@ -892,3 +892,13 @@ def test_a_separating_table_inside_the_output_folder_is_in_its_manifest(data, tm
     assert list(pd.read_csv(out / "sep.csv").columns[:2]) == ["gamma_deg", "theta_deg"]
     code, _, _ = _run(argv + ["--separate-out", out / "again.csv"])
     assert code == 0 and (out / "again.csv").is_file() and not (out / "sep.csv").exists()
+
+
+def test_a_separating_table_that_is_the_output_folder_is_refused_up_front(data, tmp_path):
+    """diagnose --out D --separate-out D worked for 4 s, then exited 1 with "cannot read or
+    write .D.irreflect-tmp-...: Is a directory": the second claim of the same path reused
+    the first, a folder, unchecked."""
+    out = tmp_path / "d2"
+    line = _one_error(["diagnose", data, "--out", out, "--separate-out", out])
+    assert f"--separate-out {out}: is the --out folder of this run" in line
+    assert [p.name for p in tmp_path.iterdir() if "d2" in p.name] == []  # nor a lock left
