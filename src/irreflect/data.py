@@ -511,15 +511,10 @@ def validate_table(df: pd.DataFrame, source: str = "table", *,
             )
     if sigma is not None and np.any(sigma <= 0):
         i = int(np.nonzero(sigma <= 0)[0][0])
-        if sigma[i] < 0:
-            _fail(
-                f"{source}: sigma is a 1-sigma uncertainty and must be >= 0; found {sigma[i]:g} "
-                f"in {rows(i)}"
-            )
         _fail(
-            f"{source}: sigma must be > 0 (fits are weighted by 1/sigma^2); found 0 in "
-            f"{rows(i)}: give that row's uncertainty, or delete the sigma column to fit "
-            "unweighted"
+            f"{source}: sigma must be > 0 (a 1-sigma uncertainty; fits are weighted by "
+            f"1/sigma^2); found {sigma[i]:g} in {rows(i)}: give that row's uncertainty, or "
+            "delete the sigma column to fit unweighted"
         )
     peak = float(np.max(np.abs(power)))
     if partial and peak < POWER_RANGE[0]:
