@@ -170,6 +170,21 @@ def test_empty_or_orphan_options_are_refused_not_ignored(data, tmp_path, argv, w
     assert sorted(p.name for p in tmp_path.iterdir()) == ["mydata.csv"]
 
 
+@pytest.mark.parametrize("argv, words", [
+    # was "material '--reflectance': reflectance must be in [0, 1] ..."
+    (["fit", "{data}", "--reflectance", "1.5", "--save", "{out}.json"],
+     "irreflect: error: --reflectance must be in [0, 1] (reflected power"),
+    # was fitted and written as m.json, printed as "wrote .../m.json/"
+    (["fit", "{data}", "--save", "{out}.json/"], "m.json/: ends in '/', so it names a folder; "
+                                                 "expected a file name ending in .json"),
+    (["protocol", "--gammas", "-20", "-40", "-60", "--out", "{out}.csv/"], "ends in '/'"),
+])
+def test_bad_output_options_are_named_as_options(data, tmp_path, argv, words):
+    line = _one_error([a.format(data=data, out=tmp_path / "m") for a in argv])
+    assert words in line
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["mydata.csv"]
+
+
 @pytest.mark.parametrize("argv, warning", [
     (["plot", "{data}", "--seed", "3", "--out", "{out}.png"],
      "--seed has no effect without --fit"),

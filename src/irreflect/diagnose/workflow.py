@@ -343,6 +343,15 @@ class Diagnosis:
     alternatives: tuple[tuple[str, ...], ...] = ()
     alternative_fits: dict = field(default_factory=dict)
     separating: tuple[dict, ...] = ()
+    #: the base model's unweighted fit (``irreflect fit`` on a table without sigma):
+    #: ``{"r2", "rmse"}``
+    unweighted_base: dict = field(default_factory=dict)
+
+    @property
+    def reweighted(self) -> bool:
+        """Whether the fits are weighted by a noise the diagnosis estimated and that varies
+        with the power: their R^2 and RMSE are then not those of an unweighted fit."""
+        return self.noise.source == "estimated" and self.noise.relative > 0
 
     @property
     def before(self) -> Assessment:
@@ -408,6 +417,8 @@ class Diagnosis:
             "noise_method": self.noise.method,
             "noise_additive": self.noise.additive,
             "noise_relative": self.noise.relative,
+            "fits_weighted_by_estimated_noise": self.reweighted,
+            "unweighted_base": dict(self.unweighted_base) if self.reweighted else None,
             "unexplained": self.unexplained,
             "verdict": self.verdict,
             "summary": self.summary,
@@ -426,7 +437,7 @@ class Diagnosis:
             head = "step 0: base model" if i == 0 else f"step {i}: + {' + '.join(added)}"
             lines.append("")
             lines.append(f"{head} ({a.model_name})")
-            lines.append(_assessment_line(a))
+            lines.append(_assessment_line(a) + (self._weighted_note() if i == 0 else ""))
             lines.append("  structure (p-values; each test, and the lack of fit, at level "
                          f"{a.level(self.alpha):.3g}):")
             for s in a.structure:
@@ -473,10 +484,20 @@ class Diagnosis:
             lines.append(f"  together: chi2 {self.separating[0]['total_chi2']:.1f} (write "
                          "them as a plan with --separate-out)")
         b, a = self.before, self.after
+        weighted = ", fitted weighted by the estimated noise" if self.reweighted else ""
         lines.append(f"gap: RMSE {b.fit.rmse:.4g} -> {a.fit.rmse:.4g}, R^2 {b.fit.r2:.5f} -> "
                      f"{a.fit.r2:.5f}, chi2/dof {b.lack_of_fit.ratio:.3g} -> "
-                     f"{a.lack_of_fit.ratio:.3g} ({self.elapsed_s:.1f} s)")
+                     f"{a.lack_of_fit.ratio:.3g} ({self.elapsed_s:.1f} s{weighted})")
         return "\n".join(lines)
+
+    def _weighted_note(self) -> str:
+        """Said after the base model's R^2 when the fits are weighted by the noise found."""
+        if not self.reweighted:
+            return ""
+        u = self.unweighted_base
+        unweighted = (f"; unweighted R^2 {u['r2']:.5f}, RMSE {u['rmse']:.4g}"
+                      if u else "")
+        return f"\n  (fitted weighted by the estimated noise{unweighted})"
 
 
 def _p_text(p: float) -> str:
@@ -775,8 +796,10 @@ def _base_fit(meas, base_model, seed):
 def _base_fit_and_noise(meas, base_model, seed, alpha):
     """The base model's fit and the table's noise (estimated from its residuals when the
     table has no sigma; a proportional part found: the base fit weighted by it, and the
-    noise judged again): (base fit, noise, the table with the noise as its sigma)."""
+    noise judged again): (base fit, noise, the table with the noise as its sigma, the
+    unweighted base fit's ``{"r2", "rmse"}``)."""
     base_fit = _base_fit(meas, base_model, seed)
+    unweighted = {"r2": float(base_fit.r2), "rmse": float(base_fit.rmse)}
     noise = estimate_noise(meas, residuals=base_fit.residuals, fitted=base_fit.fitted,
                            seed=seed, alpha=alpha)
     if noise.source == "estimated" and not noise.dof >= MIN_NOISE_DOF:
@@ -816,7 +839,7 @@ def _base_fit_and_noise(meas, base_model, seed, alpha):
                 noise = estimate_noise(meas, residuals=base_fit.residuals,
                                        fitted=base_fit.fitted, seed=seed, alpha=alpha)
             work = dataclasses.replace(meas, sigma=noise.sigma)
-    return base_fit, noise, work
+    return base_fit, noise, work, unweighted
 
 
 def _separation(search, final, alternatives, meas, target, separate):
@@ -912,7 +935,7 @@ def diagnose(measurements, model="two-lobe", *, extensions: Sequence[str] | None
     names = [n for n in names if n not in used]
     say = progress or (lambda message: None)
     say(f"fitting {base_model.name}")
-    base_fit, noise, work = _base_fit_and_noise(meas, base_model, seed, alpha)
+    base_fit, noise, work, unweighted = _base_fit_and_noise(meas, base_model, seed, alpha)
     search = _Search(meas, work, base_model, names, noise, seed, say)
     search.add("", base_fit, ())
     rounds, final = _select(search, names, max_effects, alpha, min_share)
@@ -970,6 +993,7 @@ def diagnose(measurements, model="two-lobe", *, extensions: Sequence[str] | None
         settings={"max_effects": max_effects, "min_share": min_share, "alpha": alpha,
                   "seed": seed, "extensions": names, "separation_target": target},
         alternatives=alternatives, alternative_fits=alt_fits, separating=tuple(separating),
+        unweighted_base=unweighted,
     )
 
 
