@@ -1070,6 +1070,17 @@ def test_a_dense_table_without_the_specular_peak_is_warned(tmp_path):
     assert code == 0 and "irreflect: warning: the table has no reading within 4 deg" in err
 
 
+@pytest.mark.parametrize("strategies, warned", [("paper", True), ("adaptive,paper", True),
+                                                ("paper,hindsight", False)])
+def test_campaign_generations_without_hindsight_is_warned_of(strategies, warned, tmp_path):
+    # --generations sets only the hindsight subsets' search; without that strategy it was
+    # ignored without a word (the table is missing: refused right after the options)
+    code, _, err = _run(["campaign", tmp_path / "missing.csv", "--generations", "7",
+                         "--strategies", strategies])
+    assert code == 2
+    assert ("irreflect: warning: --generations has no effect" in err) is warned, err
+
+
 def test_the_receivers_resolution_spaces_the_readings_and_flags_a_lobe_it_cannot_resolve(
         tmp_path):
     # a receiver that averages over 4 deg: readings at least 2 deg apart, the opening's lobe

@@ -170,6 +170,21 @@ def test_empty_or_orphan_options_are_refused_not_ignored(data, tmp_path, argv, w
     assert sorted(p.name for p in tmp_path.iterdir()) == ["mydata.csv"]
 
 
+@pytest.mark.parametrize("argv, words", [
+    # was "material '--reflectance': reflectance must be in [0, 1] ..."
+    (["fit", "{data}", "--reflectance", "1.5", "--save", "{out}.json"],
+     "irreflect: error: --reflectance must be in [0, 1] (reflected power"),
+    # was fitted and written as m.json, printed as "wrote .../m.json/"
+    (["fit", "{data}", "--save", "{out}.json/"], "m.json/: ends in '/', so it names a folder; "
+                                                 "expected a file name ending in .json"),
+    (["protocol", "--gammas", "-20", "-40", "-60", "--out", "{out}.csv/"], "ends in '/'"),
+])
+def test_bad_output_options_are_named_as_options(data, tmp_path, argv, words):
+    line = _one_error([a.format(data=data, out=tmp_path / "m") for a in argv])
+    assert words in line
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["mydata.csv"]
+
+
 @pytest.mark.parametrize("argv, warning", [
     (["plot", "{data}", "--seed", "3", "--out", "{out}.png"],
      "--seed has no effect without --fit"),
@@ -892,3 +907,13 @@ def test_a_separating_table_inside_the_output_folder_is_in_its_manifest(data, tm
     assert list(pd.read_csv(out / "sep.csv").columns[:2]) == ["gamma_deg", "theta_deg"]
     code, _, _ = _run(argv + ["--separate-out", out / "again.csv"])
     assert code == 0 and (out / "again.csv").is_file() and not (out / "sep.csv").exists()
+
+
+def test_a_separating_table_that_is_the_output_folder_is_refused_up_front(data, tmp_path):
+    """diagnose --out D --separate-out D worked for 4 s, then exited 1 with "cannot read or
+    write .D.irreflect-tmp-...: Is a directory": the second claim of the same path reused
+    the first, a folder, unchecked."""
+    out = tmp_path / "d2"
+    line = _one_error(["diagnose", data, "--out", out, "--separate-out", out])
+    assert f"--separate-out {out}: is the --out folder of this run" in line
+    assert [p.name for p in tmp_path.iterdir() if "d2" in p.name] == []  # nor a lock left

@@ -499,6 +499,56 @@ def test_cli_protocol_errors_are_one_line(args, message, capsys, tmp_path):
     assert len(err) == 1 and message in err[0] and not out.exists()
 
 
+@pytest.mark.parametrize("source", [["--design-from", "missing.csv"],
+                                    ["--lobe-from", "missing.csv"]])
+def test_cli_specular_index_is_refused_with_a_pilot(source, capsys, tmp_path):
+    # it failed inside the design with "angles of incidence must be finite numbers in
+    # degrees; found [nan]" (--design-from) or was ignored (--lobe-from)
+    assert main(["protocol", *source, "--specular-index", "4"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and f"--specular-index applies to --gammas (not to {source[0]}" in err[0]
+
+
+@pytest.mark.parametrize("args, named, code", [
+    (["--gammas", "-20", "-40", "-60", "--layout", "balanced"], "--layout", 0),
+    (["--gammas", "-20", "-40", "-60", "--specular-index", "40", "--mirror-offset", "3",
+      "--seed", "2"], "--mirror-offset and --seed have", 0),
+    (["--design-from", "missing.csv", "--mirror-offset", "3"], "--mirror-offset has", 2),
+    (["--lobe-from", "missing.csv", "--generations", "3"], "--generations has", 2),
+])
+def test_cli_protocol_warns_of_options_without_effect(args, named, code, capsys):
+    assert main(["protocol", *args]) == code  # 2: the missing table, after the warning
+    err = capsys.readouterr().err
+    warning = [line for line in err.splitlines() if line.startswith("irreflect: warning:")]
+    assert len(warning) == 1 and named in warning[0] and "no effect" in warning[0], err
+
+
+def test_cli_protocol_options_that_apply_give_no_warning(capsys):
+    assert main(["protocol", "--gammas", "-20", "-40", "-60", "--specular-index", "40",
+                 "--layout", "balanced", "--wide-offset", "50", "--central-offset", "0"]) == 0
+    assert "warning" not in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("out, fmt", [("p.csv", "json"), ("p.json", "md"), ("p.md", "csv")])
+def test_cli_protocol_format_must_match_the_extension(out, fmt, tmp_path, capsys):
+    # `--out x.csv --format json` wrote JSON into x.csv; evaluate-protocol then failed to
+    # parse it as CSV
+    path = tmp_path / out
+    assert main(["protocol", "--gammas", "-20", "-40", "-60", "--out", str(path),
+                 "--format", fmt]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and f"--format is {fmt}" in err[0] and out[-4:] in err[0]
+    assert not path.exists()
+
+
+def test_cli_evaluate_protocol_warns_of_monte_carlo_options_without_it(capsys):
+    assert main(["evaluate-protocol", "missing.csv", "missing2.csv", "--angle-error", "3",
+                 "--power-noise", "0.2"]) == 2
+    err = capsys.readouterr().err.splitlines()
+    assert err[0].startswith("irreflect: warning: --angle-error and --power-noise have no "
+                             "effect without --monte-carlo"), err
+
+
 def test_cli_evaluate_protocol(tmp_path, capsys):
     path = write_protocol(paper_protocol([-20, -40, -60]), tmp_path / "p.csv")
     data = str(bundled_dir() / "terrazzo.csv")

@@ -279,6 +279,11 @@ def test_too_few_degrees_of_freedom(grazing):
     with pytest.raises(IrreflectError,
                        match=r"verdict: PROTOCOL FAILS on grazing: too few degrees of freedom"):
         evaluate_protocol(sub.take(np.arange(7)), grazing)
+    # it said "which a fit needs at least 8 for; remedy: measure at least 10": both, told
+    with pytest.raises(IrreflectError, match=r"7 coefficients of 'two-lobe': a fit needs at "
+                       r"least 8, a protocol at least 10 \(the 3 beyond the coefficients "
+                       r"check the fit\); remedy: measure at least 10 distinct settings"):
+        evaluate_protocol(sub.take(np.arange(5)), grazing)
 
 
 # ----------------------------------------------------------------------------- the offsets
@@ -408,17 +413,22 @@ def test_a_clamped_glossy_point_on_top_of_another_is_replaced(tmp_path):
     assert back.n_points == 12
 
 
-def test_the_remedy_suggests_a_receiver_range_within_the_measured_one():
-    # -64.158 to 64.158 rounded to 4 digits gave -64.16 to 64.16: beyond the table's range
+@pytest.mark.parametrize("low, high", [(-64.158, 64.158), (-79.0472, 79.0472),
+                                       (-12.345678912, 33.3)])
+def test_the_remedy_suggests_the_measured_receiver_range(low, high):
+    # -64.158 to 64.158 rounded to 4 digits gave -64.16 to 64.16, beyond the table's range;
+    # rounded inward, -79.0472 gave -79.04, which left the measured extremes outside
     from irreflect.protocol.advice import adaptive_remedy
 
-    theta = np.array([-64.158, 0.0, 30.0, 64.158, -64.158, 10.0])
+    theta = np.array([low, 0.0, 30.0, high, low, 10.0])
     gamma = np.array([-15.0, -15.0, -15.0, -15.0, -45.0, -45.0])
     dense = Measurements(gamma, theta, np.ones(6), name="d")
     text = adaptive_remedy(dense)
-    assert "--gammas 15 45 --theta-min -64.15 --theta-max 64.15`" in text
-    dense = Measurements(gamma, np.where(np.abs(theta) > 60, np.sign(theta) * 70.0, theta),
-                         np.ones(6), name="d")
+    got = text.split("--theta-min ")[1].split("`")[0].split(" --theta-max ")
+    assert "--gammas 15 45 --theta-min " in text
+    assert float(got[0]) == low and float(got[1]) == high, got
+    dense = Measurements(gamma, np.array([-70.0, 0.0, 30.0, 70.0, -70.0, 10.0]), np.ones(6),
+                         name="d")
     assert "--theta-min -70 --theta-max 70`" in adaptive_remedy(dense)
 
 

@@ -12,7 +12,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from irreflect.errors import IrreflectError
+from irreflect.errors import IrreflectError, SceneError
 from irreflect.room import (
     Box,
     from_model,
@@ -531,6 +531,40 @@ def test_room_cli_writes_results_and_refuses_bad_input(tmp_path, capsys):
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "missing key" in err and "Traceback" not in err
     assert not target.exists()
+
+
+@pytest.mark.parametrize("name, text, said", [
+    ("pilot.csv", "gamma_deg,theta_deg,power\n-20,10,1.5\n", "is a measurement table"),
+    ("empty.csv", "", "is an empty .csv file"),
+    ("pilot.parquet", None, "is a .parquet file"),
+    ("wood.json", '{"model": "two-lobe"}\n', "is JSON (a material file"),
+    ("wood.toml", '{"model": "two-lobe"}\n', "is JSON (a material file"),
+])
+def test_room_names_a_table_or_material_file_given_as_its_scene(name, text, said, tmp_path):
+    # they were "not valid TOML (...): fix the syntax" or "missing key 'room'"
+    path = tmp_path / name
+    path.write_bytes(b"PAR1\0\0PAR1") if text is None else path.write_text(text)
+    with pytest.raises(SceneError) as exc:
+        load_scene(path)
+    msg = str(exc.value)
+    assert msg.startswith(f"{path}: {said}") and "not a scene: expected a scene .toml" in msg
+    assert "[materials.NAME]" in msg and "TOML (" not in msg and "\n" not in msg
+
+
+def test_room_scene_named_csv_is_still_read_as_a_scene(tmp_path):
+    path = tmp_path / "scene.csv"
+    path.write_text((ROOMS / "office.toml").read_text().replace('"plasterboard.json"',
+                                                                 f'"{ROOMS}/plasterboard.json"'))
+    with pytest.raises(SceneError, match="plasterboard.json") as exc:
+        load_scene(path)  # read as a scene: refused for its material path, not as a table
+    assert "not a scene" not in str(exc.value)
+
+
+def test_room_misspelt_bundled_scene_is_named(tmp_path, capsys):
+    from irreflect.cli import main
+
+    assert main(["room", "offce", "--out", str(tmp_path / "never")]) == 2
+    assert "Did you mean 'office'?" in capsys.readouterr().err
 
 
 def test_room_cli_paper_form_warns(tmp_path, capsys):

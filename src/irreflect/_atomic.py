@@ -196,6 +196,12 @@ def claim_output(path, kind: str = "dir", option: str = "--out", suffixes=None):
     with _held_lock:
         claim = _held.get(key)
         new = claim is None
+        if not new and (claim.kind == "file") != (kind == "file"):  # two outputs, one path
+            word = {True: "file", False: "folder"}
+            raise IrreflectError(
+                f"{option} {path}: is the {claim.option} {word[claim.kind == 'file']} of this "
+                f"run ({claim.option} {claim.path}); expected a {word[kind == 'file']} of its "
+                f"own: give {option} another path")
         if new:
             path = check_output_path(path, "file" if kind == "file" else "dir", option,
                                      suffixes)

@@ -551,15 +551,10 @@ def validate_table(df: pd.DataFrame, source: str = "table", *,
             )
     if sigma is not None and np.any(sigma <= 0):
         i = int(np.nonzero(sigma <= 0)[0][0])
-        if sigma[i] < 0:
-            _fail(
-                f"{source}: sigma is a 1-sigma uncertainty and must be >= 0; found {sigma[i]:g} "
-                f"in {rows(i)}"
-            )
         _fail(
-            f"{source}: sigma must be > 0 (fits are weighted by 1/sigma^2); found 0 in "
-            f"{rows(i)}: give that row's uncertainty, or delete the sigma column to fit "
-            "unweighted"
+            f"{source}: sigma must be > 0 (a 1-sigma uncertainty; fits are weighted by "
+            f"1/sigma^2); found {sigma[i]:g} in {rows(i)}: give that row's uncertainty, or "
+            "delete the sigma column to fit unweighted"
         )
     peak = float(np.max(np.abs(power)))
     if partial and peak < POWER_RANGE[0]:
@@ -938,8 +933,11 @@ def _bundled_hint(path: Path, kind: str) -> str:
     if stem in names:
         return (f"; the bundled '{stem}' is reachable by name: write '{stem}' instead of a "
                 "path ('irreflect datasets' lists what ships with irreflect)")
+    close = ([] if os.sep in str(path) or "/" in str(path) else
+             difflib.get_close_matches(stem.casefold(), names, n=1))
     return (f" (or the name of a bundled {'dataset' if kind == 'table' else 'scene'}: "
-            f"{', '.join(names)}; 'irreflect datasets' lists them)")
+            f"{', '.join(names)}; 'irreflect datasets' lists them)"
+            + (f". Did you mean '{close[0]}'?" if close else ""))
 
 
 def resolve_scene(scene) -> Path:

@@ -246,6 +246,10 @@ def _campaign(args) -> int:
     for s in strategies:
         if s not in STRATEGIES:
             raise unknown_name("campaign strategy", s, STRATEGIES)
+    if args.generations is not None and "hindsight" not in strategies:
+        print("irreflect: warning: --generations has no effect: no strategy of --strategies "
+              "is 'hindsight' (it sets the NSGA-II generations of its subsets)", file=sys.stderr)
+    args.generations = 100 if args.generations is None else args.generations
     dense = read_measurements(args.data, average_duplicates=args.average_duplicates)
     check_points_budget(dense.n_points, "campaign", str(args.data))
     if dense.n_points > CAMPAIGN_MAX_POINTS:
@@ -430,7 +434,7 @@ def register(sub) -> None:
                    help="relative power noise added to every reading, 1 sigma (default 0)")
     p.add_argument("--angle-error", type=NON_NEGATIVE, default=0.0,
                    help="receiver angle error, uniform +- this many degrees (default 0)")
-    p.add_argument("--generations", type=POSITIVE_INT, default=100,
+    p.add_argument("--generations", type=POSITIVE_INT, default=None,
                    help="NSGA-II generations of the hindsight subsets (default 100)")
     add_resolution_argument(p, "the dense table was read with it: the campaign's "
                                "instrument has it and every fit but the hindsight subsets' "

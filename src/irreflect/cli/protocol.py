@@ -25,11 +25,64 @@ from .options import (
 SUFFIXES = {".csv": "csv", ".json": "json", ".md": "md", ".markdown": "md"}
 
 
+#: options of ``protocol`` that tune one kind of design, the kinds they act on, and their
+#: defaults (None in the parser, so that an option given where it has no effect is told)
+_TUNING = {
+    "layout": (("specular",), "paper"),
+    "mirror_offset": (("paper",), 10.0),
+    "min_separation": (("paper",), None),
+    "wide_offset": (("paper", "specular", "lobe"), 60.0),
+    "central_offset": (("paper", "specular", "lobe"), 20.0),
+    "model": (("design",), "two-lobe"),
+    "selector": (("design",), "nsga2"),
+    "pop_size": (("design",), 100),
+    "generations": (("design",), 200),
+    "seed": (("design", "lobe"), 0),
+    "average_duplicates": (("design", "lobe"), False),
+}
+_KIND_TEXT = {"paper": "--gammas without --specular-index", "specular": "--specular-index",
+              "design": "--design-from", "lobe": "--lobe-from"}
+_KIND_NAME = {"paper": "the paper's protocol (--gammas without --specular-index)",
+              "specular": "a --specular-index design", "design": "a --design-from design",
+              "lobe": "a --lobe-from design"}
+
+
+def _check_options(args) -> None:
+    """Refuse options that contradict the kind of design asked for; warn of options that
+    have no effect on it (and fill in their defaults)."""
+    kind = ("design" if args.design_from else "lobe" if args.lobe_from
+            else "specular" if args.specular_index is not None else "paper")
+    source = {"design": "--design-from", "lobe": "--lobe-from"}.get(kind, "--gammas")
+    if kind != "design" and (args.n is not None or args.gamma_settings is not None):
+        extra = " (which always gives 12 points)" if kind == "lobe" else ""
+        raise IrreflectError(f"--n and --gamma-settings apply to --design-from, not to "
+                             f"{source}{extra}")
+    if kind in ("design", "lobe") and args.specular_index is not None:
+        why = ("it measures the specular lobe on the pilot" if kind == "lobe"
+               else "it picks its points from the pilot scan")
+        raise IrreflectError(f"--specular-index applies to --gammas (not to {source}: {why}):"
+                             f" leave it out, or give --gammas G1 G2 G3 instead of {source}")
+    unused = []
+    for dest, (kinds, default) in _TUNING.items():
+        value = getattr(args, dest)
+        if value is None or value is False:
+            setattr(args, dest, default)
+        elif kind not in kinds:
+            unused.append(f"--{dest.replace('_', '-')} acts only with "
+                          + " or ".join(_KIND_TEXT[k] for k in kinds))
+    if unused:
+        names = [u.split()[0] for u in unused]
+        print(f"irreflect: warning: {' and '.join(names)} "
+              f"{'has' if len(names) == 1 else 'have'} no effect on {_KIND_NAME[kind]}: "
+              f"{'; '.join(unused)}", file=sys.stderr)
+
+
 def _cmd_protocol(args) -> int:
     import contextlib
 
     from .._atomic import claim_output
 
+    _check_options(args)
     fmt = args.format
     if args.out is not None and not args.out.strip():
         raise IrreflectError("--out must name a file; found an empty name (leave it out to "
@@ -37,8 +90,13 @@ def _cmd_protocol(args) -> int:
     if args.out and Path(args.out).is_dir():
         raise IrreflectError(f"--out {args.out}: is a folder; expected a file name ending in "
                              ".csv, .json or .md")
+    suffix = Path(args.out).suffix.lower() if args.out else ""
+    if fmt is not None and SUFFIXES.get(suffix, fmt) != fmt:
+        raise IrreflectError(
+            f"--out {args.out}: the extension '{suffix}' means {SUFFIXES[suffix]}, but "
+            f"--format is {fmt}: name the file {Path(args.out).with_suffix('.' + fmt)} or "
+            "drop --format (the extension then decides)")
     if args.out and fmt is None:
-        suffix = Path(args.out).suffix.lower()
         if suffix not in SUFFIXES:
             raise IrreflectError(
                 f"--out {args.out}: unknown extension '{suffix or 'none'}': name the file "
@@ -58,9 +116,6 @@ def _protocol(args, fmt: str) -> int:
     if args.lobe_from:
         from ..protocol.evaluate import glossy_protocol_for
 
-        if args.n is not None or args.gamma_settings is not None:
-            raise IrreflectError("--n and --gamma-settings apply to --design-from, not to "
-                                 "--lobe-from (which always gives 12 points)")
         pilot = load_data(args, "protocol-lobe-from", args.lobe_from)
         protocol = glossy_protocol_for(pilot, theta_min=args.theta_min,
                                        theta_max=args.theta_max, seed=args.seed,
@@ -72,9 +127,6 @@ def _protocol(args, fmt: str) -> int:
     elif args.specular_index is not None:
         from ..protocol.core import glossy_protocol
 
-        if args.n is not None or args.gamma_settings is not None:
-            raise IrreflectError("--n and --gamma-settings apply to --design-from, not to "
-                                 "--gammas")
         protocol = glossy_protocol(
             args.gammas,
             -70.0 if args.theta_min is None else args.theta_min,
@@ -95,8 +147,6 @@ def _protocol(args, fmt: str) -> int:
             pop_size=args.pop_size, generations=args.generations, progress=True,
         )
     else:
-        if args.n is not None or args.gamma_settings is not None:
-            raise IrreflectError("--n and --gamma-settings apply to --design-from, not to --gammas")
         protocol = paper_protocol(
             args.gammas,
             -70.0 if args.theta_min is None else args.theta_min,
@@ -140,6 +190,14 @@ def _cmd_evaluate(args) -> int:
     if args.monte_carlo == 1:
         raise IrreflectError("--monte-carlo: expected 0 (none) or at least 2 trials (a spread "
                              "needs two); found 1")
+    unused = [o for o, v in (("--angle-error", args.angle_error),
+                             ("--power-noise", args.power_noise)) if v is not None]
+    if unused and not args.monte_carlo:
+        print(f"irreflect: warning: {' and '.join(unused)} {'has' if len(unused) == 1 else 'have'}"
+              " no effect without --monte-carlo TRIALS (they set its goniometer errors)",
+              file=sys.stderr)
+    args.angle_error = 1.0 if args.angle_error is None else args.angle_error
+    args.power_noise = 0.01 if args.power_noise is None else args.power_noise
     if args.monte_carlo:
         check_trials_budget(args.monte_carlo, "--monte-carlo")
         check_number(args.angle_error, "--angle-error (deg)", low=0.0, high=10.0)
@@ -189,7 +247,7 @@ def register(sub) -> None:
                    help="with --gammas: glossy-aware 12 points for a specular lobe index N "
                         "(lobe-width points at its half width acos(2^(-1/N)) instead of "
                         "--mirror-offset; default: none, the paper's offsets)")
-    p.add_argument("--layout", choices=("paper", "balanced"), default="paper",
+    p.add_argument("--layout", choices=("paper", "balanced"), default=None,
                    help="with --specular-index: 'paper' (5+2+5 points, default) or 'balanced' "
                         "(4 per gamma: mirror, lobe width, two diffuse)")
     p.add_argument("--theta-min", type=ANGLE, default=None,
@@ -197,11 +255,11 @@ def register(sub) -> None:
                         "no limit for --design-from)")
     p.add_argument("--theta-max", type=ANGLE, default=None,
                    help="highest receiver angle (deg; default 70 for --gammas)")
-    p.add_argument("--mirror-offset", type=POSITIVE, default=10.0,
+    p.add_argument("--mirror-offset", type=POSITIVE, default=None,
                    help="lobe-width points around the mirror angle (deg, Eqs. 29-30; default 10)")
-    p.add_argument("--wide-offset", type=POSITIVE, default=60.0,
+    p.add_argument("--wide-offset", type=POSITIVE, default=None,
                    help="diffuse points from the mirror angle (deg, Eqs. 31-32; default 60)")
-    p.add_argument("--central-offset", type=FINITE, default=20.0,
+    p.add_argument("--central-offset", type=FINITE, default=None,
                    help="offset of the central gamma's points (deg, Eqs. 33-34; default 20)")
     p.add_argument("--min-separation", type=POSITIVE, default=None,
                    help="points of one gamma closer than this coincide (deg; default "
@@ -210,13 +268,13 @@ def register(sub) -> None:
                    help="--design-from: number of points (default: the knee of the front)")
     p.add_argument("--gamma-settings", type=POSITIVE_INT, default=None, metavar="K",
                    help="--design-from: use only K angle-of-incidence settings (default: any)")
-    p.add_argument("--model", default="two-lobe", help="--design-from: model (default two-lobe)")
-    p.add_argument("--selector", default="nsga2", help="--design-from: optimiser (default nsga2)")
-    p.add_argument("--pop-size", type=int_at_least(2), default=100,
+    p.add_argument("--model", default=None, help="--design-from: model (default two-lobe)")
+    p.add_argument("--selector", default=None, help="--design-from: optimiser (default nsga2)")
+    p.add_argument("--pop-size", type=int_at_least(2), default=None,
                    help="--design-from: NSGA-II population (default 100)")
-    p.add_argument("--generations", type=POSITIVE_INT, default=200,
+    p.add_argument("--generations", type=POSITIVE_INT, default=None,
                    help="--design-from: NSGA-II generations (default 200)")
-    p.add_argument("--seed", type=SEED, default=0,
+    p.add_argument("--seed", type=SEED, default=None,
                    help="seed of the optimiser and of the fits' random starts (default 0)")
     p.add_argument("--average-duplicates", action="store_true",
                    help="--design-from / --lobe-from: average duplicated (gamma, theta) rows")
@@ -249,9 +307,9 @@ def _register_evaluate(sub) -> None:
     p.add_argument("--monte-carlo", type=NON_NEGATIVE_INT, default=0, metavar="TRIALS",
                    help="also run a Monte Carlo of goniometer errors with this many trials, "
                         "at least 2 (default 0: none)")
-    p.add_argument("--angle-error", type=NON_NEGATIVE, default=1.0,
+    p.add_argument("--angle-error", type=NON_NEGATIVE, default=None,
                    help="Monte Carlo: half-width of the uniform angle error (deg, 0-10, default 1)")
-    p.add_argument("--power-noise", type=NON_NEGATIVE, default=0.01,
+    p.add_argument("--power-noise", type=NON_NEGATIVE, default=None,
                    help="Monte Carlo: relative power noise, 1-sigma (default 0.01)")
     p.add_argument("--seed", type=SEED, default=0,
                    help="seed of the fit's random starts and of the Monte Carlo (default 0)")

@@ -285,17 +285,13 @@ def _num(x):
     return x if np.isfinite(x) else None
 
 
-def _inward(value: float, direction: int) -> str:
-    """``value`` to 4 significant digits, rounded toward the inside of the range
-    (``direction`` +1: up, for its lower end; -1: down, for its upper end), so that the
-    suggested receiver range stays within the measured one."""
-    text = f"{value:.4g}"
-    if (float(text) - value) * direction >= -1e-12:
-        return text
-    digits = 4 - int(np.floor(np.log10(abs(value)))) - 1 if value else 0
-    step = 10.0 ** -digits
-    rounded = (np.ceil(value / step) if direction > 0 else np.floor(value / step)) * step
-    return f"{rounded:.{max(digits, 0)}f}".rstrip("0").rstrip(".") if digits > 0 else f"{rounded:g}"
+def _exact(value: float) -> str:
+    """``value`` as short as it is exact, so that a suggested receiver range is the measured
+    one: rounded to 4 digits it went beyond it (-64.158 as -64.16) or, rounded inward, left
+    the measured extremes outside (-79.0472 as -79.04, which `next` then notes as readings
+    beyond its range)."""
+    text = f"{value:.10g}"
+    return text if float(text) == value else repr(value)
 
 
 def adaptive_remedy(dense=None) -> str:
@@ -305,8 +301,8 @@ def adaptive_remedy(dense=None) -> str:
     if dense is not None:
         mags = sorted({float(abs(g)) for g in np.asarray(dense.gamma_deg, float)})
         inst = (" --gammas " + " ".join(f"{g:g}" for g in mags)
-                + f" --theta-min {_inward(float(np.min(dense.theta_deg)), 1)}"
-                + f" --theta-max {_inward(float(np.max(dense.theta_deg)), -1)}")
+                + f" --theta-min {_exact(float(np.min(dense.theta_deg)))}"
+                + f" --theta-max {_exact(float(np.max(dense.theta_deg)))}")
     return (f"measure adaptively: `irreflect next MEASURED.csv --n 3{inst}` proposes the next "
             "settings from the points measured so far (MEASURED.csv: gamma_deg, theta_deg, "
             f"power; only the header to start) and says when to stop ({CAMPAIGN_DOC})")

@@ -246,8 +246,10 @@ def evaluate_protocol(protocol, dense, model="two-lobe", *, tolerance_deg: float
         raise IrreflectError(
             f"verdict: PROTOCOL FAILS on {dense.name}: too few degrees of freedom: {what} has "
             f"{distinct} distinct settings for the {model_obj.n_params} coefficients of "
-            f"'{model_obj.name}', which a fit needs at least {model_obj.n_params + 1} for; "
-            f"remedy: measure at least {model_obj.n_params + MIN_DOF} distinct settings, or "
+            f"'{model_obj.name}': a fit needs at least {model_obj.n_params + 1}, a protocol "
+            f"at least {model_obj.n_params + MIN_DOF} (the {MIN_DOF} beyond the coefficients "
+            "check the fit); remedy: measure at least "
+            f"{model_obj.n_params + MIN_DOF} distinct settings, or "
             + adaptive_remedy(dense))
     result = fit(meas, model_obj, seed=seed)
     if reference is None or reference.model != model_obj.name:

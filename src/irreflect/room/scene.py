@@ -295,14 +295,60 @@ def load_scene(path, *, materials_dir=None) -> Scene:
     own folder.
     """
     try:
+        _refuse_other_files(path, None)
         text = read_text(path, "scene", "a scene TOML file (see datasets/rooms/office.toml)",
                          fix="a scene is a few KB of text")
+        _refuse_other_files(path, text)
         doc = parse_toml(text, str(path), "a scene TOML file")
     except SceneError:
         raise
     except IrreflectError as exc:
         raise SceneError(str(exc)) from None
     return scene_from_dict(doc, path=str(path), materials_dir=materials_dir)
+
+
+def _is_scene(text: str) -> bool:
+    try:
+        return "room" in parse_toml(text, "scene", "a scene TOML file")
+    except IrreflectError:
+        return False
+
+
+def _refuse_other_files(path, text: str | None) -> None:
+    """A measurement table or a material file given where a scene is expected is named as
+    what it is, with the way from it to a scene (not "not valid TOML" or "missing key
+    'room'"). ``text`` None: judged by the name alone, before reading."""
+    import re
+
+    from ..data import BUNDLED_SCENES
+
+    if not isinstance(path, str | os.PathLike):
+        return
+    suffix = Path(path).suffix.lower()
+    first = text.lstrip().split("\n", 1)[0] if text else ""
+    columns = {c.strip().strip('"').lower() for c in re.split(r"[,;\t|]", first)}
+    expected = (f"expected a scene .toml file (see datasets/rooms/office.toml) or the name of "
+                f"a bundled scene ({', '.join(BUNDLED_SCENES)})")
+    if {"gamma_deg", "theta_deg"} <= columns or suffix in (".csv", ".parquet", ".pq"):
+        if text is None and suffix == ".csv":
+            return  # read first: its header says what it is
+        if suffix == ".csv" and not {"gamma_deg", "theta_deg"} <= columns and _is_scene(text):
+            return  # a scene named .csv: read as one
+        what = ("a measurement table (columns gamma_deg, theta_deg, power)"
+                if {"gamma_deg", "theta_deg"} <= columns
+                else f"a{'n empty' if text is not None and not text.strip() else ''} "
+                     f"{suffix} file (a measurement table?)")
+        fix = ("to simulate its material" if {"gamma_deg", "theta_deg"} <= columns
+               else "if it is a material's measurement table, to simulate the material")
+        raise SceneError(f"{path}: is {what}, not a scene: {expected}; {fix}, fit it with "
+                         f"'irreflect fit {path} --save MATERIAL.json' "
+                         "and name MATERIAL.json in a scene's [materials.NAME] table "
+                         "(file = \"MATERIAL.json\")")
+    if text is not None and (suffix == ".json" or first.startswith("{")):  # never TOML
+        raise SceneError(f"{path}: is JSON (a material file of 'irreflect fit --save'?), not a "
+                         f"scene: {expected}; name the material file in a scene's "
+                         f"[materials.NAME] table (file = \"{Path(path).name}\") and pass "
+                         "the scene")
 
 
 def scene_from_dict(doc: dict, path: str | None = None, *, materials_dir=None) -> Scene:
