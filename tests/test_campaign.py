@@ -1336,7 +1336,8 @@ def test_a_fit_with_the_receivers_resolution_warns_of_its_own_result_only(tmp_pa
     def point_fit_that_warns(measurements, model, *args, **kwargs):
         result = real_fit(measurements, model, *args, **kwargs)
         if model == "two-lobe" or model is get_model("two-lobe"):  # not the averaged model
-            warnings.warn("ill-determined by these data: v_nd (the point fit)", FitWarning)
+            warnings.warn("ill-determined by these data: v_nd (the point fit)", FitWarning,
+                          stacklevel=2)
         return result
 
     monkeypatch.setattr(api, "fit", point_fit_that_warns)

@@ -740,7 +740,7 @@ def test_a_worker_runs_warnings_come_back_as_warnings_not_printed_text():
     from irreflect.errors import FitWarning
     from irreflect.selection.parallel import RunOutcome, _run_task, _Task, _warn_again
 
-    meas = synthetic(noise=0.004, seed=3, name="noisy")
+    meas = synthetic(noise=0.02, seed=3, name="noisy")  # 12-point fits that warn
     task = _Task(meas, 0, dict(pop_size=8, generations=2, max_points=12), True, None)
     err = io.StringIO()
     with contextlib.redirect_stderr(err):

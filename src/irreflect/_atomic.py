@@ -189,8 +189,9 @@ def claim_output(path, kind: str = "dir", option: str = "--out", suffixes=None):
     claim the caller holds. Yields the path.
     """
 
-    if path is None or not isinstance(path, str | os.PathLike) or str(path).strip() == "":
-        check_output_path(path, "file" if kind == "file" else "dir", option)  # one line
+    if (path is None or not isinstance(path, str | os.PathLike) or str(path).strip() == ""
+            or kind == "file" and str(path).endswith(("/", os.sep))):  # Path() drops the '/'
+        check_output_path(path, "file" if kind == "file" else "dir", option, suffixes)
     path = Path(path)
     key = _key(path)
     with _held_lock:

@@ -499,6 +499,12 @@ def check_output_path(path, kind: str = "file", option: str = "--out",
                              f"{'an empty name' if isinstance(path, str) else repr(path)}")
     if "\0" in str(path):
         raise IrreflectError(f"{option} {path!r}: a path cannot hold a NUL character")
+    if kind == "file" and str(path).endswith(tuple(filter(None, (os.sep, os.altsep, "/")))):
+        # Path() drops the separator: 'x.json/' would be written as 'x.json'
+        raise IrreflectError(f"{option} {path}: ends in '{str(path)[-1]}', so it names a folder;"
+                             " expected a file name" + (f" ending in {', '.join(suffixes)}"
+                                                        if suffixes else "")
+                             + f": write {str(path).rstrip(os.sep + (os.altsep or '') + '/')}")
     path = _follow_link(Path(path), noun, option)
     if kind == "file":
         if path.is_dir():

@@ -258,14 +258,17 @@ def parse_reflectance(value, name: str = "--reflectance"):
 
 
 def _check_rho(rho, name) -> float:
+    """``name``: a material's name, or an option (``--reflectance``), named as such."""
+    what = (str(name) if str(name).startswith("--")
+            else f"material '{name}': reflectance")
     try:
         rho = float(rho)
     except (TypeError, ValueError) as exc:
-        raise IrreflectError(f"material '{name}': reflectance must be a number in [0, 1] or "
-                             f"\"K\"; found {rho!r}") from exc
+        raise IrreflectError(f"{what} must be a number in [0, 1] or \"K\"; found "
+                             f"{rho!r}") from exc
     if not (0.0 <= rho <= 1.0) or not math.isfinite(rho):
-        raise IrreflectError(f"material '{name}': reflectance must be in [0, 1] (reflected power "
-                             f"cannot exceed the incident power); found {rho:g}")
+        raise IrreflectError(f"{what} must be in [0, 1] (reflected power cannot exceed the "
+                             f"incident power); found {rho:g}")
     return rho
 
 
