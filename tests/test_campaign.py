@@ -17,7 +17,7 @@ import pytest
 from irreflect.campaign import Campaign, DenseInstrument, Instrument, opening_design, replay
 from irreflect.campaign.replay import replay_adaptive
 from irreflect.cli import main
-from irreflect.data import Measurements, bundled_dir, read_measurements
+from irreflect.data import DataNotice, Measurements, bundled_dir, read_measurements
 from irreflect.errors import DataError, IrreflectError
 from irreflect.models import two_lobe_power
 
@@ -770,6 +770,42 @@ def test_next_on_a_header_only_table_writes_the_opening(tmp_path):
     assert doc["n_measured"] == 8 and len(doc["proposals"]) == 2
     assert doc["verdict"]["verdict"] == "continue" and doc["verdict"]["stop"] is False
     assert "at least 10 readings before stopping" in doc["verdict"]["reasons"]
+
+
+def test_next_refuses_readings_in_the_mirrored_frame_and_reads_a_campaigns_own(tmp_path):
+    """Readings with gamma >= 0 peaking at theta = -gamma (the paper's frame mirrored) were
+    read by `next` as magnitudes, so the lobe stood on the wrong side (predicted R^2 down to
+    -1, "1.66e+12 times the largest reading"): refused in one line, as `fit`'s detection
+    finds them. A campaign's own readings (its opening, 8-13 of them, or a scan) in the
+    paper's frame or as magnitudes are read as before, theta kept."""
+    from irreflect.campaign.io import read_readings
+
+    g = np.repeat([-10.0, -30.0, -50.0, -70.0], 33)
+    t = np.tile(np.arange(-80.0, 81.0, 5.0), 4)
+    keep = np.abs(t - g) >= 5.0
+    scan = _answer(GLOSSY, np.random.default_rng(0))(
+        pd.DataFrame({"gamma_deg": g[keep], "theta_deg": t[keep]}))
+    mirrored = tmp_path / "mirrored.csv"
+    scan.assign(gamma_deg=-scan.gamma_deg, theta_deg=-scan.theta_deg).to_csv(mirrored,
+                                                                            index=False)
+    code, stdout, err = _run(["next", mirrored, "--n", "2", "--out", tmp_path / "n.csv"])
+    assert code == 2 and stdout == "" and err.count("\n") == 1, err
+    assert err.startswith("irreflect: error: ") and "the paper's frame mirrored" in err
+    assert "change the sign of both gamma_deg and theta_deg" in err
+    assert not (tmp_path / "n.csv").exists()
+    with pytest.warns(DataNotice, match="paper's frame mirrored"):  # fit turns it
+        assert np.array_equal(read_measurements(mirrored).theta_deg, scan.theta_deg)
+    opening = _answer(GLOSSY, np.random.default_rng(1))(
+        Campaign(Instrument(gammas_deg=(-10, -20, -30, -40, -50, -60, -70))).propose(13)[["gamma_deg", "theta_deg"]])
+    for n, table in [(n, opening.iloc[:n]) for n in range(8, 14)] + [(len(scan), scan)]:
+        for frame in (table, table.assign(gamma_deg=table.gamma_deg.abs())):
+            path = tmp_path / f"readings{n}.csv"
+            frame.to_csv(path, index=False)
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                read = read_readings(path)
+            assert np.array_equal(read.theta_deg, table.theta_deg), n
+            assert np.array_equal(read.gamma_deg, table.gamma_deg), n
 
 
 @pytest.mark.parametrize("content, fragment", [
