@@ -17,7 +17,7 @@ import pytest
 from irreflect.campaign import Campaign, DenseInstrument, Instrument, opening_design, replay
 from irreflect.campaign.replay import replay_adaptive
 from irreflect.cli import main
-from irreflect.data import Measurements, bundled_dir, read_measurements
+from irreflect.data import DataNotice, Measurements, bundled_dir, read_measurements
 from irreflect.errors import DataError, IrreflectError
 from irreflect.models import two_lobe_power
 
@@ -156,6 +156,71 @@ def test_opening_design_honours_the_gamma_settings():
     tool = Instrument(gammas_deg=(-10, -20, -30, -40, -50, -60, -70), max_gamma_settings=2)
     plan = Campaign(tool).propose(8)
     assert set(plan["gamma_deg"]) == {-10.0, -70.0}
+
+
+def test_opening_labels_say_where_the_reading_stands_and_one_angle_does_not_crowd():
+    """With --gamma-settings 1 the plan's readings for three angles fell on -70 deg: theta
+    +20 was called "diffuse lobe, source side" (the far side), and five of ten readings
+    crowded at theta -80, -79, 78, 79, 80; at gamma 0 the opening spoke of "grazing
+    incidence" and of a source side the normal incidence has not."""
+    one = Campaign(Instrument(gammas_deg=(-10, -20, -30, -40, -50, -60, -70), theta_min=-80,
+                              theta_max=80, max_gamma_settings=1)).propose(10)
+    said = dict(zip(one.theta_deg, one.why, strict=True))
+    assert set(one.gamma_deg) == {-70.0} and len(one) == 10
+    assert said[20.0] == ("opening design: diffuse lobe on the far side, 50 deg short of the "
+                          "mirror direction")
+    assert all(t < 0 for t, why in said.items() if "source side" in why), said
+    assert said[70.0].endswith("mirror direction: the specular peak")
+    assert said[0.0].endswith("diffuse lobe near the normal, grazing incidence")
+    assert int(np.sum(np.abs(one.theta_deg) >= 78)) == 2, said  # -80 and 80, not five
+    normal = Campaign(Instrument(gammas_deg=(0,), theta_min=-80, theta_max=80)).propose(10)
+    assert not normal.why.str.contains("grazing|source side|toward|short of").any(), normal
+    assert normal.why.str.contains("normal incidence").any()
+    assert "diffuse lobe, 50 deg from the normal" in set(normal.why.str[16:])
+    from irreflect.campaign.design import region  # the adaptive proposals' words alike
+
+    assert region(0.0, -50.0, 5.0) == "the diffuse lobe, 50 deg from the normal"
+    assert region(-40.0, -50.0, 5.0) == "the diffuse lobe on the source side"
+    small = Campaign(Instrument(gammas_deg=(-10, -20, -30, -40))).propose(8)
+    assert not small.why.str.contains("grazing incidence").any()
+    assert small.why.str.contains("40 deg incidence \\(the largest\\)").any()
+
+
+@pytest.mark.parametrize("name, kw", [
+    ("cli", dict(gammas_deg=(-10, -20, -30, -40, -50, -60, -70), theta_min=-80, theta_max=80)),
+    ("docs", dict(gammas_deg=(0, -15, -30, -45, -60, -75), theta_min=-64, theta_max=64)),
+    ("coarse", dict(gammas_deg=(-10, -30, -50, -70, -80), theta_step=2.0, min_separation=3.0,
+                    source_clearance=10.0)),
+])
+def test_the_opening_of_a_standard_instrument_is_the_same_settings_as_before(name, kw):
+    """The opening's settings before the labels and the one-angle crowding were mended
+    (stop 45), on instruments with three or more angles: the whole plan, and the readings
+    of a campaign asking for 3, 3 and 2 at a time."""
+    before = {
+        "cli": (
+            [(-10, 10), (-40, 40), (-70, 70), (-10, -40), (-70, 0), (-70, 68), (-40, 75),
+             (-10, 11), (-70, -80), (-40, -60), (-10, 35), (-70, 80)],
+            [(-10, 10), (-40, 40), (-70, 70), (-10, -40), (-70, 0), (-70, 68), (-10, 11),
+             (-40, 75)]),
+        "docs": (
+            [(0, -5), (-30, 30), (-75, 64), (0, -50), (-75, 0), (-75, 63), (-30, 64), (0, 5),
+             (-75, -64), (-30, -50), (0, 25), (-75, 62)],
+            [(0, -5), (-30, 30), (-75, 64), (0, -50), (-75, 0), (-75, 63), (0, 5), (-30, 64)]),
+        "coarse": (
+            [(-10, 9), (-50, 49), (-80, 79), (-10, -41), (-80, -1), (-80, 75), (-50, 85),
+             (-10, 13), (-80, -69), (-50, -71), (-10, 35), (-80, 85)],
+            [(-10, 9), (-50, 49), (-80, 79), (-10, -41), (-80, -1), (-80, 75), (-10, 13),
+             (-50, 85)]),
+    }
+    tool = Instrument(**kw)
+    plan, walk = before[name]
+    assert [(g, t) for g, t, _ in opening_design(tool, 15)] == plan
+    campaign, taken = Campaign(tool, seed=0), []
+    for k in (3, 3, 2):
+        rows = campaign.propose(k)[["gamma_deg", "theta_deg"]]
+        taken += list(zip(rows.gamma_deg, rows.theta_deg, strict=True))
+        campaign.add(_answer(GLOSSY, np.random.default_rng(0), noise=0.0)(rows))
+    assert taken == walk
 
 
 def test_the_verdict_stops_once_the_allowed_angles_of_incidence_are_spent():
@@ -770,6 +835,42 @@ def test_next_on_a_header_only_table_writes_the_opening(tmp_path):
     assert doc["n_measured"] == 8 and len(doc["proposals"]) == 2
     assert doc["verdict"]["verdict"] == "continue" and doc["verdict"]["stop"] is False
     assert "at least 10 readings before stopping" in doc["verdict"]["reasons"]
+
+
+def test_next_refuses_readings_in_the_mirrored_frame_and_reads_a_campaigns_own(tmp_path):
+    """Readings with gamma >= 0 peaking at theta = -gamma (the paper's frame mirrored) were
+    read by `next` as magnitudes, so the lobe stood on the wrong side (predicted R^2 down to
+    -1, "1.66e+12 times the largest reading"): refused in one line, as `fit`'s detection
+    finds them. A campaign's own readings (its opening, 8-13 of them, or a scan) in the
+    paper's frame or as magnitudes are read as before, theta kept."""
+    from irreflect.campaign.io import read_readings
+
+    g = np.repeat([-10.0, -30.0, -50.0, -70.0], 33)
+    t = np.tile(np.arange(-80.0, 81.0, 5.0), 4)
+    keep = np.abs(t - g) >= 5.0
+    scan = _answer(GLOSSY, np.random.default_rng(0))(
+        pd.DataFrame({"gamma_deg": g[keep], "theta_deg": t[keep]}))
+    mirrored = tmp_path / "mirrored.csv"
+    scan.assign(gamma_deg=-scan.gamma_deg, theta_deg=-scan.theta_deg).to_csv(mirrored,
+                                                                            index=False)
+    code, stdout, err = _run(["next", mirrored, "--n", "2", "--out", tmp_path / "n.csv"])
+    assert code == 2 and stdout == "" and err.count("\n") == 1, err
+    assert err.startswith("irreflect: error: ") and "the paper's frame mirrored" in err
+    assert "change the sign of both gamma_deg and theta_deg" in err
+    assert not (tmp_path / "n.csv").exists()
+    with pytest.warns(DataNotice, match="paper's frame mirrored"):  # fit turns it
+        assert np.array_equal(read_measurements(mirrored).theta_deg, scan.theta_deg)
+    opening = _answer(GLOSSY, np.random.default_rng(1))(
+        Campaign(Instrument(gammas_deg=(-10, -20, -30, -40, -50, -60, -70))).propose(13)[["gamma_deg", "theta_deg"]])
+    for n, table in [(n, opening.iloc[:n]) for n in range(8, 14)] + [(len(scan), scan)]:
+        for frame in (table, table.assign(gamma_deg=table.gamma_deg.abs())):
+            path = tmp_path / f"readings{n}.csv"
+            frame.to_csv(path, index=False)
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                read = read_readings(path)
+            assert np.array_equal(read.theta_deg, table.theta_deg), n
+            assert np.array_equal(read.gamma_deg, table.gamma_deg), n
 
 
 @pytest.mark.parametrize("content, fragment", [

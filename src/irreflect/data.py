@@ -402,11 +402,19 @@ MIRRORED_FRAME = ("read as the paper's frame mirrored (gamma and theta both chan
 def _frame(gamma, theta, power, positive: bool, partial: bool, source):
     """The paper's frame of a table's angles and the notes on it: gammas all >= 0 read as
     magnitudes, or as the paper's frame mirrored when the readings peak at theta = -gamma
-    (:func:`_peak_sides`); a note when a table in the paper's convention peaks at the
-    source direction."""
+    (:func:`_peak_sides`; a campaign's readings so far, ``partial``, are then refused); a
+    note when a table in the paper's convention peaks at the source direction."""
     out = []
     if positive:
-        sides = [] if partial else _peak_sides(gamma, theta, power)
+        sides = _peak_sides(gamma, theta, power)
+        if partial and sides and all(side < 0 for side in sides):
+            # a campaign's proposals are in the paper's frame: rows added from them to a
+            # file in the mirrored frame would mix the two, so it is refused, not turned
+            _fail(f"{source}: all gamma_deg >= 0 and the readings peak at theta = -gamma at "
+                  "every angle of incidence: the file looks like the paper's frame mirrored, "
+                  "which a campaign does not read (its proposals are in the paper's frame): "
+                  "change the sign of both gamma_deg and theta_deg; if the gammas are "
+                  "magnitudes with the mirror at theta = +gamma, make them negative instead")
         if sides and all(side < 0 for side in sides):
             # the readings peak at theta = -gamma in the file's own signs: the paper's frame
             # mirrored (source on the positive side), so theta turns with gamma

@@ -219,13 +219,14 @@ def opening_design(instrument, n: int) -> list[tuple[float, float, str]]:
     # with a coarse receiver step the probe stands far out: named as region() names it
     body = ("the specular lobe's body" if probe <= 20.0 else
             "the specular lobe's flank" if probe <= 30.0 else "off the specular lobe")
+    at_hi = _incidence(hi)
     plan = [(g, -g, "mirror", "mirror direction", "mirror direction: the specular peak")
             for g in chosen]
     plan += [
         (lo, max(tmin, -lo - 50.0), "source", "diffuse lobe, source side",
          "diffuse lobe, source side"),
-        (hi, 0.0, "normal", "diffuse lobe near the normal, grazing incidence",
-         "diffuse lobe near the normal, grazing incidence"),
+        (hi, 0.0, "normal", f"diffuse lobe near the normal, {at_hi}",
+         f"diffuse lobe near the normal, {at_hi}"),
         (hi, -hi - probe, "toward normal", f"{body} toward the normal",
          f"{body}, {{off}} deg from the mirror toward the normal: starts bracketing its "
          "width"),
@@ -233,16 +234,22 @@ def opening_design(instrument, n: int) -> list[tuple[float, float, str]]:
          "far side beyond the specular lobe"),
         (lo, -lo + probe, "toward grazing", f"{body} toward grazing",
          f"{body}, {{off}} deg from the mirror toward grazing: starts bracketing its width"),
-        (hi, max(tmin, hi - 10.0), "source", "diffuse lobe, source side at grazing incidence",
-         "diffuse lobe, source side at grazing incidence"),
+        (hi, max(tmin, hi - 10.0), "source", f"diffuse lobe, source side at {at_hi}",
+         f"diffuse lobe, source side at {at_hi}"),
         (mid, max(tmin, mid - 20.0), "source", "diffuse lobe, source side",
          "diffuse lobe, source side"),
         (lo, min(tmax, -lo + 25.0), "far", "far side beyond the specular lobe",
          "far side beyond the specular lobe"),
-        (hi, min(tmax, -hi + 12.0), "far",
-         "far side beyond the specular lobe at grazing incidence",
-         "far side beyond the specular lobe at grazing incidence"),
+        (hi, min(tmax, -hi + 12.0), "far", f"far side beyond the specular lobe at {at_hi}",
+         f"far side beyond the specular lobe at {at_hi}"),
     ]
+    if len(chosen) < 3:
+        # fewer angles than the plan's three: the readings it spreads over them fall on one
+        # angle, and those clipped to the same end of the receiver's range would crowd
+        # beside it (5 of 10 at theta -80, -79, 78, 79, 80 with --gamma-settings 1): each
+        # planned setting once; the opening goes on with the farthest free settings
+        seen = set()
+        plan = [e for e in plan if (e[0], e[1]) not in seen and not seen.add((e[0], e[1]))]
     tol = instrument.reach_tolerance
     out, taken = [], []
     for g, t, kind, short, why in plan:
@@ -251,32 +258,57 @@ def opening_design(instrument, n: int) -> list[tuple[float, float, str]]:
             continue
         taken.append(idx)
         g_, t_ = float(settings[idx, 0]), float(settings[idx, 1])
-        out.append((g_, t_, _said(why, short, kind, g_, t_, tol)))
+        out.append((g_, t_, _said(why, short, kind, g_, t_, tol, t)))
         if len(out) == n:
             break
     return out
 
 
-def _said(why: str, short: str, kind: str, gamma: float, theta: float, tol: float) -> str:
+#: The opening calls its largest angle of incidence grazing from this |gamma| (deg) on, as
+#: :func:`region` calls a receiver grazing.
+GRAZING_DEG = 60.0
+
+
+def _incidence(gamma: float) -> str:
+    """The opening's words for its largest angle of incidence."""
+    if abs(gamma) >= GRAZING_DEG:
+        return "grazing incidence"
+    return "normal incidence" if gamma == 0 else f"{abs(gamma):g} deg incidence (the largest)"
+
+
+def _said(why: str, short: str, kind: str, gamma: float, theta: float, tol: float,
+          target: float | None = None) -> str:
     """What an opening reading measures: the plan's reason ``why`` when the setting the
     instrument allows is where the plan meant it (the mirror within ``tol``, the source side
     at theta < 0, the normal within 15 deg, the lobe's body on the named side of the mirror,
     the far side beyond it), else the plan's intent (``short``) and where the setting is: a
     receiver range that misses the mirror direction must not have its nearest setting
-    called the specular peak."""
+    called the specular peak. Where the plan's own setting (``target``) is not where it
+    means (the source side's reading 50 deg short of the mirror, at |gamma| >= 50 deg on the
+    far side), the reading is called what it is; at normal incidence there are no sides."""
     off = theta + gamma  # signed: > 0 beyond the mirror (toward grazing)
-    where = {"mirror": abs(off) <= tol, "source": theta < 0.0, "normal": abs(theta) <= 15.0,
-             "toward normal": off < 0.0, "toward grazing": off > 0.0,
-             "far": off > tol}[kind]
-    if where and kind == "mirror" and abs(off) > MIRROR_NEAR_DEG + 1e-9:
-        return (f"{short}: the setting nearest it, {abs(off):.3g} deg "
-                f"{'beyond' if off > 0 else 'short of'} it (the receiver's step does not "
-                "reach the specular peak)")
-    if where:
+
+    def where(t):
+        o = t + gamma
+        return {"mirror": abs(o) <= tol, "source": t < 0.0 or gamma == 0.0,
+                "normal": abs(t) <= 15.0, "toward normal": o < 0.0, "toward grazing": o > 0.0,
+                "far": o > tol}[kind]
+
+    if gamma == 0.0:  # the source is at the normal: neither side is the source's
+        why, short = (x.replace(", source side", f", {abs(theta):g} deg from the normal")
+                      .replace(" toward the normal", "").replace(" toward grazing", "")
+                      .replace("far side beyond", "beyond") for x in (why, short))
+    shy = "from" if gamma == 0.0 else "beyond" if off > 0 else "short of"
+    if where(theta) and kind == "mirror" and abs(off) > MIRROR_NEAR_DEG + 1e-9:
+        return (f"{short}: the setting nearest it, {abs(off):.3g} deg {shy} it (the "
+                "receiver's step does not reach the specular peak)")
+    if where(theta):
         return why.replace("{off}", f"{abs(off):.3g}")
+    if target is not None and not where(target):
+        place = "near the normal" if abs(theta) <= 10.0 else "on the far side"
+        return f"diffuse lobe {place}, {abs(off):.3g} deg {shy} the mirror direction"
     return (f"{short}: not available (out of the receiver's range or taken), so the "
-            f"nearest free setting, "
-            f"{abs(off):.3g} deg {'beyond' if off > 0 else 'short of'} the mirror direction")
+            f"nearest free setting, {abs(off):.3g} deg {shy} the mirror direction")
 
 
 def _nearest_free(settings, gamma, theta, taken, sep):
@@ -613,7 +645,9 @@ def region(gamma: float, theta: float, width: float, measured_gammas=()) -> str:
         return f"grazing reception (theta {theta:g} deg)"
     if abs(theta) <= 10.0:
         return "the diffuse lobe near the normal"
-    side = theta * (-gamma) < 0 if gamma else theta < 0
+    if gamma == 0:  # the source stands at the normal: neither side is the source's
+        return f"the diffuse lobe, {abs(theta):g} deg from the normal"
+    side = theta * (-gamma) < 0
     return "the diffuse lobe on the source side" if side else "the diffuse lobe on the far side"
 
 
