@@ -290,6 +290,19 @@ def _numeric(df: pd.DataFrame, col: str, source: str, rows: _Rows) -> np.ndarray
     return arr
 
 
+def _angle_notes(gamma, theta, partial, source) -> tuple[np.ndarray, list[str]]:
+    """The angles of incidence read as their settings (:func:`_group_jittered_gammas`)
+    and the notes on a table's angles: that jitter, and angles that look like radians."""
+    gamma, jitter_note = _group_jittered_gammas(gamma, source)
+    notes = [jitter_note] if jitter_note else []
+    if not partial and _looks_like_radians(gamma, theta):
+        notes.append(f"{source}: every angle lies within +-{np.pi / 2:.4g} (pi/2) and the "
+                     f"receiver angles span only {np.ptp(theta):.3g}: the file may give "
+                     "radians, and irreflect reads degrees (multiply gamma_deg and theta_deg "
+                     "by 180/pi if so)")
+    return gamma, notes
+
+
 def _looks_like_radians(gamma, theta) -> bool:
     """Angles that all lie within +-pi/2 while the receiver sweeps more than 0.5 of them
     over five or more distinct values: a table in radians (read as degrees, a scan of
@@ -585,14 +598,8 @@ def validate_table(df: pd.DataFrame, source: str = "table", *,
     if positive or not partial:
         gamma, theta, frame_notes = _frame(gamma, theta, power, positive, partial, source)
         notes += frame_notes
-    gamma, jitter_note = _group_jittered_gammas(gamma, source)
-    if jitter_note:
-        notes.append(jitter_note)
-    if not partial and _looks_like_radians(gamma, theta):
-        notes.append(f"{source}: every angle lies within +-{np.pi / 2:.4g} (pi/2) and the "
-                     f"receiver angles span only {np.ptp(theta):.3g}: the file may give "
-                     "radians, and irreflect reads degrees (multiply gamma_deg and theta_deg "
-                     "by 180/pi if so)")
+    gamma, angle_notes = _angle_notes(gamma, theta, partial, source)
+    notes += angle_notes
     material = _one_material(df, source)
     gamma, theta, power, sigma, merged = _merge_duplicates(gamma, theta, power, sigma, source,
                                                            rows, average_duplicates)
