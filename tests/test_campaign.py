@@ -1182,6 +1182,21 @@ def test_campaign_generations_without_hindsight_is_warned_of(strategies, warned,
     assert ("irreflect: warning: --generations has no effect" in err) is warned, err
 
 
+@pytest.mark.parametrize("method, warned", [(None, True), ("interpolate", False)])
+def test_campaign_theta_step_with_the_nearest_method_is_warned_of(method, warned, tmp_path):
+    # --theta-step only sets the interpolated readings' grid: with the nearest method (the
+    # default) it was refused as an error, where every other option that does nothing is
+    # warned of (docs/bad-input.md)
+    path = tmp_path / "glossy.csv"
+    _material(GLOSSY, step=2.0).to_frame().to_csv(path, index=False)
+    extra = [] if method is None else ["--method", method]
+    code, out, err = _run(["campaign", path, "--strategies", "paper", "--theta-step", "2",
+                           *extra])
+    assert code == 0, err
+    assert ("irreflect: warning: --theta-step 2 has no effect" in err) is warned, err
+    assert "paper" in out
+
+
 def test_the_receivers_resolution_spaces_the_readings_and_flags_a_lobe_it_cannot_resolve(
         tmp_path):
     # a receiver that averages over 4 deg: readings at least 2 deg apart, the opening's lobe

@@ -259,8 +259,11 @@ def _campaign(args) -> int:
     if args.method == "interpolate" and args.theta_step is None:
         args.theta_step = 1.0
     if args.method == "nearest" and args.theta_step is not None:
-        raise IrreflectError("--theta-step applies to --method interpolate (the nearest "
-                             "method reads at the table's own angles)")
+        # an option that does nothing is warned of (docs/bad-input.md), as --generations is
+        print(f"irreflect: warning: --theta-step {args.theta_step:g} has no effect with "
+              "--method nearest (the default: readings at the table's own angles); add "
+              "--method interpolate to read every --theta-step deg", file=sys.stderr)
+        args.theta_step = None
     bar = progress(len(strategies), desc=f"campaign {dense.name}", unit="strategies",
                    enabled=not args.json)
     try:
