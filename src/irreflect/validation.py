@@ -170,6 +170,7 @@ def check_real_array(values, name: str, *, ndim: int | None = 1, finite: bool = 
             arr = arr.astype(float)
         except (TypeError, ValueError):
             first = next((v for v in np.ravel(arr) if not _is_number(v)), None)
+            first = first.item() if isinstance(first, np.generic) else first  # not np.str_('a')
             raise DataError(f"{where}{name} must be numbers; found {first!r} "
                             f"({type(first).__name__})") from None
     arr = arr.astype(float, copy=False)
