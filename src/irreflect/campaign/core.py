@@ -241,10 +241,11 @@ class Campaign:
         See :data:`STOP_TOLERANCE`.
     noise_floor : float
         Power units: a negative reading down to minus this is the detector's noise, not a
-        sign error (default 0: a negative reading beyond 25 % of the largest reading so far
-        is refused, and so is one with no positive reading as large; readings with a sigma
-        column may go down to -4 sigma). A replay sets it from the dense table's own most
-        negative reading, which the table's check accepted.
+        sign error (default 0: a negative reading beyond 25 % of a larger positive reading is
+        refused; from four nonzero readings on, so are most readings negative and one below
+        every positive one and 4 times the typical one, while a lone negative reading may be
+        noise around a small signal and is kept; readings with a sigma column may go down to
+        -4 sigma). A replay sets it from the dense table's own most negative reading.
     """
 
     def __init__(self, instrument: Instrument, measured=None, *, model: str = "two-lobe",
