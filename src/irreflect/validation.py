@@ -197,7 +197,15 @@ def check_same_length(**arrays) -> int:
 
 def check_angles_deg(gamma_deg, theta_deg, *, limit: float = 90.0):
     """Angles in degrees for a prediction: real numbers within [-limit, limit] (NaN passes
-    through: NaN in, NaN out), broadcast against each other (any shape)."""
+    through: NaN in, NaN out), broadcast against each other (any shape). pandas Series of
+    different indexes are refused, as in Measurements: they would pair by position, not by
+    label."""
+    indexes = [getattr(v, "index", None) for v in (gamma_deg, theta_deg)]  # pandas' labels
+    if all(hasattr(i, "equals") for i in indexes) and not indexes[0].equals(indexes[1]):
+        raise IrreflectError("gamma_deg and theta_deg are pandas Series with different indexes, "
+                             "which would pair their values by position, not by label: take "
+                             "them from one DataFrame, call .reset_index(drop=True) on each, or "
+                             "pass arrays (.to_numpy())")
     out = []
     for name, values in (("gamma_deg", gamma_deg), ("theta_deg", theta_deg)):
         arr = check_real_array(values, name, ndim=None, finite=False)
