@@ -784,7 +784,7 @@ def test_next_notes_readings_the_instrument_cannot_take(tmp_path):
                          "--theta-max", "40", "--gamma-settings", "1"])
     assert code == 0, err
     assert "2 reading(s) at theta beyond the receiver range -40..40 deg" in err
-    assert "already use 2 angles of incidence, more than --gamma-settings 1" in err
+    assert "already use 2 angles of incidence, more than max_gamma_settings (--gamma-settings) 1" in err
     code, _, err = _run(["next", measured, "--gammas", "-20", "-40"])
     assert code == 0 and "beyond the receiver range" not in err and "already use" not in err
 
@@ -1150,7 +1150,8 @@ def test_next_notes_readings_at_angles_the_instrument_does_not_list(tmp_path):
     pd.DataFrame({"gamma_deg": g, "theta_deg": t, "power": two_lobe_power(
         np.radians(g), np.radians(t), *GLOSSY)}).to_csv(measured, index=False)
     code, _, err = _run(["next", measured, "--gammas", "20,40", "--json"])
-    assert code == 0 and "note: readings at gamma -60 deg, which --gammas does not list" in err
+    assert code == 0 and ("note: readings at gamma -60 deg, which the instrument does not list "
+                          "(gammas_deg, --gammas)") in err and err.count("gamma -60 deg") == 1
     code, stdout, err = _run(["next", measured, "--gammas", "20,40,60", "--json"])
     assert code == 0 and "note" not in err and json.loads(stdout)["notes"] == []
 
@@ -1784,5 +1785,44 @@ def test_next_takes_jittered_readings_at_the_instrument_s_angles(tmp_path):
     assert tool.snap_gammas(snapped)[1] is None
     rows.iloc[:3].to_csv(tmp_path / "r.csv", index=False)
     code, out, err = _run(["next", tmp_path / "r.csv", "--gammas", "-10", "-40", "-70"])
-    assert code == 0 and "3 reading(s) within 0.25 deg" in err
-    assert "which --gammas does not list" not in err
+    assert code == 0 and err.count("3 reading(s) within 0.25 deg") == 1
+    assert "does not list" not in err
+
+
+def test_campaign_add_snaps_jittered_gammas_and_notes_readings_off_the_instrument():
+    """In Python, Campaign.add took -29.97 for the instrument's -30 as an angle it does not
+    list, silently: the next proposals called -30 'a new angle of incidence' and the verdict
+    saw -70 as extrapolated. It now snaps them as `next` does, and notes (DataNotice)
+    readings at angles the instrument does not list or beyond its receiver range."""
+    tool = Instrument(gammas_deg=(-10, -30, -70), theta_min=-60, theta_max=60)
+    rows = [(-9.97, 10.0, 1.0), (-30.02, 30.0, 2.0), (-69.9, 55.0, 1.5)]
+    with pytest.warns(DataNotice, match=r"^3 reading\(s\) within 0.25 deg .*-30.02 -> -30"):
+        campaign = Campaign(tool).add(rows)
+    assert campaign.measurements.gamma_deg.tolist() == [-10.0, -30.0, -70.0]
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        campaign.add([(-80.0, 10.0, 1.0), (-30.0, 65.0, 0.5), (-10.0, 20.0, 1.0)])
+    notes = [str(w.message) for w in caught if issubclass(w.category, DataNotice)]
+    assert len(notes) == 2 and notes[0].startswith("readings at gamma -80 deg, which the "
+                                                   "instrument does not list")
+    assert notes[1].startswith("1 reading(s) at theta beyond the receiver range -60..60 deg")
+
+
+def test_campaign_r2_against_reads_a_table_by_name_or_path_and_checks_its_name():
+    """r2_against("terrazzo") raised AttributeError ('str' has no gamma_deg): it reads any
+    table now; Campaign(name=5) was refused only at the first add, by Measurements."""
+    from irreflect import fit
+
+    truth = fit("terrazzo", seed=0)
+    campaign = Campaign(Instrument(gammas_deg=(-10, -30, -50, -70), theta_min=-80,
+                                   theta_max=80))
+    assert np.isnan(campaign.r2_against("terrazzo"))
+    opening = campaign.propose(8)
+    campaign.add(opening[["gamma_deg", "theta_deg"]].assign(
+        power=truth.predict(opening.gamma_deg, opening.theta_deg)))
+    # readings of the fitted curve itself: the campaign's fit recovers it
+    assert campaign.r2_against("terrazzo") == pytest.approx(truth.r2, abs=1e-4)
+    with pytest.raises(DataError, match="expected a measurement table"):
+        campaign.r2_against([1.0, 2.0])
+    with pytest.raises(IrreflectError, match="name must be text .*; found 5"):
+        Campaign(Instrument(gammas_deg=(-10, -50)), name=5)

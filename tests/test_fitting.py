@@ -309,6 +309,22 @@ def test_predict_refuses_none_for_an_angle_in_one_line():
     assert res.predict(-10.0, 10.0) > 0
 
 
+def test_predict_refuses_series_of_different_indexes_as_measurements_does():
+    """predict(Series [-30, -20] at labels 5, 6, Series [35, 20] at 0, 1) paired them by
+    position where pandas pairs by label: refused, as Measurements refuses them."""
+    import pandas as pd
+
+    from irreflect.errors import IrreflectError
+
+    res = fit(synthetic(noise=0.003, seed=2), seed=0)
+    g, t = pd.Series([-30.0, -20.0], index=[5, 6]), pd.Series([35.0, 20.0])
+    with pytest.raises(IrreflectError, match=r"^gamma_deg and theta_deg are pandas Series "
+                       r"with different indexes, .*\.reset_index\(drop=True\)"):
+        res.predict(g, t)
+    same = res.predict(g.reset_index(drop=True), t)
+    assert same == pytest.approx(res.predict([-30.0, -20.0], [35.0, 20.0]))
+
+
 def test_a_hand_built_table_of_positive_gammas_is_named_when_fitted():
     """fit(Measurements(|gamma|, ...)) read the magnitudes in the mirrored frame: R^2 0.047
     with only 'measure more angles' to say why, where the same DataFrame fits to 0.99."""

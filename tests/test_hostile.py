@@ -689,6 +689,24 @@ def _diagnose(**kw):
     return diagnose(synthetic(), **kw)
 
 
+def _validate(frame):
+    from irreflect import validate_table
+
+    return validate_table(frame)
+
+
+def _campaign(name):
+    import irreflect.campaign as campaign
+
+    return getattr(campaign, name)
+
+
+def _compare(models):
+    from irreflect.compare import compare_models
+
+    return compare_models(synthetic(), models)
+
+
 def _robustness(**kw):
     from irreflect.protocol import paper_protocol, protocol_robustness
 
@@ -700,6 +718,8 @@ API_CASES = [
     ("fit use_sigma='no'", lambda: _fit(use_sigma="no"), "use_sigma must be True or False"),
     ("fit n_random_starts=-1", lambda: _fit(n_random_starts=-1), "n_random_starts must be"),
     ("fit n_keep='x'", lambda: _fit(n_keep="x"), "n_keep must be an integer"),
+    ("fit options=dict", lambda: _fit(options={"seed": 0}),
+     "options must be an irreflect.fitting.FitOptions (or None); found dict"),
     ("fit extra_starts", lambda: _fit(extra_starts=np.zeros((2, 9))), "extra_starts must be"),
     ("fit_subsets ftol=-1", lambda: _fit_subsets(ftol=-1), "ftol must be"),
     ("fit_subsets scan='yes'", lambda: _fit_subsets(scan="yes"), "scan must be True or False"),
@@ -722,6 +742,20 @@ API_CASES = [
      "checkpoint_every must be"),
     ("diagnose alpha=2", lambda: _diagnose(alpha=2), "alpha must be"),
     ("diagnose extensions=5", lambda: _diagnose(extensions=5), "extensions must be a list"),
+    ("run_selection max_points=5", lambda: _selection(max_points=5),
+     "max_points (--max-points) must be at least 8"),
+    ("fit of duplicated rows", lambda: _validate(pd.concat([synthetic().to_frame()] * 2)),
+     "(--average-duplicates; average_duplicates=True of read_measurements and validate_table)"),
+    ("diagnose separate=-1", lambda: _diagnose(separate=-1),
+     "separate must be an integer >= 0; found -1"),
+    ("Instrument.from_table text", lambda: _campaign("Instrument").from_table(["a"], [0.0]),
+     "gamma_deg must be numbers; found 'a'"),
+    ("opening_design(None)", lambda: _campaign("opening_design")(None, 3),
+     "opening_design expects an Instrument"),
+    ("opening_design n=0", lambda: _campaign("opening_design")(
+        _campaign("Instrument")(gammas_deg=(-10, -50)), 0), "must be an integer >= 1; found 0"),
+    ("compare_models twice", lambda: _compare(["phong", "phong"]),
+     "listed twice in models (--models)"),
     ("protocol_robustness n_trials='x'", lambda: _robustness(n_trials="x"), "n_trials must be"),
 ]
 

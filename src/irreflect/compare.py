@@ -196,7 +196,8 @@ def parse_model_list(text=None, phong_at_deg: float = 10.0) -> list[str]:
         get_model(spec.model_text)  # validates 'n-lobe:4'-style sizes
         label = str(spec)
         if label in out:
-            raise IrreflectError(f"model '{label}' is listed twice in --models: list it once")
+            raise IrreflectError(f"model '{label}' is listed twice in models (--models): list it "
+                                 "once")
         out.append(label)
     if not out:
         raise IrreflectError("--models is empty: expected a comma-separated list, e.g. two-lobe,phong")

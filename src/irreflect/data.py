@@ -348,8 +348,9 @@ def _merge_duplicates(gamma, theta, power, sigma, source, rows, average):
             i = int(np.nonzero(dup)[0][0])
             _fail(
                 f"{source}: {int(key.duplicated().sum())} duplicated (gamma_deg, theta_deg) rows, "
-                f"first ({gamma[i]:g}, {theta[i]:g}) at {rows(i)}: remove them or pass "
-                "--average-duplicates to average their power"
+                f"first ({gamma[i]:g}, {theta[i]:g}) at {rows(i)}: remove them or average "
+                "their power into one row (--average-duplicates; average_duplicates=True of "
+                "read_measurements and validate_table)"
             )
         frame = pd.DataFrame({"g": gamma, "t": theta, "p": power})
         if sigma is not None:

@@ -170,6 +170,7 @@ def check_real_array(values, name: str, *, ndim: int | None = 1, finite: bool = 
             arr = arr.astype(float)
         except (TypeError, ValueError):
             first = next((v for v in np.ravel(arr) if not _is_number(v)), None)
+            first = first.item() if isinstance(first, np.generic) else first  # not np.str_('a')
             raise DataError(f"{where}{name} must be numbers; found {first!r} "
                             f"({type(first).__name__})") from None
     arr = arr.astype(float, copy=False)
@@ -196,7 +197,15 @@ def check_same_length(**arrays) -> int:
 
 def check_angles_deg(gamma_deg, theta_deg, *, limit: float = 90.0):
     """Angles in degrees for a prediction: real numbers within [-limit, limit] (NaN passes
-    through: NaN in, NaN out), broadcast against each other (any shape)."""
+    through: NaN in, NaN out), broadcast against each other (any shape). pandas Series of
+    different indexes are refused, as in Measurements: they would pair by position, not by
+    label."""
+    indexes = [getattr(v, "index", None) for v in (gamma_deg, theta_deg)]  # pandas' labels
+    if all(hasattr(i, "equals") for i in indexes) and not indexes[0].equals(indexes[1]):
+        raise IrreflectError("gamma_deg and theta_deg are pandas Series with different indexes, "
+                             "which would pair their values by position, not by label: take "
+                             "them from one DataFrame, call .reset_index(drop=True) on each, or "
+                             "pass arrays (.to_numpy())")
     out = []
     for name, values in (("gamma_deg", gamma_deg), ("theta_deg", theta_deg)):
         arr = check_real_array(values, name, ndim=None, finite=False)

@@ -29,7 +29,7 @@ import numpy as np
 import pandas as pd
 
 from .. import metrics
-from ..data import Measurements, read_measurements, validate_table
+from ..data import DataNotice, Measurements, as_measurements, read_measurements, validate_table
 from ..errors import DataError, FitError, FitWarning, IrreflectError
 from ..fitting import AVERAGED_OPTIONS, FitOptions, FitResult, fit, fit_averaged, judge
 from ..models import get_model
@@ -241,10 +241,11 @@ class Campaign:
         See :data:`STOP_TOLERANCE`.
     noise_floor : float
         Power units: a negative reading down to minus this is the detector's noise, not a
-        sign error (default 0: a negative reading beyond 25 % of the largest reading so far
-        is refused, and so is one with no positive reading as large; readings with a sigma
-        column may go down to -4 sigma). A replay sets it from the dense table's own most
-        negative reading, which the table's check accepted.
+        sign error (default 0: a negative reading beyond 25 % of a larger positive reading is
+        refused; from four nonzero readings on, so are most readings negative and one below
+        every positive one and 4 times the typical one, while a lone negative reading may be
+        noise around a small signal and is kept; readings with a sigma column may go down to
+        -4 sigma). A replay sets it from the dense table's own most negative reading.
     """
 
     def __init__(self, instrument: Instrument, measured=None, *, model: str = "two-lobe",
@@ -265,6 +266,8 @@ class Campaign:
         self.rule = rule
         self.stop_tolerance = check_number(stop_tolerance, "stop_tolerance", low=0.0,
                                            high=1.0, low_open=True)
+        if not isinstance(name, str):  # was refused only at the first add
+            raise IrreflectError(f"name must be text (the readings' name); found {name!r}")
         self.name = name
         self.noise_floor = check_number(noise_floor, "noise_floor", low=0.0)
         settings = instrument.settings()
@@ -326,8 +329,11 @@ class Campaign:
     def add(self, rows) -> Campaign:
         """Add readings: Measurements, a DataFrame or path with ``gamma_deg, theta_deg,
         power[, sigma]``, or a list of ``(gamma, theta, power)``. A reading at a setting
-        already measured is refused (average them first)."""
-        new = _as_rows(rows)
+        already measured is refused (average them first). Angles of incidence within
+        0.25 deg of the instrument's are taken at them (the goniometer's jitter), and
+        readings where the instrument does not reach are fitted; both with a
+        :class:`~irreflect.data.DataNotice` (:meth:`Instrument.reading_notes`)."""
+        new, snapped = self.instrument.snap_gammas(_as_rows(rows))
         if not len(new):
             return self
         has_sigma = "sigma" in new.columns
@@ -348,6 +354,9 @@ class Campaign:
         validate_table(frame, self.name, partial=True, noise_floor=self.noise_floor)
         self._rows = combined.reset_index(drop=True)
         self._sigma = has_sigma
+        for text in [snapped] * bool(snapped) + self.instrument.reading_notes(
+                combined["gamma_deg"], combined["theta_deg"]):
+            warnings.warn(text, DataNotice, stacklevel=2)
         if self._state is not None and self._state.fit is not None:
             self._previous[len(self._rows) - len(new)] = self._state.range_pred
         self._state = None
@@ -1086,8 +1095,9 @@ class Campaign:
 
     # ------------------------------------------------------------------ scoring
     def r2_against(self, dense) -> float:
-        """R^2 of the current fit against a dense table (for replays and checks)."""
-        res = self.fit
+        """R^2 of the current fit against a dense table (Measurements, a DataFrame, a path or
+        a bundled name; for replays and checks); NaN before the first fit."""
+        dense, res = as_measurements(dense), self.fit
         if res is None:
             return float("nan")
         with np.errstate(all="ignore"):

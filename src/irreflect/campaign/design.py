@@ -41,11 +41,11 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..errors import FitWarning
+from ..errors import FitWarning, IrreflectError
 from ..fitting import FitResult, fit_subsets, prediction_and_jacobian
 from ..protocol.core import lobe_half_width_deg
-from ..validation import check_number
-from .instrument import MIRROR_NEAR_DEG
+from ..validation import check_int, check_number
+from .instrument import MIRROR_NEAR_DEG, Instrument
 
 
 @dataclass(frozen=True)
@@ -197,6 +197,10 @@ def opening_design(instrument, n: int) -> list[tuple[float, float, str]]:
     and the diffuse lobe away from the mirror: on the source side, near the normal at
     grazing incidence, and on the far side beyond the lobe.
     """
+    if not isinstance(instrument, Instrument):
+        raise IrreflectError(f"opening_design expects an Instrument "
+                             f"(irreflect.campaign.Instrument); found {type(instrument).__name__}")
+    n = check_int(n, "n (the number of opening readings)", 1)  # 0 and -3 gave the whole plan
     settings = instrument.settings()
     gammas = instrument.gammas
     limit = instrument.max_gamma_settings or len(gammas)

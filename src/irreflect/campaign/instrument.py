@@ -160,8 +160,8 @@ class Instrument:
     @classmethod
     def from_table(cls, gamma_deg, theta_deg, **kwargs) -> Instrument:
         """The instrument that can take exactly the readings of a (dense) table."""
-        g = np.asarray(gamma_deg, float).ravel()
-        t = np.asarray(theta_deg, float).ravel()
+        g = check_real_array(gamma_deg, "gamma_deg", ndim=None, finite=False).ravel()
+        t = check_real_array(theta_deg, "theta_deg", ndim=None, finite=False).ravel()
         if not g.size or g.size != t.size:
             raise IrreflectError(
                 f"an instrument from a table needs its readings' gamma and theta, one of each "
@@ -202,7 +202,8 @@ class Instrument:
         return np.asarray(self.gammas_deg, float)
 
     def snap_gammas(self, readings):
-        """``readings`` (:class:`~irreflect.data.Measurements`) with each angle of incidence
+        """``readings`` (:class:`~irreflect.data.Measurements` or a DataFrame with
+        ``gamma_deg``) with each angle of incidence
         within :data:`irreflect.data.GAMMA_JITTER_SPAN` of one the instrument lists read at
         that one, and a note naming them (None when none moved): a goniometer reporting its
         encoder (-69.96 for -70) had its readings fitted as at angles the instrument does
@@ -211,9 +212,9 @@ class Instrument:
 
         from ..data import GAMMA_JITTER_SPAN
 
-        if readings is None or not readings.n_points or not len(self.gammas):
+        if readings is None or not len(readings.gamma_deg) or not len(self.gammas):
             return readings, None
-        g = readings.gamma_deg
+        g = np.asarray(readings.gamma_deg, float)
         nearest = self.gammas[np.argmin(np.abs(g[:, None] - self.gammas[None, :]), axis=1)]
         move = (np.abs(g - nearest) <= GAMMA_JITTER_SPAN) & (g != nearest)
         if not move.any():
@@ -224,8 +225,40 @@ class Instrument:
                 "incidence of the instrument are taken at it (gamma "
                 + ", ".join(f"{a:.4g} -> {b:g}" for a, b in pairs[:8])
                 + (", ..." if len(pairs) > 8 else "") + " deg): jitter of the goniometer's "
-                "reading; list the angles in --gammas to keep them apart")
+                "reading; list those angles in the instrument's (gammas_deg, --gammas) to keep "
+                "them apart")
+        if not hasattr(readings, "n_points"):  # a DataFrame (Campaign.add)
+            return readings.assign(gamma_deg=np.where(move, nearest, g)), note
         return replace(readings, gamma_deg=np.where(move, nearest, g)), note
+
+    def reading_notes(self, gamma_deg, theta_deg) -> list[str]:
+        """Notes on readings that stand where the instrument does not reach: at angles of
+        incidence it does not list or beyond its receiver range (they are fitted, but the
+        proposals and the verdict's range are the instrument's), or at more angles of
+        incidence than ``max_gamma_settings`` allows. ``Campaign.add`` warns them
+        (:class:`irreflect.data.DataNotice`); ``irreflect next`` prints them."""
+        g, t = np.asarray(gamma_deg, float), np.asarray(theta_deg, float)
+        listed = {round(float(x), 6) for x in self.gammas}
+        other = sorted({round(float(x), 6) for x in g} - listed, key=abs)
+        out = []
+        if other:
+            out.append(f"readings at gamma {', '.join(f'{x:g}' for x in other)} deg, which "
+                       "the instrument does not list (gammas_deg, --gammas): they are fitted, "
+                       "but the proposals and the verdict's predicted R^2 cover only the "
+                       "listed angles; add them to its angles of incidence to include them")
+        beyond = int(np.sum((t < self.theta_min - 1e-6) | (t > self.theta_max + 1e-6)))
+        if beyond:
+            out.append(f"{beyond} reading(s) at theta beyond the receiver range "
+                       f"{self.theta_min:g}..{self.theta_max:g} deg: they are fitted, but the "
+                       "verdict's predicted R^2 covers only the range (theta_min/theta_max, "
+                       "--theta-min/--theta-max)")
+        used = len({round(float(x), 6) for x in g})
+        limit = self.max_gamma_settings
+        if limit and used > limit:
+            out.append(f"the readings already use {used} angles of incidence, more than "
+                       f"max_gamma_settings (--gamma-settings) {limit}: the proposals stay "
+                       "at the measured ones")
+        return out
 
     def settings(self) -> np.ndarray:
         """Every (gamma, theta) reading the instrument can take, ``(n, 2)`` degrees, sorted

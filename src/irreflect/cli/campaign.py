@@ -86,9 +86,6 @@ def _next(args) -> int:
     tool = _instrument(args)
     readings = read_readings(args.measured, average_duplicates=args.average_duplicates,
                              max_rows=NEXT_MAX_READINGS)
-    readings, snapped = tool.snap_gammas(readings)
-    if snapped:
-        print(f"irreflect: note: {snapped}", file=sys.stderr)
     name = Path(args.measured).stem
     campaign = Campaign(tool, readings, model=model.name, seed=args.seed, name=name)
     proposals = campaign.propose(args.n)
@@ -117,9 +114,9 @@ def _next(args) -> int:
     warned = _mirror_warnings(tool) + [w for w in (campaign.unresolved_lobe(),) if w]
     for text in warned:
         print(f"irreflect: warning: {text}", file=sys.stderr)
-    noted = _reading_notes(tool, campaign.measurements)
-    for text in noted:
-        print(f"irreflect: note: {text}", file=sys.stderr)
+    readings = campaign.measurements  # Campaign.add warns of these notes (DataNotice)
+    noted = [] if readings is None else tool.reading_notes(readings.gamma_deg,
+                                                           readings.theta_deg)
     if args.json:
         doc = {"dataset": name, "n_measured": campaign.n_measured,
                "instrument": tool.describe(), "model": model.name, "seed": args.seed,
@@ -188,37 +185,6 @@ def _mirror_warnings(tool) -> list[str]:
                      "--source-clearance)")
     return ["the specular peak (theta = -gamma) cannot be measured at gamma "
             + " and ".join(parts) + ": the fit extrapolates it there"] + coarse
-
-
-def _reading_notes(tool, readings) -> list[str]:
-    """A note when readings stand where the instrument does not reach: at angles of
-    incidence it does not list (--gammas) or beyond its receiver range (they are fitted,
-    but proposals and the verdict's range are the instrument's), or at more angles of
-    incidence than --gamma-settings allows."""
-    import numpy as np
-
-    if readings is None or not readings.n_points:
-        return []
-    listed = {round(float(g), 6) for g in tool.gammas}
-    other = sorted({round(float(g), 6) for g in readings.gamma_deg} - listed, key=abs)
-    out = []
-    if other:
-        out.append(f"readings at gamma {', '.join(f'{g:g}' for g in other)} deg, which --gammas "
-                   "does not list: they are fitted, but the proposals and the verdict's "
-                   "predicted R^2 cover only the listed angles; add them to --gammas to "
-                   "include them")
-    t = readings.theta_deg
-    beyond = int(np.sum((t < tool.theta_min - 1e-6) | (t > tool.theta_max + 1e-6)))
-    if beyond:
-        out.append(f"{beyond} reading(s) at theta beyond the receiver range "
-                   f"{tool.theta_min:g}..{tool.theta_max:g} deg: they are fitted, but the "
-                   "verdict's predicted R^2 covers only the range (--theta-min/--theta-max)")
-    used = len({round(float(g), 6) for g in readings.gamma_deg})
-    limit = tool.max_gamma_settings
-    if limit and used > limit:
-        out.append(f"the readings already use {used} angles of incidence, more than "
-                   f"--gamma-settings {limit}: the proposals stay at the measured ones")
-    return out
 
 
 def _cmd_campaign(args) -> int:

@@ -926,6 +926,7 @@ def diagnose(measurements, model="two-lobe", *, extensions: Sequence[str] | None
         raise TypeError(f"diagnose() got unexpected keyword arguments {sorted(legacy)}")
     t0 = time.perf_counter()
     _check_settings(extensions, max_effects, seed, min_share, alpha)
+    separate = check_int(separate, "separate", 0)  # was read as max(separate, 0)
     meas = as_measurements(measurements)
     base_model = get_model(model)
     names = list(EXTENSIONS) if extensions is None else list(extensions)

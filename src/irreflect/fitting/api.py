@@ -210,6 +210,10 @@ def _options(options: FitOptions | None, settings: dict) -> FitOptions:
                         f"settings: {', '.join(FIT_SETTINGS)})")
     if options is None:
         return FitOptions(**settings) if settings else _DEFAULT_OPTIONS
+    if not isinstance(options, FitOptions):  # a dict raised AttributeError deep inside
+        raise IrreflectError(f"options must be an irreflect.fitting.FitOptions (or None); "
+                             f"found {type(options).__name__}: pass the settings as keywords, "
+                             "e.g. fit(data, seed=0, n_random_starts=8)")
     return dataclasses.replace(options, **settings) if settings else options
 
 

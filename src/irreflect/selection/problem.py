@@ -511,7 +511,7 @@ def check_sizes(n: int, n_params: int, max_points: int | None, candidates) -> tu
     n_max = n_allowed if max_points is None else int(max_points)
     if n_max < n_min:
         raise IrreflectError(
-            f"--max-points must be at least {n_min} (the model's {n_params} parameters and a "
+            f"max_points (--max-points) must be at least {n_min} (the model's {n_params} parameters and a "
             f"degree of freedom); found {n_max}"
         )
     return n_min, min(n_max, n_allowed)
