@@ -23,6 +23,34 @@ def test_fit_json_has_the_documented_keys(capsys):
     assert 0.98 < out["r2"] < 1.0
 
 
+def test_fit_warns_when_the_sigma_column_decides_the_fit(tmp_path, capsys):
+    from tests.test_fitting import _lorentzian_lobe_table
+
+    path = tmp_path / "lorentz.csv"
+    _lorentzian_lobe_table(sigma_rel=0.02).to_frame().to_csv(path, index=False)
+    material = tmp_path / "m.json"
+    assert main(["fit", str(path), "--save", str(material)]) == 0
+    captured = capsys.readouterr()
+    assert "the points of smallest sigma decide it" in captured.err
+    assert "irreflect fit --ignore-sigma" in captured.err
+    assert "smallest sigma decide it" in material.read_text()  # the file carries it
+    assert main(["fit", str(path), "--json"]) == 0
+    d = json.loads(capsys.readouterr().out)
+    assert d["r2"] < 0.9 and d["unweighted_r2"] > 0.98
+    assert main(["fit", str(path), "--ignore-sigma", "--json"]) == 0
+    captured = capsys.readouterr()
+    d2 = json.loads(captured.out)
+    assert d2["r2"] == pytest.approx(d["unweighted_r2"], abs=1e-9)
+    assert "unweighted_r2" not in d2 and "smallest sigma" not in captured.err
+    # on a table without a sigma column the option does nothing, and says so
+    bare = tmp_path / "bare.csv"
+    lines = [",".join(x.split(",")[:3]) for x in path.read_text().splitlines()]
+    bare.write_text("\n".join(lines) + "\n")
+    assert main(["fit", str(bare), "--ignore-sigma"]) == 0
+    err = capsys.readouterr().err
+    assert "irreflect: warning: --ignore-sigma has no effect: bare has no sigma column" in err
+
+
 def test_fit_report_is_readable(capsys):
     assert main(["fit", str(bundled_dir() / "plasterboard.csv"), "--model", "phong"]) == 0
     out = capsys.readouterr().out

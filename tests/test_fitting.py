@@ -193,6 +193,43 @@ def test_weighted_by_inverse_sigma_squared():
     assert 0.6 < weighted.chi2_reduced < 1.5
 
 
+def _lorentzian_lobe_table(sigma_rel=None, sigma_abs=None, seed=0):
+    """A lobe with tails heavier than cos^n (a misfit of the two-lobe model), noise and a
+    sigma column: relative (growing with the power) or constant."""
+    rng = np.random.default_rng(seed)
+    g, t = np.meshgrid([-10.0, -30.0, -50.0, -70.0], np.arange(-84.0, 85.0, 2.0))
+    g, t = g.ravel(), t.ravel()
+    keep = np.abs(t - g) >= 5
+    g, t = g[keep], t[keep]
+    power = np.cos(np.radians(t)) + 20 / (1 + ((-g - t) / 4) ** 2) ** 1.5
+    sigma = sigma_rel * power if sigma_rel is not None else np.full(power.size, sigma_abs)
+    return Measurements(g, t, power + rng.normal(0, sigma), sigma=sigma, name="lorentz")
+
+
+def test_weights_check_names_a_fit_its_sigma_column_decided():
+    from irreflect.fitting import weights_check
+
+    # a sigma proportional to the power and a model that misfits beyond it: the weighted
+    # fit follows the low tails (R^2 0.856 on the power), the unweighted one the lobe (0.989)
+    meas = _lorentzian_lobe_table(sigma_rel=0.02)
+    weighted = fit(meas, seed=0)
+    text, r2_unweighted = weights_check(meas, weighted)
+    assert weighted.chi2_reduced > 10 and weighted.r2 < 0.9
+    assert r2_unweighted == pytest.approx(fit(meas, seed=0, use_sigma=False).r2, abs=1e-9)
+    assert r2_unweighted > 0.98
+    assert "the points of smallest sigma decide it" in text
+    assert f"R^2 {weighted.r2:.4f}" in text and f"unweighted to {r2_unweighted:.4f}" in text
+    # the same misfit with a constant sigma: the weights change nothing, nothing is said
+    even = _lorentzian_lobe_table(sigma_abs=0.01)
+    flat = fit(even, seed=0)
+    text, r2_unweighted = weights_check(even, flat)
+    assert flat.chi2_reduced > 2 and text == ""
+    assert r2_unweighted == pytest.approx(flat.r2, abs=1e-6)
+    # a fit within its noise is not checked at all
+    assert weights_check("terrazzo", fit("terrazzo"))[0] == ""
+    assert np.isnan(weights_check("terrazzo", fit("terrazzo"))[1])
+
+
 def test_standard_errors_match_a_monte_carlo_of_the_noise():
     truth = TABLE3["terrazzo"]
     fits = np.array([fit(synthetic(truth, noise=0.005, seed=s), use_sigma=False).values

@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import contextlib
+import dataclasses
+import math
 import sys
 
 from .options import (
@@ -52,9 +54,22 @@ def _cmd_fit(args) -> int:
              if args.save is not None else contextlib.nullcontext())
     with claim:  # the material file's path is checked and locked before any work
         meas = load_data(args)
+        if args.ignore_sigma and meas.sigma is None:
+            print(f"irreflect: warning: --ignore-sigma has no effect: {meas.name} has no "
+                  "sigma column (the fit is unweighted)", file=sys.stderr)
         # resolution 0: the plain fit
         result = fit_averaged(meas, model, args.resolution, seed=args.seed or 0,
-                              engine=_engine(meas.n_points))
+                              engine=_engine(meas.n_points), use_sigma=not args.ignore_sigma)
+        unweighted = math.nan
+        if meas.sigma is not None and not args.ignore_sigma:
+            from ..fitting import weights_check
+
+            text, unweighted = weights_check(meas, result, model, args.resolution,
+                                             args.seed or 0)
+            if text:  # said, and carried by the material file
+                print(f"irreflect: warning: {meas.name}, {result.model}: {text}",
+                      file=sys.stderr)
+                result = dataclasses.replace(result, warnings=result.warnings + (text,))
         if args.save is not None:
             from ..room.materials import save_material
 
@@ -66,8 +81,6 @@ def _cmd_fit(args) -> int:
             save_material(result, args.save, data_file=args.data, wavelength_nm=args.wavelength,
                           notes=notes, reflectance=args.reflectance)
     if args.resolution:
-        import sys
-
         from ..models.aperture import unresolved
 
         widths = {-abs(a.gamma_deg): a.lobe_half_width_deg for a in result.verdict().angles}
@@ -81,7 +94,8 @@ def _cmd_fit(args) -> int:
                                       "n_points", "fit_ms", "converged", "message",
                                       "at_bound", "ill_determined", "warnings", "verdict")}
                    | {"polar_error_pct": result.polar_errors()}
-                   | ({"on_all_points": on_all} if on_all else {}))
+                   | ({"on_all_points": on_all} if on_all else {})
+                   | ({"unweighted_r2": unweighted} if math.isfinite(unweighted) else {}))
     else:
         print(f"{meas.name}: {meas.n_points} points, angles of incidence "
               f"{', '.join(f'{g:g}' for g in meas.gammas)} deg")
@@ -145,6 +159,10 @@ def register(sub) -> None:
     p.add_argument("--seed", type=SEED, default=0,
                    help="seed of the random extra starts (default 0)")
     p.add_argument("--json", action="store_true", help="one JSON object on stdout")
+    p.add_argument("--ignore-sigma", action="store_true",
+                   help="fit unweighted although the table has a sigma column (default: "
+                        "weighted by 1/sigma^2; a weighted fit the sigma column decides is "
+                        "warned of)")
     add_resolution_argument(p, "the readings are fitted as the model averaged over it, so "
                                "the coefficients are the material's")
     p.add_argument("--save", metavar="MATERIAL.json",

@@ -46,6 +46,7 @@ from .api import (
     fit_averaged,
     points_at_incidence,
     retry_reasons,
+    weights_check,
 )
 from .engine import ENGINE, ENGINES, uses_kernel
 from .finish import prediction_and_jacobian
@@ -68,6 +69,6 @@ __all__ = [
     "SMALL_TABLE_SEARCH", "STOP_FTOL", "STOP_MAXITER", "STOP_NONFINITE", "STOP_POLISHED",
     "STOP_STUCK", "STOP_XTOL", "FitOptions", "FitResult", "SubsetFits", "check_fit_data", "default_keep",
     "default_screen", "fit", "fit_averaged", "fit_subsets", "judge", "points_at_incidence",
-    "prediction_and_jacobian", "retry_reasons",
+    "prediction_and_jacobian", "retry_reasons", "weights_check",
     "screen_samples", "uses_kernel", "warm",
 ]

@@ -23,7 +23,7 @@ from .._atomic import atomic_directory, atomic_path, claim_output
 from .._progress import progress as progress_display
 from ..data import BUNDLED, Measurements, bundled_dir, load_bundled, read_measurements
 from ..errors import FitWarning, IrreflectError
-from ..fitting import fit
+from ..fitting import fit, weights_check
 from ..paper import paper_tables_dir as _paper_tables_dir
 from ..room.checks import material_notes
 from ..room.scene import load_scene
@@ -156,6 +156,10 @@ def _run_report(out_dir, datasets, recon, quick, seed, data_dir, t_start, bar, a
         for name, meas in datasets.items():
             advance(f"fit {name}")
             fits[name] = fit(meas, seed=seed)
+            text, _ = weights_check(meas, fits[name], seed=seed)
+            if text:  # a weighted fit its sigma column decided: in the report's warnings
+                warnings.warn(FitWarning(f"{meas.name}, {fits[name].model}: {text}"),
+                              stacklevel=2)
         tag("fit", start)
         ctx = ReportContext(datasets=datasets, fits=fits, out_dir=tmp, quick=quick, seed=seed,
                             paper_dir=_paper_tables_dir(), progress=advance,
