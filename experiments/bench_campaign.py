@@ -263,6 +263,7 @@ def run_one(job):
         "ad25": ad.r2.get(n_max, np.nan), "seconds": time.perf_counter() - t0,
         "curve": ad.r2, "bands": {n: v.r2_band for n, v in result.verdicts.items()},
         "stability": {n: v.stability for n, v in result.verdicts.items()},
+        "stops": {n: bool(v.stop) for n, v in result.verdicts.items()},
     }
 
 
