@@ -53,8 +53,9 @@ def test_write_then_read_is_lossless(tmp_path, suffix):
         ("gamma_deg,theta_deg,power\n-10,0,1\n-10,5,abc\n", r"'power' must be numeric; found 'abc' in data row 2"),
         ("gamma_deg,theta_deg,power\n-10,0,1\n-10,5,\n", r"'power' has 1 empty, NaN or infinite.*data row 2"),
         ("gamma_deg,theta_deg,power\n-10,0,1\n-10,5,inf\n", r"infinite"),
-        ("gamma_deg,theta_deg,power\n-10,90,1\n", r"theta_deg must lie strictly between -90 and 90.*found 90"),
-        ("gamma_deg,theta_deg,power\n-95,10,1\n", r"gamma_deg must lie strictly between"),
+        ("gamma_deg,theta_deg,power\n-10,90,1\n", r"every row has an angle of \+-90 deg"),
+        ("gamma_deg,theta_deg,power\n-95,10,1\n", r"gamma_deg must lie within -90 and 90 degrees; found -95"),
+        ("gamma_deg,theta_deg,power\n-10,90,1\n-10,91,1\n", r"theta_deg must lie within.*found 91 in data row 2 \(line 3\)"),
         ("gamma_deg,theta_deg,power,sigma\n-10,0,1,-0.1\n", r"sigma must be > 0 \(a 1-sigma uncertainty; .*\); found -0.1"),
         ("gamma_deg,theta_deg,power,sigma\n-10,0,1,0\n", r"sigma must be > 0 \(a 1-sigma uncertainty; .*\); found 0 in"),
         ("gamma_deg,theta_deg,power\n-10,0,1\n-10,0,2\n", r"duplicated \(gamma_deg, theta_deg\).*--average-duplicates"),
@@ -70,6 +71,23 @@ def test_validation_errors_are_one_line_and_say_how_to_fix(tmp_path, text, patte
     with pytest.raises(DataError, match=pattern) as info:
         read_measurements(_csv(tmp_path, text))
     assert "\n" not in str(info.value)
+
+
+def test_rows_at_ninety_degrees_are_left_out_with_a_note_and_rows_keep_their_lines(tmp_path):
+    # a goniometer sweeping -90..90 writes receivers in the surface plane: the whole file
+    # was refused ("strictly between -90 and 90"); those rows are now left out, with a note
+    text = "gamma_deg,theta_deg,power\n-10,-90,0.001\n" + "".join(
+        f"-10,{t},{1 + np.cos(np.radians(t)):.4f}\n" for t in range(-80, 81, 10)) + \
+        "-10,90,0.002\n-30,90,0.0\n"
+    with pytest.warns(DataNotice, match=r"left out 3 row\(s\) at gamma or theta = \+-90 deg "
+                                        r"\(first data row 1 \(line 2\)\)"):
+        meas = read_measurements(_csv(tmp_path, text))
+    assert meas.n_points == 17 and np.max(np.abs(meas.theta_deg)) == 80
+    # a later error names its row in the file, not its place among the rows kept
+    lines = text.splitlines()
+    lines[3] = "-10,-70,-0.9"
+    with pytest.raises(DataError, match=r"found -0.9 at data row 3 \(line 4\)"):
+        read_measurements(_csv(tmp_path, "\n".join(lines) + "\n"))
 
 
 def test_series_with_different_indexes_are_refused_not_paired_by_position():

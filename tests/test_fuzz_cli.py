@@ -307,7 +307,7 @@ BAD_OPTIONS = [
     ("next", ["{data}", "--model", "nope"]), ("next", ["{data}", "--source-clearance", "nan"]),
     ("campaign", ["{data}", "--strategies", "greedy"]), ("campaign", ["{data}", "--n-max", "3"]),
     ("campaign", ["{data}", "--method", "spline"]), ("campaign", ["{data}", "--noise", "-1"]),
-    ("campaign", ["{data}", "--theta-step", "1"]), ("campaign", ["{data}", "--seed", "-1"]),
+    ("campaign", ["{data}", "--seed", "-1"]),
     ("campaign", ["{data}", "--strategies", ","]), ("campaign", ["{data}", "--out", "{root}/file.txt"]),
     ("campaign", ["{data}", "--out", "{root}/foreign"]),
     ("campaign", ["{data}", "--angle-error", "45", "--strategies", "adaptive"]),

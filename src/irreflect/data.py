@@ -185,13 +185,20 @@ def check_sigma(power: np.ndarray, sigma: np.ndarray, source: str, rows=None,
 class _Rows:
     """How a message names data row ``i`` (0-based): with the file line for a CSV."""
 
-    def __init__(self, lines=None):
+    def __init__(self, lines=None, index=None):
         self.lines = lines
+        self.index = index  # the table's row of each row kept (rows left out before)
 
     def __call__(self, i: int) -> str:
+        i = int(self.index[i]) if self.index is not None else i
         if self.lines is None:
             return f"data row {i + 1}"
         return f"data row {i + 1} (line {self.lines[i]})"
+
+    def kept(self, index) -> _Rows:
+        """The labels of the rows ``index`` (of the rows so far) once the others are left out."""
+        index = np.asarray(index)
+        return _Rows(self.lines, index if self.index is None else self.index[index])
 
 
 _MISSING = {"", "nan", "na", "n/a", "null", "none"}
@@ -288,6 +295,31 @@ def _numeric(df: pd.DataFrame, col: str, source: str, rows: _Rows) -> np.ndarray
             f"first in {rows(i)}: measure it again or remove the row"
         )
     return arr
+
+
+def _leave_out_grazing(gamma, theta, power, sigma, rows, source):
+    """The rows with an angle of exactly +-90 deg (the source or the receiver in the surface
+    plane: a goniometer that sweeps -90..90 writes them; the model has no power there to
+    fit) left out, with a note; an angle beyond +-90 deg is an error."""
+    for col, arr in (("gamma_deg", gamma), ("theta_deg", theta)):
+        out = np.abs(arr) > 90 + 1e-9
+        if out.any():
+            i = int(np.nonzero(out)[0][0])
+            _fail(f"{source}: {col} must lie within -90 and 90 degrees; found {arr[i]:g} in "
+                  f"{rows(i)}: angles are in degrees from the surface normal")
+    at = (np.abs(gamma) >= 90 - 1e-9) | (np.abs(theta) >= 90 - 1e-9)
+    if not at.any():
+        return gamma, theta, power, sigma, rows, None
+    if at.all():
+        _fail(f"{source}: every row has an angle of +-90 deg (in the surface plane): nothing "
+              "to fit; angles are in degrees from the surface normal, strictly between -90 "
+              "and 90")
+    keep = np.nonzero(~at)[0]
+    note = (f"{source}: left out {int(at.sum())} row(s) at gamma or theta = +-90 deg (first "
+            f"{rows(int(np.argmax(at)))}): the source or the receiver lies in the surface "
+            "plane there, where the model has no power to fit")
+    return (gamma[keep], theta[keep], power[keep], None if sigma is None else sigma[keep],
+            rows.kept(keep), note)
 
 
 def _angle_notes(gamma, theta, partial, source) -> tuple[np.ndarray, list[str]]:
@@ -563,14 +595,10 @@ def validate_table(df: pd.DataFrame, source: str = "table", *,
     power = _numeric(df, "power", source, rows)
     sigma = _numeric(df, "sigma", source, rows) if "sigma" in df.columns else None
     notes = []
-    for col, arr in (("gamma_deg", gamma), ("theta_deg", theta)):
-        out = np.abs(arr) >= 90
-        if out.any():
-            i = int(np.nonzero(out)[0][0])
-            _fail(
-                f"{source}: {col} must lie strictly between -90 and 90 degrees; found {arr[i]:g} "
-                f"in {rows(i)}: angles are in degrees from the surface normal"
-            )
+    gamma, theta, power, sigma, rows, grazing = _leave_out_grazing(gamma, theta, power, sigma,
+                                                                  rows, source)
+    if grazing:
+        notes.append(grazing)
     if sigma is not None and np.any(sigma <= 0):
         i = int(np.nonzero(sigma <= 0)[0][0])
         _fail(
