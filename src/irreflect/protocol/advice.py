@@ -247,8 +247,10 @@ class ProtocolVerdict:
                 f"{j.reference_r2:.4f} ({rule})")
         if np.isfinite(j.polar_excess) and j.polar_excess > POLAR_EXCESS_LIMIT:
             text += (f"; at |gamma| = {j.polar_gamma:g} deg its polar-area error is "
-                     f"{j.polar_excess + self.polar_reference:.3g} % against the all-points "
-                     f"fit's {self.polar_reference:.3g} % (more than {POLAR_EXCESS_LIMIT:g} "
+                     f"{metrics.format_polar_error(j.polar_excess + self.polar_reference)} % "
+                     "against the all-points fit's "
+                     f"{metrics.format_polar_error(self.polar_reference)} % (more than "
+                     f"{POLAR_EXCESS_LIMIT:g} "
                      "points worse)")
         return text
 
