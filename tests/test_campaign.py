@@ -775,6 +775,28 @@ def test_a_coarse_receiver_step_says_the_mirror_is_not_reached(tmp_path):
     assert stdout.count("the specular lobe's body, 1 deg from the mirror") == 1
 
 
+@pytest.mark.parametrize("step", ["2.5", "5", "1"])
+def test_a_mirror_within_the_source_clearance_is_blamed_on_it_whatever_the_step(tmp_path,
+                                                                                step):
+    # at gamma 0 the mirror is the source direction: a step of 2.5 deg was told "a
+    # --theta-step of 2 deg or less near the mirror reaches it", which no step does
+    measured = tmp_path / "measured.csv"
+    measured.write_text("gamma_deg,theta_deg,power\n")
+    code, stdout, err = _run(["next", measured, "--gammas", "0", "-30", "-60",
+                              "--theta-min=-80", "--theta-max", "80", "--theta-step", step])
+    assert code == 0, err
+    assert ("the specular peak (theta = -gamma) cannot be measured at gamma 0 deg (within 5 "
+            "deg of the source direction, --source-clearance)") in err
+    assert "--theta-step of 2 deg or less" not in err
+    label = next(line for line in stdout.splitlines() if "design: mirror direction" in line
+                 and line.split()[1] == "0")
+    assert "receiver's step" not in label
+    tool = Instrument(gammas_deg=(0, -30, -60), theta_min=-80, theta_max=80, theta_step=2.5)
+    assert [tool.mirror_blocked(g) for g in (0.0, -2.0, -30.0)] == ["source", "source", None]
+    assert Instrument(gammas_deg=(-70,), theta_min=-80, theta_max=60).mirror_blocked(
+        -70) == "range"
+
+
 def test_next_notes_readings_the_instrument_cannot_take(tmp_path):
     measured = tmp_path / "measured.csv"
     rows = [(g, t, 1.0 + 0.01 * abs(t)) for g in (-20.0, -40.0) for t in (-50.0, 0.0, 30.0)]

@@ -493,3 +493,26 @@ def test_a_log_radius_of_less_than_two_decades_has_three_readable_labels():
     assert len(shown) == 3, shown  # three labels inside the radius drawn, not one
     assert not [t for t in ax.yaxis.get_minorticklabels() if t.get_text()]
     plt.close("all")
+
+
+@pytest.mark.parametrize("radius", ["log", "linear"])
+def test_a_panel_whose_readings_are_all_zero_or_negative_is_drawn(radius):
+    # plot_polar_per_gamma (diagnose's polar_fits.png) stopped with 'Geometric sequence
+    # cannot include zero' when one angle of incidence read only zeros on a log radius
+    from irreflect.data import Measurements
+
+    theta = np.arange(-70.0, 71.0, 10.0)
+    lobe = 1e-4 * np.exp(-0.5 * ((theta - 30.0) / 8.0) ** 2) + 1e-8
+    gamma = np.repeat([-30.0, -80.0, -60.0], theta.size)
+    power = np.concatenate([lobe, np.zeros(theta.size), np.full(theta.size, -1e-9)])
+    meas = Measurements(gamma, np.tile(theta, 3), power)
+    fig = plot_polar_per_gamma(meas, {"fit": lambda g, t: 1e-6 + 0 * np.asarray(t)},
+                               radius=radius)
+    panels = {a.get_title(): a for a in fig.axes if a.name == "polar"}
+    full = panels["gamma = -30 deg"].get_ylim()
+    for title in ("gamma = -80 deg", "gamma = -60 deg"):
+        low, high = panels[title].get_ylim()
+        assert panels[title].get_yscale() == radius
+        assert (low, high) == pytest.approx(full)  # the table's radius, not an empty one
+    assert full[1] == pytest.approx(1e-4 * (1.6 if radius == "log" else 1.25), rel=0.01)
+    plt.close("all")

@@ -598,3 +598,15 @@ def test_the_fit_and_the_protocol_advice_judge_coefficients_by_one_rule():
     result = SimpleNamespace(model="two-lobe", model_object=None, values=values, stderr=stderr,
                              param_names=("u_as", "v_as", "u_nd", "v_nd", "u_ns", "v_ns", "K"))
     assert sorted(n for n, _ in advice._uncertain(result)) == sorted(ill)
+
+
+def test_a_protocol_scoring_above_the_all_points_fit_is_said_to_be_above_it():
+    # a sigma-weighted all-points fit can score below the protocol's fit on plain R^2: the
+    # line read '-0.0517 below the all-points fit's 0.9367'
+    verdict = advice.ProtocolVerdict(advice.judge(0.9884, 0.9367), "the protocol", 12, 7)
+    assert verdict.status == "pass"
+    assert "R^2 0.9884 on all points, 0.0517 above the all-points fit's 0.9367" \
+        in verdict.line()
+    assert "-0.0" not in verdict.text()
+    below = advice.ProtocolVerdict(advice.judge(0.9367, 0.9884), "the protocol", 12, 7)
+    assert "R^2 0.9367 on all points, 0.0517 below the all-points fit's 0.9884" in below.line()

@@ -252,3 +252,28 @@ def test_a_fit_at_one_angle_of_incidence_is_judged_there_and_on_all_points(capsy
     assert v.to_dict()["fitted_at_gamma_deg"] == 30
     assert fit(Measurements(g, t, noisy), "phong").verdict().summary().startswith(
         "verdict: trustworthy: every coefficient")
+
+
+def test_a_polar_area_error_beyond_1000_percent_is_printed_as_such_and_kept_in_json():
+    # a lobe a thousandth of a degree wide gave '1.74e+19 % of the whole curve': a relative
+    # error that large says only that the areas differ by orders of magnitude
+    from irreflect import metrics
+    from irreflect.compare import _fmt_pct
+    from irreflect.verdict import AngleVerdict, FitVerdict
+
+    angle = AngleVerdict(gamma_deg=63.0, n_points=44, polar_error_pct=1.7355e19,
+                         polar_error_at_points_pct=66.74, specular_share=0.69,
+                         lobe_half_width_deg=0.00059, lobe_points_1hw=0, lobe_points_2hw=0,
+                         lobe_matters=True)
+    verdict = FitVerdict(angles=(angle,), at_bound=(), ill_determined=(), converged=True,
+                         saturated_gammas_deg=())
+    text = verdict.summary() + "\n" + "\n".join(verdict.table())
+    assert "(polar-area error 66.7 % at the receivers, > 1000 % of the whole curve)" in text
+    row = next(r for r in verdict.table() if r.split()[0] == "63")
+    assert row.split()[2:5] == ["66.7", ">", "1000"]
+    assert "e+19" not in text
+    assert verdict.angles[0].to_dict()["polar_error_pct"] == pytest.approx(1.7355e19)
+    assert [metrics.format_polar_error(x, ".2f") for x in (1000.0, 1000.01, np.inf)] == [
+        "1000.00", "> 1000", "> 1000"]
+    assert (_fmt_pct(5.74e11), _fmt_pct(250.0), _fmt_pct(np.nan)) == (
+        "> 1000", " 250.0", "     -")

@@ -169,9 +169,9 @@ class Comparison:
 
 
 def _fmt_pct(value) -> str:
-    if not np.isfinite(value):
+    if np.isnan(value):
         return f"{'-':>6}"
-    return f"{value:>6.1f}" if value >= 100 else f"{value:>6.2f}"
+    return f"{metrics.format_polar_error(value, '.1f' if value >= 100 else '.2f'):>6}"
 
 
 # ----------------------------------------------------------------------------- logic

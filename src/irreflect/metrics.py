@@ -153,6 +153,22 @@ def polar_area_error(theta_deg, measured, model_fn, step_deg: float = 0.1,
     return float(100.0 * between / under) if under > 0 else float("nan")
 
 
+#: A relative polar-area error above this (percent) says only that the model's area is of
+#: another order than the measured one (a lobe a thousandth of a degree wide gave 1.74e+19):
+#: text shows it as "> 1000" (JSON keeps the number).
+POLAR_ERROR_SHOWN_MAX = 1000.0
+
+
+def format_polar_error(value, spec: str = ".3g") -> str:
+    """A relative polar-area error (percent, without the sign) as text: ``value`` in
+    ``spec``, or ``"> 1000"`` above :data:`POLAR_ERROR_SHOWN_MAX` (infinite included); NaN
+    is formatted as it is."""
+    value = float(value)
+    if value > POLAR_ERROR_SHOWN_MAX:
+        return f"> {POLAR_ERROR_SHOWN_MAX:g}"
+    return format(value, spec)
+
+
 def polar_area_errors(gamma_deg, theta_deg, measured, predict_deg, step_deg: float = 0.1,
                       model_sampling: str = "measured"):
     """Polar-area error (percent) for each angle of incidence.

@@ -141,8 +141,9 @@ class FitVerdict:
         if self.misshapen:
             out.append("shape not reproduced at |gamma| = "
                        + ", ".join(f"{a.gamma_deg:g} deg (polar-area error "
-                                   f"{a.polar_error_at_points_pct:.3g} % at the receivers, "
-                                   f"{a.polar_error_pct:.3g} % of the whole curve)"
+                                   f"{_pct(a.polar_error_at_points_pct)} % at the "
+                                   f"receivers, {_pct(a.polar_error_pct)} % of the whole "
+                                   "curve)"
                                    for a in self.misshapen))
         if self.at_bound:
             out.append("at a bound: " + ", ".join(self.at_bound))
@@ -160,7 +161,7 @@ class FitVerdict:
             lobes = [a for a in self.angles if a.lobe_matters]
             at = "every angle" if self.fitted_at_deg is None else "that angle"
             text = ("verdict: trustworthy" + self._where() + ": every coefficient determined, "
-                    f"polar-area error of the whole curve <= {worst:.3g} % at {at} of "
+                    f"polar-area error of the whole curve <= {_pct(worst)} % at {at} of "
                     "incidence")
             if lobes:
                 text += (", the specular lobe resolved wherever it matters (>= "
@@ -193,8 +194,8 @@ class FitVerdict:
             if a.lobe_resolved and not a.lobe_matters:
                 word += " (no lobe that matters)" if a.ok else ""
             rows.append(f"{a.gamma_deg:>8g}{a.n_points:>8d}"
-                        f"{_cell(a.polar_error_at_points_pct, 11)}"
-                        f"{_cell(a.polar_error_pct, 13)}"
+                        f"{_pct_cell(a.polar_error_at_points_pct, 11)}"
+                        f"{_pct_cell(a.polar_error_pct, 13)}"
                         f"{a.specular_share:>8.3g}{a.lobe_half_width_deg:>11.3g}"
                         f"{a.lobe_points_1hw:>9d}{a.lobe_points_2hw:>9d}  {word}")
         if any(not np.isfinite(a.polar_error_pct) for a in self.angles):
@@ -215,6 +216,16 @@ class FitVerdict:
 def _cell(x: float, width: int) -> str:
     """A table cell: the number, or '-' where there is none."""
     return f"{x:>{width}.3g}" if np.isfinite(x) else f"{'-':>{width}}"
+
+
+def _pct(x: float) -> str:
+    """A polar-area error (%) in text: '> 1000' beyond what a relative error can say."""
+    return metrics.format_polar_error(x)
+
+
+def _pct_cell(x: float, width: int) -> str:
+    """A table cell of a polar-area error (%): as :func:`_pct`, '-' where there is none."""
+    return f"{_pct(x):>{width}}" if not np.isnan(x) else f"{'-':>{width}}"
 
 
 def _num(x: float):

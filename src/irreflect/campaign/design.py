@@ -262,7 +262,8 @@ def opening_design(instrument, n: int) -> list[tuple[float, float, str]]:
             continue
         taken.append(idx)
         g_, t_ = float(settings[idx, 0]), float(settings[idx, 1])
-        out.append((g_, t_, _said(why, short, kind, g_, t_, tol, t)))
+        out.append((g_, t_, _said(why, short, kind, g_, t_, tol, t,
+                                  instrument.mirror_blocked(g_))))
         if len(out) == n:
             break
     return out
@@ -281,7 +282,7 @@ def _incidence(gamma: float) -> str:
 
 
 def _said(why: str, short: str, kind: str, gamma: float, theta: float, tol: float,
-          target: float | None = None) -> str:
+          target: float | None = None, blocked: str | None = None) -> str:
     """What an opening reading measures: the plan's reason ``why`` when the setting the
     instrument allows is where the plan meant it (the mirror within ``tol``, the source side
     at theta < 0, the normal within 15 deg, the lobe's body on the named side of the mirror,
@@ -289,7 +290,9 @@ def _said(why: str, short: str, kind: str, gamma: float, theta: float, tol: floa
     receiver range that misses the mirror direction must not have its nearest setting
     called the specular peak. Where the plan's own setting (``target``) is not where it
     means (the source side's reading 50 deg short of the mirror, at |gamma| >= 50 deg on the
-    far side), the reading is called what it is; at normal incidence there are no sides."""
+    far side), the reading is called what it is; at normal incidence there are no sides.
+    ``blocked``: why no setting can stand at the mirror direction (``Instrument.
+    mirror_blocked``), named instead of the receiver's step."""
     off = theta + gamma  # signed: > 0 beyond the mirror (toward grazing)
 
     def where(t):
@@ -304,8 +307,11 @@ def _said(why: str, short: str, kind: str, gamma: float, theta: float, tol: floa
                       .replace("far side beyond", "beyond") for x in (why, short))
     shy = "from" if gamma == 0.0 else "beyond" if off > 0 else "short of"
     if where(theta) and kind == "mirror" and abs(off) > MIRROR_NEAR_DEG + 1e-9:
-        return (f"{short}: the setting nearest it, {abs(off):.3g} deg {shy} it (the "
-                "receiver's step does not reach the specular peak)")
+        cause = {"source": "the mirror direction is within the source clearance: no "
+                           "setting reaches the specular peak",
+                 "range": "the mirror direction is beyond the receiver's range"}.get(
+                     blocked, "the receiver's step does not reach the specular peak")
+        return f"{short}: the setting nearest it, {abs(off):.3g} deg {shy} it ({cause})"
     if where(theta):
         return why.replace("{off}", f"{abs(off):.3g}")
     if target is not None and not where(target):

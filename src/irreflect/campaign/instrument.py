@@ -301,6 +301,18 @@ class Instrument:
         return tuple(g for g, d in self._mirror_distances().items()
                      if d > self.reach_tolerance)
 
+    def mirror_blocked(self, gamma: float) -> str | None:
+        """Why no receiver setting can stand at the mirror direction (theta = -gamma) of
+        ``gamma``, whatever the step: ``"range"`` (beyond the receiver's range),
+        ``"source"`` (within the source clearance: at normal incidence the mirror is the
+        source direction), or None."""
+        mirror = -float(gamma)
+        if not self.theta_min - 1e-9 <= mirror <= self.theta_max + 1e-9:
+            return "range"
+        if abs(mirror - float(gamma)) < self.source_clearance - 1e-9:
+            return "source"
+        return None
+
     def mirror_offsets(self) -> dict[float, float]:
         """deg: per angle of incidence whose mirror direction the instrument reaches
         (:meth:`mirror_misses`), how far its nearest setting stands from it."""

@@ -160,6 +160,10 @@ def _mirror_warnings(tool) -> list[str]:
     from ..campaign.instrument import MIRROR_NEAR_DEG
 
     off = {g: d for g, d in tool.mirror_offsets().items() if d > MIRROR_NEAR_DEG + 1e-9}
+    # a mirror direction beyond the range or within the source clearance: no step reaches
+    # it, however near its nearest setting (gamma 0 at a step of 2.5 deg blamed the step)
+    blocked_anyway = {g for g in off if tool.mirror_blocked(g)}
+    off = {g: d for g, d in off.items() if g not in blocked_anyway}
     by_offset: dict[str, list[str]] = {}
     for g, d in off.items():
         by_offset.setdefault(f"{d:.3g}", []).append(f"{g:g}")
@@ -169,7 +173,8 @@ def _mirror_warnings(tool) -> list[str]:
                + f": a glossy lobe narrower than that goes unmeasured there (a "
                f"--theta-step of {MIRROR_NEAR_DEG:g} deg or less near the mirror reaches it)"]
               if off else [])
-    missed = tool.mirror_misses()
+    misses = set(tool.mirror_misses()) | blocked_anyway
+    missed = [g for g in map(float, tool.gammas) if g in misses]
     if not missed:
         return coarse
     out_of_range = [g for g in missed if not tool.theta_min <= -g <= tool.theta_max]

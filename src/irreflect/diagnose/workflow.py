@@ -62,6 +62,7 @@ from .._jsonio import finite
 from ..data import Measurements, as_measurements
 from ..errors import FitError, FitWarning, IrreflectError
 from ..fitting import FitResult, fit
+from ..metrics import format_polar_error
 from ..models import ReflectionModel, get_model
 from ..models.extensions import EXTENSIONS, applied_extensions, get_extension
 from ..validation import check_int, check_number, check_seed
@@ -448,7 +449,7 @@ class Diagnosis:
                          + ", ".join(f"{_deg(g)} deg: {v:.3g}" for g, v in worst))
             if a.polar_errors:
                 lines.append("  polar-area error (section 5.3): "
-                             + ", ".join(f"{_deg(g)} deg {e:.2f}%"
+                             + ", ".join(f"{_deg(g)} deg {format_polar_error(e, '.2f')}%"
                                          for g, e in a.polar_errors.items()))
             if i > 0:
                 prev = self.steps[i - 1]

@@ -195,7 +195,8 @@ class FitResult:
         if errors:
             lines.append("relative polar-area error per angle of incidence (section 5.3, the "
                          "model at the measured receivers):")
-            lines.append("  " + "  ".join(f"{g:g} deg: {e:.2f}%" for g, e in errors.items()))
+            lines.append("  " + "  ".join(f"{g:g} deg: {metrics.format_polar_error(e, '.2f')}%"
+                                          for g, e in errors.items()))
         lines.append("per angle of incidence (the model's continuous curve; lobe half width "
                      "and the receivers within one and two half widths of the mirror):")
         lines += ["  " + row for row in verdict.table()]

@@ -68,7 +68,9 @@ def _set_log_radius(ax, low: float, high: float) -> None:
     """A logarithmic radius from ``low`` to ``high`` with a few readable labels: at most
     four decades labelled, no minor-tick labels, and three plain labels when the range
     spans less than two decades (matplotlib's own labels then overprint each other, or
-    label one tick only)."""
+    label one tick only). A ``high`` not above ``low`` (a panel whose readings are all zero
+    or negative) is raised to a decade above it: there is no range to draw."""
+    high = high if high > low else 10.0 * low
     ax.set_rscale("log")
     ax.set_rlim(low, high)
     ticker = matplotlib.ticker
@@ -105,7 +107,7 @@ class _PolarScale:
         if self.log:
             _set_log_radius(ax, self.floor, top * 1.6)
         else:
-            ax.set_rlim(0.0, top * 1.08)
+            ax.set_rlim(0.0, top * 1.08 if top > 0 else 1.0)
 
     def caption(self) -> str:
         scale = (f"logarithmic radius from {self.floor:.2g}" if self.log else "linear radius")
@@ -251,11 +253,13 @@ def plot_polar_per_gamma(measurements, curves: dict, fig=None, *, title=None, st
             _curve(ax, scale, grid, values, label=label, **kw)
             if _flag_negative(ax, scale, grid, values):
                 negative.append(label)
+        if top <= scale.floor:  # nothing drawable measured here (all zero or negative):
+            top = scale.top     # the whole table's radius, as in a single diagram
         # a sharp model peak between receivers must not squash the measured curve
         if scale.log:
             _set_log_radius(ax, scale.floor, top * 1.6)
         else:
-            ax.set_rlim(0.0, 1.25 * top)
+            ax.set_rlim(0.0, 1.25 * top if top > 0 else 1.0)
         ax.set_title(plain(f"gamma = {g:g} deg") + (f"\n{', '.join(negative)}: power < 0"
                                              if negative else ""),
                      fontsize=9, color="red" if negative else "k")

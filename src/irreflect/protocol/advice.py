@@ -240,13 +240,17 @@ class ProtocolVerdict:
                      f"{j.noise_allowance:.2g}")
         rule += f"; fails beyond {j.fail_margin:.2g}"
         worse = ", worse than a constant" if j.r2 < 0 else ""
+        # a sigma-weighted all-points fit may score below the protocol's on plain R^2
+        gap = (f"{j.drop:.4f} below" if j.drop >= 0 else f"{-j.drop:.4f} above")
         text = (f"verdict: {word}: the model fitted on {self.what}'s points has R^2 "
-                f"{j.r2:.4f} on all points{worse}, {j.drop:.4f} below the all-points fit's "
+                f"{j.r2:.4f} on all points{worse}, {gap} the all-points fit's "
                 f"{j.reference_r2:.4f} ({rule})")
         if np.isfinite(j.polar_excess) and j.polar_excess > POLAR_EXCESS_LIMIT:
             text += (f"; at |gamma| = {j.polar_gamma:g} deg its polar-area error is "
-                     f"{j.polar_excess + self.polar_reference:.3g} % against the all-points "
-                     f"fit's {self.polar_reference:.3g} % (more than {POLAR_EXCESS_LIMIT:g} "
+                     f"{metrics.format_polar_error(j.polar_excess + self.polar_reference)} % "
+                     "against the all-points fit's "
+                     f"{metrics.format_polar_error(self.polar_reference)} % (more than "
+                     f"{POLAR_EXCESS_LIMIT:g} "
                      "points worse)")
         return text
 

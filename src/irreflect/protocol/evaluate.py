@@ -113,8 +113,9 @@ class ProtocolEvaluation:
             lines.append(f"{name:<12}{value:>12.5g}{self.stderrs[name]:>12.3g}")
         if self.polar_errors:
             lines.append("polar-area error per angle of incidence (section 5.3):")
-            lines.append("  " + "  ".join(f"{g:g} deg: {e:.2f}%"
-                                          for g, e in self.polar_errors.items()))
+            lines.append("  " + "  ".join(
+                f"{g:g} deg: {metrics.format_polar_error(e, '.2f')}%"
+                for g, e in self.polar_errors.items()))
         if self.ill_determined:
             lines.append("ill-determined coefficients: " + "; ".join(self.ill_determined))
         lines += [f"note: {n}" for n in self.notes]

@@ -113,8 +113,8 @@ def _findings(ctx: ReportContext, comparisons) -> list:
             d = comp.scores["two-lobe"].bic - comp.scores[best].bic
             findings.append(Finding(1, name, (
                 f"{best} describes the data better than the two-lobe model (BIC lower by "
-                f"{d:.0f}; mean polar-area error {comp.scores[best].mean_error_pct:.1f} % "
-                f"against {comp.scores['two-lobe'].mean_error_pct:.1f} %)")))
+                f"{d:.0f}; mean polar-area error {_pct(comp.scores[best].mean_error_pct)} % "
+                f"against {_pct(comp.scores['two-lobe'].mean_error_pct)} %)")))
     return findings
 
 
@@ -246,7 +246,7 @@ def _per_dataset(comparisons, table6, recon):
             ts = comp.scores["torrance-sparrow"]
             paint = (f" On our plasterboard reconstruction (the paper compares its plasterboard "
                      f"with Karner's paint) Torrance-Sparrow reaches a mean error of "
-                     f"{ts.mean_error_pct:.1f}% (worst {ts.max_error_pct:.1f}%), against the "
+                     f"{_pct(ts.mean_error_pct)}% (worst {_pct(ts.max_error_pct)}%), against the "
                      "14.6% quoted for paint: different samples, so only the order of "
                      "magnitude compares.")
     return trend, floor, gap, paint
@@ -348,3 +348,9 @@ paint samples that are not available, so these numbers cannot be recomputed here
 The literature models are written in the plane of incidence as received power
 (BRDF x cos(theta) x K, `irreflect models`). {share_text}
 """
+
+
+def _pct(value: float) -> str:
+    """A mean or worst polar-area error (%) in a sentence: '> 1000' beyond what a relative
+    error can say."""
+    return metrics.format_polar_error(value, ".1f")

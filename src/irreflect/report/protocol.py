@@ -177,7 +177,7 @@ def _paper_rows(ctx, res, name, meas, proto, ev, papers):
         findings.append(Finding(0, name, (
             f"the paper's protocol (gammas {gammas} deg) with the power interpolated at "
             f"its exact angles (protocol evaluation) gives R^2 = {ev.r2:.4g} against "
-            f"{ev.reference_r2:.4g}, polar-area error up to {worst_e:.4g} % (at |gamma| "
+            f"{ev.reference_r2:.4g}, polar-area error up to {metrics.format_polar_error(worst_e, '.4g')} % (at |gamma| "
             f"{worst_g:g} deg); cause: " + _first_cause(ev)), key="paper-protocol"))
         if snapped is not None and abs(snapped - ev.r2) > 0.05:
             differ.append(f"{name}: R^2 {snapped:.4g} with the points snapped (Tables 2 "
