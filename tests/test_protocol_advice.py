@@ -471,36 +471,52 @@ def test_a_lobe_point_in_the_source_shadow_is_not_blamed_on_the_receiver_step():
     assert step == 10.0 and "receiver step of at most 10 deg" in text
 
 
-def test_a_pilot_whose_third_angle_lies_beyond_70_deg_is_told_to_raise_theta_max(
-        tmp_path, capsys):
-    """A held-out pilot at |gamma| 15, 45, 75 with receivers to 85 deg: --lobe-from keeps
-    the paper's tool's 70 deg, saw two angles, and was told to measure three. The error now
-    names the option that uses the third; with it the design is made."""
+def test_lobe_from_takes_the_pilots_receiver_range_unless_one_is_given(tmp_path, capsys):
+    """A held-out pilot at |gamma| 15, 45, 75 with receivers -30..85 deg: --lobe-from kept
+    the paper's tool's 70 deg, saw two angles, and was told to pass --theta-max 85. The
+    pilot was measured on the user's tool: its range is now the default, and the design
+    stands at 75 deg; a range given explicitly still wins, with the note naming the
+    option (or its omission) that uses the third angle."""
     def arm(_gamma):
         return np.arange(-30.0, 85.1, 1.0)
 
     pilot = write_table(table(GLOSSY, (15, 45, 75), arm, name="pilot"), tmp_path / "p.csv")
     out = tmp_path / "g.csv"
-    assert main(["protocol", "--lobe-from", str(pilot), "--out", str(out)]) == 2
+    assert main(["protocol", "--lobe-from", str(pilot), "--out", str(out)]) == 0
+    capsys.readouterr()
+    got = pd.read_csv(out)
+    assert sorted(set(got["gamma_deg"])) == [-75.0, -45.0, -15.0]
+    assert got["theta_deg"].min() >= -30.0 and got["theta_deg"].max() > 70.0
+    # the same pilot with the paper's tool's range given: two angles, told what to pass
+    assert main(["protocol", "--lobe-from", str(pilot), "--theta-max", "70",
+                 "--out", str(out)]) == 2
     err = capsys.readouterr().err.strip().splitlines()[-1]
     assert "found 2 within the receiver range (|gamma| <= 70 deg)" in err
-    assert "pass --theta-max 85" in err and "|gamma| 75 deg" in err
-    assert not out.exists()
-    assert main(["protocol", "--lobe-from", str(pilot), "--theta-max", "85",
-                 "--out", str(out)]) == 0
-    assert sorted(set(pd.read_csv(out)["gamma_deg"])) == [-75.0, -45.0, -15.0]
+    assert ("pass --theta-max 85 (theta_max=85 in Python), or leave it out for the scan's "
+            "own range, to use |gamma| 75 deg") in err
     # a pilot with only two angles at all is still told to measure a third
     two = write_table(table(GLOSSY, (15, 45), arm, name="two"), tmp_path / "two.csv")
     assert main(["protocol", "--lobe-from", str(two), "--out", str(out)]) == 2
     assert capsys.readouterr().err.strip().endswith("measure the scan at three or more "
                                                     "angles of incidence")
+    # receivers reaching 85 deg only on the source side (theta -85..60) do not reach the
+    # mirror at 75: no --theta-max is suggested (the reach was |theta|, and said 85)
+    def lopsided(_gamma):
+        return np.arange(-85.0, 60.1, 1.0)
+
+    side = write_table(table(GLOSSY, (15, 45, 75), lopsided, name="side"), tmp_path / "s.csv")
+    assert main(["protocol", "--lobe-from", str(side), "--out", str(out)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()[-1]
+    assert "found 2 within the receiver range (|gamma| <= 60 deg)" in err
+    assert "--theta-max" not in err and err.endswith("angles of incidence")
 
 
 def test_a_design_that_falls_short_on_its_own_pilot_says_so_with_the_cause(tmp_path, capsys):
     """A held-out pilot with |gamma| 72 deg beyond the tool's 70 got a design scoring R^2
-    0.52 on the pilot's points (its own fit: 0.95) with only a note. The design is now judged
+    0.52 on the pilot's points (its own fit: 0.95) with only a note. The design is judged
     on its pilot as evaluate-protocol judges it: a warning, the cause (extrapolation to the
-    angle left out), the option that uses that angle, and the campaign as the remedy."""
+    angle left out), the option that uses that angle, and the campaign as the remedy. By
+    default the pilot's receiver range (to 85 deg) is the tool's, and the design passes."""
     def arm(_gamma):
         return np.arange(-30.0, 85.1, 2.5)
 
@@ -508,7 +524,8 @@ def test_a_design_that_falls_short_on_its_own_pilot_says_so_with_the_cause(tmp_p
               name="pilot")
     pilot = write_table(m, tmp_path / "pilot.csv")
     out = tmp_path / "g.csv"
-    assert main(["protocol", "--lobe-from", str(pilot), "--out", str(out)]) == 0
+    assert main(["protocol", "--lobe-from", str(pilot), "--theta-max", "70",
+                 "--out", str(out)]) == 0
     err = capsys.readouterr().err
     warned = [x for x in err.splitlines() if x.startswith("irreflect: warning: on its own pilot")]
     assert len(warned) == 1 and re.search(r"verdict: (MARGINAL|PROTOCOL FAILS)", warned[0])
@@ -517,14 +534,16 @@ def test_a_design_that_falls_short_on_its_own_pilot_says_so_with_the_cause(tmp_p
     assert "cause: extrapolation beyond the measured angles of incidence" in err
     assert "the table is scored at |gamma| = 60, 75 deg too" in err
     assert ("the pilot's |gamma| 75 deg lies beyond the receiver range (|gamma| <= 70 deg" in err
-            and "pass --theta-max 85" in err)
+            and "pass --theta-max 85 (theta_max=85 in Python), or leave it out for the "
+                "pilot's own range, to design with it" in err)
     no_maker(err)
-    # the option it names: the design uses 75 deg, and passes on its pilot
-    assert main(["protocol", "--lobe-from", str(pilot), "--theta-max", "85",
-                 "--out", str(tmp_path / "g85.csv")]) == 0
-    err = capsys.readouterr().err
-    assert "on its own pilot" not in err and "-75" in err.split("gammas ")[1].split(" deg")[0]
-    proto = glossy_protocol_for(m, theta_max=85.0)
+    # without --theta-max: the pilot's range, the design uses 75 deg and passes on its pilot
+    for extra in ([], ["--theta-max", "85"]):
+        assert main(["protocol", "--lobe-from", str(pilot), *extra,
+                     "--out", str(tmp_path / "g85.csv")]) == 0
+        err = capsys.readouterr().err
+        assert "on its own pilot" not in err and "-75" in err.split("gammas ")[1].split(" deg")[0]
+    proto = glossy_protocol_for(m)
     assert proto.settings["pilot_status"] == "pass" and proto.settings["pilot_r2"] > 0.99
 
 

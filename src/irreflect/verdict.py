@@ -16,7 +16,15 @@ verdict looks at each angle of incidence:
   (a spike the model draws between two receivers counts: the room integrates that curve,
   not its values at the receivers). The shape is not reproduced where the first exceeds
   :data:`POLAR_ERROR_LIMIT` percent, or the second exceeds the first by more than
-  :data:`UNMEASURED_LIMIT` points (the curve has structure no receiver saw);
+  :data:`UNMEASURED_LIMIT` points (the curve has structure no receiver saw). When that
+  excess lies where the specular lobe is (between the receivers bracketing two half widths
+  of the mirror) and the receivers there stand more than half a half width apart, the
+  comparison with the measured points joined by straight lines cannot judge the lobe's
+  shape: the lobe is *under-sampled* there (a receiver step of half its half width lets
+  straight segments miss under 5 % of its polar area; one of a whole half width, 15 %), and
+  the verdict says so instead of "shape not reproduced" (a table of the model's own law
+  with receivers 5 deg apart and a lobe 3.5 deg wide was said not to reproduce its shape,
+  20-50 % of the whole curve, with its coefficients recovered within 4 %);
 * **the coefficients**: at a bound of their physical range, ill-determined, or a search
   that did not converge (the fit's own checks);
 * **a fit at one angle of incidence** (``MODEL@G``, the paper's Phong at 10 deg): it is
@@ -62,6 +70,15 @@ class AngleVerdict:
     lobe_points_1hw: int  # receivers within one half width of the mirror direction
     lobe_points_2hw: int  # ... within two half widths
     lobe_matters: bool
+    #: the curve's excess over the error at the receivers lies in the lobe's window, where
+    #: the receivers stand too far apart for straight segments to follow the lobe
+    lobe_undersampled: bool = False
+    #: the widest gap between receivers across the lobe's window (deg; NaN: not looked at)
+    lobe_receiver_gap_deg: float = float("nan")
+    #: why the angle has no polar area ("" where it has one): "points" (fewer than two),
+    #: "zero" (every reading zero: no measured area to compare with), "span" (the readings
+    #: stand at one receiver angle)
+    no_area: str = ""
 
     @property
     def lobe_resolved(self) -> bool:
@@ -70,13 +87,20 @@ class AngleVerdict:
 
     @property
     def shape_reproduced(self) -> bool:
+        unmeasured = (self.polar_error_pct - self.polar_error_at_points_pct
+                      > UNMEASURED_LIMIT)
         return not (self.polar_error_at_points_pct > POLAR_ERROR_LIMIT
-                    or self.polar_error_pct - self.polar_error_at_points_pct
-                    > UNMEASURED_LIMIT)
+                    or (unmeasured and not self.lobe_undersampled))
+
+    @property
+    def step_needed_deg(self) -> float:
+        """The receiver step near the mirror that lets the polar-area comparison follow the
+        lobe (half its half width, rounded down to two digits; NaN without a lobe)."""
+        return _floor2(self.lobe_half_width_deg / 2.0)
 
     @property
     def ok(self) -> bool:
-        return self.lobe_resolved and self.shape_reproduced
+        return self.lobe_resolved and self.shape_reproduced and not self.lobe_undersampled
 
     def to_dict(self) -> dict:
         return {"gamma_deg": self.gamma_deg, "n_points": self.n_points,
@@ -86,7 +110,8 @@ class AngleVerdict:
                 "lobe_half_width_deg": _num(self.lobe_half_width_deg),
                 "lobe_points_1hw": self.lobe_points_1hw,
                 "lobe_points_2hw": self.lobe_points_2hw, "lobe_matters": self.lobe_matters,
-                "lobe_resolved": self.lobe_resolved, "ok": self.ok}
+                "lobe_resolved": self.lobe_resolved,
+                "lobe_undersampled": self.lobe_undersampled, "ok": self.ok}
 
 
 @dataclass(frozen=True)
@@ -120,9 +145,15 @@ class FitVerdict:
         return tuple(a for a in self.angles if not a.shape_reproduced)
 
     @property
+    def undersampled(self) -> tuple[AngleVerdict, ...]:
+        """Angles whose lobe has its points but too few for the polar-area comparison (an
+        unresolved lobe is named as such)."""
+        return tuple(a for a in self.angles if a.lobe_undersampled and a.lobe_resolved)
+
+    @property
     def trustworthy(self) -> bool:
         return (self.converged and not self.at_bound and not self.ill_determined
-                and not self.unresolved and not self.misshapen
+                and not self.unresolved and not self.misshapen and not self.undersampled
                 and not self.misses_other_angles)
 
     def problems(self) -> list[str]:
@@ -138,6 +169,8 @@ class FitVerdict:
                      f"of {a.lobe_half_width_deg:.2g} deg)" for a in self.unresolved]
             out.append("specular lobe not resolved at |gamma| = " + ", ".join(parts)
                        + ": its width is not measured")
+        if self.undersampled:
+            out.append(_undersampled_text(self.undersampled))
         if self.misshapen:
             out.append("shape not reproduced at |gamma| = "
                        + ", ".join(f"{a.gamma_deg:g} deg (polar-area error "
@@ -190,7 +223,8 @@ class FitVerdict:
                 f"{'lobe HWHM':>11}{'in 1 HW':>9}{'in 2 HW':>9}  verdict"]
         for a in self.angles:
             word = "ok" if a.ok else ("lobe unresolved" if not a.lobe_resolved
-                                      else "shape not reproduced")
+                                      else "shape not reproduced" if not a.shape_reproduced
+                                      else "lobe under-sampled")
             if a.lobe_resolved and not a.lobe_matters:
                 word += " (no lobe that matters)" if a.ok else ""
             rows.append(f"{a.gamma_deg:>8g}{a.n_points:>8d}"
@@ -198,8 +232,7 @@ class FitVerdict:
                         f"{_pct_cell(a.polar_error_pct, 13)}"
                         f"{a.specular_share:>8.3g}{a.lobe_half_width_deg:>11.3g}"
                         f"{a.lobe_points_1hw:>9d}{a.lobe_points_2hw:>9d}  {word}")
-        if any(not np.isfinite(a.polar_error_pct) for a in self.angles):
-            rows.append("(-: a polar area needs two or more points at that angle of incidence)")
+        rows += _no_area_notes(self.angles)
         return rows
 
     def to_dict(self) -> dict:
@@ -211,6 +244,71 @@ class FitVerdict:
                 "ill_determined": list(self.ill_determined), "converged": self.converged,
                 "saturated_gammas_deg": list(self.saturated_gammas_deg), **at,
                 "angles": [a.to_dict() for a in self.angles]}
+
+
+def _undersampled_text(angles) -> str:
+    """The problem phrase of the angles whose lobe is under-sampled."""
+    parts = [f"{a.gamma_deg:g} deg (half width {a.lobe_half_width_deg:.2g} deg, receivers up "
+             f"to {a.lobe_receiver_gap_deg:.2g} deg apart across it; polar-area error "
+             f"{a.polar_error_at_points_pct:.3g} % at the receivers, "
+             f"{a.polar_error_pct:.3g} % of the whole curve)" for a in angles]
+    step = min(a.step_needed_deg for a in angles)
+    reach = max(2.0 * a.lobe_half_width_deg for a in angles)
+    return ("specular lobe under-sampled at |gamma| = " + ", ".join(parts)
+            + ": straight lines between the readings cannot follow it, so the polar-area "
+            "error of the curve does not judge its shape there; a receiver step of at most "
+            f"{step:g} deg within +-{reach:.2g} deg of the mirror would resolve it")
+
+
+def _no_area_notes(angles) -> list[str]:
+    """The footnote of the table's '-' cells: why an angle has no polar area."""
+    out = []
+    if any(a.no_area == "points" for a in angles):
+        out.append("(-: a polar area needs two or more points at that angle of incidence)")
+    for reason, text in (("zero", "all {n} readings are zero: an area error is relative to "
+                                  "the measured area, and there is none"),
+                         ("span", "its {n} readings stand at one receiver angle: they span "
+                                  "no area")):
+        for a in angles:
+            if a.no_area == reason:
+                out.append(f"(-: no polar area at |gamma| = {a.gamma_deg:g} deg: "
+                           + text.format(n=a.n_points) + ")")
+    return out
+
+
+def _floor2(x: float) -> float:
+    """``x > 0`` rounded down to two significant digits (a step "at most" must not round
+    up past the value it stands for)."""
+    if not (np.isfinite(x) and x > 0):
+        return float("nan")
+    scale = 10.0 ** (np.floor(np.log10(x)) - 1)
+    return float(np.round(np.floor(x / scale * (1 + 1e-12)) * scale, 12))
+
+
+def _lobe_sampling(theta, measured, model_fn, mirror, hw) -> tuple[float, float]:
+    """Where the model's continuous curve departs from the measured points joined by
+    straight lines beyond what it does at the receivers: the excess (percentage points of
+    the measured polar area, as :func:`irreflect.metrics.polar_area_error` counts it)
+    outside the lobe's window, from the receiver at or before ``mirror - 2 hw`` to the one
+    at or after ``mirror + 2 hw``, and the widest gap between receivers in that window."""
+    order = np.argsort(theta)
+    theta, measured = theta[order], measured[order]
+    below, above = theta[theta <= mirror - 2 * hw], theta[theta >= mirror + 2 * hw]
+    lo = below[-1] if below.size else theta[0]
+    hi = above[0] if above.size else theta[-1]
+    inside = theta[(theta >= lo) & (theta <= hi)]
+    gap = float(np.max(np.diff(inside))) if inside.size > 1 else float("inf")
+    n_steps = max(int(np.ceil((theta[-1] - theta[0]) / 0.1)), 2)
+    grid = np.unique(np.concatenate([np.linspace(theta[0], theta[-1], n_steps + 1), theta]))
+    r_meas = np.interp(grid, theta, measured)
+    r_points = np.interp(grid, theta, np.asarray(model_fn(theta), float))
+    with np.errstate(over="ignore", invalid="ignore"):
+        excess = (np.abs(r_meas**2 - np.asarray(model_fn(grid), float) ** 2)
+                  - np.abs(r_meas**2 - r_points**2))
+        excess = np.where((grid < lo) | (grid > hi), excess, 0.0)
+        under = np.trapezoid(r_meas**2, np.radians(grid))
+        outside = float(100.0 * np.trapezoid(excess, np.radians(grid)) / under)
+    return outside, gap
 
 
 def _cell(x: float, width: int) -> str:
@@ -250,6 +348,30 @@ def _lobe_laws(result, g_abs_deg):
     return nan, nan, nan
 
 
+def _sampling(result, gamma_deg, theta_deg, g, hw, matters, polar) -> dict:
+    """The fields of one angle that say how its receivers sample it: why it has no polar
+    area, and whether its lobe is under-sampled (see the module docstring; ``polar``: the
+    polar-area errors of the curve and at the receivers). An angle whose error at the
+    receivers is beyond :data:`POLAR_ERROR_LIMIT` does not reproduce its shape whatever
+    lies between them, and is not called under-sampled."""
+    # the rows polar_area_errors compared at |gamma| = g (the last signed gamma of that size)
+    signed = [x for x in sorted(np.unique(gamma_deg), key=abs) if abs(abs(x) - g) <= 1e-9]
+    sel = gamma_deg == signed[-1]
+    theta, power = theta_deg[sel], np.asarray(result.power, float)[sel]
+    out = {"no_area": ("points" if sel.sum() < 2 else "span" if np.ptp(theta) <= 0
+                       else "zero" if not np.any(power) else "")}
+    curve, at_points = polar
+    if not (matters and np.isfinite(hw) and hw > 0 and at_points <= POLAR_ERROR_LIMIT
+            and curve - at_points > UNMEASURED_LIMIT):
+        return out
+    outside, gap = _lobe_sampling(
+        theta, power, lambda t: result.predict(np.full_like(t, signed[-1]), t),
+        -float(signed[-1]), hw)
+    out["lobe_receiver_gap_deg"] = gap
+    out["lobe_undersampled"] = bool(outside <= UNMEASURED_LIMIT and gap > hw / 2.0)
+    return out
+
+
 def fit_verdict(result) -> FitVerdict:
     """The verdict of a :class:`irreflect.fitting.FitResult` (see the module docstring)."""
     gamma_deg = np.asarray(result.gamma_deg, float)
@@ -278,7 +400,9 @@ def fit_verdict(result) -> FitVerdict:
             specular_share=float(share[i]), lobe_half_width_deg=hw,
             lobe_points_1hw=int(np.sum(off <= hw)) if np.isfinite(hw) else 0,
             lobe_points_2hw=int(np.sum(off <= 2 * hw)) if np.isfinite(hw) else 0,
-            lobe_matters=matters))
+            lobe_matters=matters,
+            **_sampling(result, gamma_deg, theta_deg, float(g), hw, matters,
+                        (errors.get(float(g), np.nan), at_points.get(float(g), np.nan)))))
     on_all = getattr(result, "on_all_points", None)
     return FitVerdict(angles=tuple(angles), at_bound=tuple(result.at_bound),
                       ill_determined=tuple(result.ill_determined),

@@ -252,9 +252,10 @@ def register(sub) -> None:
                         "(4 per gamma: mirror, lobe width, two diffuse)")
     p.add_argument("--theta-min", type=ANGLE, default=None,
                    help="lowest receiver angle the tool can set (deg; default -70 for --gammas, "
-                        "no limit for --design-from)")
+                        "the pilot's lowest for --design-from and --lobe-from)")
     p.add_argument("--theta-max", type=ANGLE, default=None,
-                   help="highest receiver angle (deg; default 70 for --gammas)")
+                   help="highest receiver angle (deg; default 70 for --gammas, the pilot's "
+                        "highest for --design-from and --lobe-from)")
     p.add_argument("--mirror-offset", type=POSITIVE, default=None,
                    help="lobe-width points around the mirror angle (deg, Eqs. 29-30; default 10)")
     p.add_argument("--wide-offset", type=POSITIVE, default=None,

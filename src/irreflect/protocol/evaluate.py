@@ -353,9 +353,12 @@ def glossy_protocol_for(dense, reference: FitResult | None = None, *,
             "glossy_protocol_for: lobe_factors must be one or more numbers > 0 (lobe offsets "
             f"in half widths of the lobe); found {lobe_factors!r}: pass e.g. (0.5, 1.0, 2.0)")
     lobe_factors = tuple(float(f) for f in factors)
-    # the paper's tool reaches +-70 deg; grazing receivers see effects the model lacks
-    lo = max(float(np.min(dense.theta_deg)), -70.0) if theta_min is None else float(theta_min)
-    hi = min(float(np.max(dense.theta_deg)), 70.0) if theta_max is None else float(theta_max)
+    # the tool's receivers reach what the pilot's did (the pilot was measured on it): a
+    # default of the paper's tool's +-70 deg left a layered pilot's |gamma| 74 and 78 deg
+    # out, clamped its diffuse points to 70 with receivers to 87, and the design failed on
+    # its own pilot (R^2 -1.57); an explicit range still wins
+    lo = float(np.min(dense.theta_deg)) if theta_min is None else float(theta_min)
+    hi = float(np.max(dense.theta_deg)) if theta_max is None else float(theta_max)
     levels = sorted({float(abs(g)) for g in dense.gammas if abs(g) <= hi})
     _check_three_levels(dense, levels, "glossy protocol", hi)  # before the pilot's fit
     if reference is None or not {"u_ns", "v_ns"} <= set(reference.param_names):
@@ -425,7 +428,7 @@ def _judged_on_pilot(proto, dense, reference, levels, hi, seed, settings) -> lis
         return []
     settings["pilot_warning"] = f"on its own pilot {dense.name}: " + verdict.line()
     notes = [settings["pilot_warning"]] + [line.strip() for line in verdict.lines()[1:]]
-    reach = float(np.max(np.abs(dense.theta_deg)))
+    reach = float(np.max(dense.theta_deg))  # the mirror side (theta = |gamma|)
     left = [g for g in sorted({float(abs(g)) for g in dense.gammas} - set(levels)) if g <= reach]
     if left:
         many = len(left) > 1
@@ -434,8 +437,8 @@ def _judged_on_pilot(proto, dense, reference, levels, hi, seed, settings) -> lis
             f"{'lie' if many else 'lies'} beyond the receiver range (|gamma| <= {hi:g} deg: "
             f"{'their mirror directions are' if many else 'its mirror direction is'} out of "
             f"reach) and the design leaves {'them' if many else 'it'} out; its receivers reach "
-            f"{reach:g} deg: pass --theta-max {reach:g} (theta_max={reach:g} in Python) to "
-            f"design with {'them' if many else 'it'}")
+            f"{reach:g} deg: pass --theta-max {reach:g} (theta_max={reach:g} in Python), or "
+            f"leave it out for the pilot's own range, to design with {'them' if many else 'it'}")
     return notes
 
 def evaluation_table(evaluations: dict[str, ProtocolEvaluation], digits: int = 4) -> pd.DataFrame:
@@ -503,13 +506,14 @@ def _check_three_levels(dense, levels, what: str, hi=None) -> None:
     found = short_list(levels, fmt=lambda g: f"{g:g}") if levels else "none"
     fix = "measure the scan at three or more angles of incidence"
     beyond = sorted({float(abs(g)) for g in dense.gammas} - set(levels))
-    reach = float(np.max(np.abs(dense.theta_deg)))
+    reach = float(np.max(dense.theta_deg))  # the mirror side (theta = |gamma|)
     if hi is not None and len(levels) + len(beyond) >= 3 and beyond and beyond[0] <= reach:
-        # the scan has the angles, beyond the paper's tool's 70 deg: its receivers reach
-        # them (a held-out pilot at |gamma| 15, 45, 75 with receivers to 85 deg was told
-        # to measure three angles of incidence)
+        # the scan has the angles, beyond a --theta-max given: its receivers reach them (a
+        # held-out pilot at |gamma| 15, 45, 75 with receivers to 85 deg was told to measure
+        # three angles of incidence when the range was the paper's tool's 70 deg)
         fix = (f"the scan's receivers reach {reach:g} deg: pass --theta-max {reach:g} "
-               f"(theta_max={reach:g} in Python) to use |gamma| {short_list(beyond, fmt=lambda g: f'{g:g}')}"
+               f"(theta_max={reach:g} in Python), or leave it out for the scan's own range, "
+               f"to use |gamma| {short_list(beyond, fmt=lambda g: f'{g:g}')}"
                " deg, or measure a third angle of incidence within the range")
     raise IrreflectError(
         f"{dense.name}: a {what} needs three angles of incidence; found {len(levels)}"

@@ -889,7 +889,8 @@ VERDICT_SCHEMA = sc.Table({
         "polar_error_pct": _VERDICT_NUMBER, "polar_error_at_points_pct": _VERDICT_NUMBER,
         "specular_share": _VERDICT_NUMBER, "lobe_half_width_deg": _VERDICT_NUMBER,
         "lobe_points_1hw": sc.Integer(lo=0), "lobe_points_2hw": sc.Integer(lo=0),
-        "lobe_matters": sc.Boolean(), "lobe_resolved": sc.Boolean(), "ok": sc.Boolean(),
+        "lobe_matters": sc.Boolean(), "lobe_resolved": sc.Boolean(),
+        "lobe_undersampled": sc.Boolean(), "ok": sc.Boolean(),
     }, what="a verdict per angle of incidence"), max_items=10_000),
 }, what="a fit's verdict (as 'irreflect fit --save' writes it)")
 #: The declared schema of a material file (:func:`save_material` writes it).
