@@ -328,7 +328,8 @@ SATURATED_SETTINGS = 3
 
 def _saturation_note(gamma, power, source) -> str | None:
     """A note when :data:`SATURATED_SETTINGS` or more settings read exactly the largest
-    power: a detector (or its amplifier or converter) at the top of its range. Clipped
+    power, and no more than half of them: a detector (or its amplifier or converter) at the
+    top of its range (a table of one power is refused on its own). Clipped
     readings flatten the lobe's top, and a fit widens the lobe to match. (Held-out tables
     with a clipped peak tie 4-92 settings at the maximum; no real, bundled or other
     held-out table ties two.)"""
@@ -337,7 +338,7 @@ def _saturation_note(gamma, power, source) -> str | None:
         return None
     at = np.abs(power - top) <= 1e-12 * top
     count = int(at.sum())
-    if count < SATURATED_SETTINGS:
+    if count < SATURATED_SETTINGS or count > power.size / 2:  # (all equal: power constant)
         return None
     angles = np.unique(np.round(gamma[at], 6))
     return (f"{source}: {count} readings ({count / power.size:.0%}) equal the largest power, "
