@@ -53,7 +53,6 @@ from dataclasses import dataclass, field
 
 import numpy as np
 import pandas as pd
-from scipy import stats
 
 from .. import metrics
 from ..fitting.results import RELATIVE_ERROR_LIMIT, coefficient_scale, uncertain_mask
@@ -172,6 +171,8 @@ def judge(r2: float, reference_r2: float, *, n_points: int = 12, n_params: int =
     """
     allowance = 0.0
     if noise_fraction > 0 and n_points > 0:
+        from scipy import stats  # here: importing scipy.stats costs `irreflect next` 1.7 s
+
         allowance = float(stats.chi2.ppf(NOISE_QUANTILE, max(n_params, 1)) / n_points
                           * noise_fraction)
     pass_margin = max(PASS_MARGIN, allowance)
