@@ -51,6 +51,29 @@ def test_fit_warns_when_the_sigma_column_decides_the_fit(tmp_path, capsys):
     assert "irreflect: warning: --ignore-sigma has no effect: bare has no sigma column" in err
 
 
+def test_fit_carries_a_clipped_top_into_the_material_file(tmp_path, capsys):
+    import numpy as np
+    import pandas as pd
+
+    t = np.arange(-80.0, 81.0, 2.0)
+    frames = []
+    for g in (-20.0, -40.0, -60.0):
+        p = 0.2 * np.cos(np.radians(t)) + 4 * np.exp(-0.5 * ((t + g) / 5) ** 2)
+        frames.append(pd.DataFrame({"gamma_deg": g, "theta_deg": t, "power": p}))
+    table = pd.concat(frames)
+    table["power"] = np.minimum(table["power"], 3.0)  # the detector's top
+    path = tmp_path / "clipped.csv"
+    table.to_csv(path, index=False)
+    material = tmp_path / "m.json"
+    assert main(["fit", str(path), "--save", str(material)]) == 0
+    err = capsys.readouterr().err
+    assert err.count("a saturated detector?") == 1  # said once, when the table was read
+    saved = json.loads(material.read_text())["warnings"]
+    clipped = int((table["power"] == 3.0).sum())
+    assert any(w.startswith(f"clipped: {clipped} readings") and "saturated detector" in w
+               for w in saved), saved
+
+
 def test_fit_report_is_readable(capsys):
     assert main(["fit", str(bundled_dir() / "plasterboard.csv"), "--model", "phong"]) == 0
     out = capsys.readouterr().out

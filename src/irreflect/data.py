@@ -322,11 +322,11 @@ def _leave_out_grazing(gamma, theta, power, sigma, rows, source):
             rows.kept(keep), note)
 
 
-#: :func:`_saturation_note`: this many settings or more reading exactly the largest power.
+#: :func:`saturation_note`: this many settings or more reading exactly the largest power.
 SATURATED_SETTINGS = 3
 
 
-def _saturation_note(gamma, power, source) -> str | None:
+def saturation_note(gamma, power, source) -> str | None:
     """A note when :data:`SATURATED_SETTINGS` or more settings read exactly the largest
     power, and no more than half of them: a detector (or its amplifier or converter) at the
     top of its range (a table of one power is refused on its own). Clipped
@@ -663,7 +663,7 @@ def validate_table(df: pd.DataFrame, source: str = "table", *,
     if partial:
         _check_partial_negative(power, sigma, source, rows, noise_floor)
     for note in () if partial else (_check_negative_power(power, sigma, source, rows),
-                                    _saturation_note(gamma, power, source)):
+                                    saturation_note(gamma, power, source)):
         if note:
             notes.append(note)
     for note in notes:  # said once per table; the CLI prints them as "irreflect: note: ..."

@@ -70,6 +70,11 @@ def _cmd_fit(args) -> int:
                 print(f"irreflect: warning: {meas.name}, {result.model}: {text}",
                       file=sys.stderr)
                 result = dataclasses.replace(result, warnings=result.warnings + (text,))
+        from ..data import saturation_note
+
+        clipped = saturation_note(meas.gamma_deg, meas.power, meas.name)
+        if clipped:  # noted when the table was read; the material file carries it too
+            result = dataclasses.replace(result, warnings=result.warnings + (clipped,))
         if args.save is not None:
             from ..room.materials import save_material
 
