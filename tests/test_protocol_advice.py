@@ -629,3 +629,21 @@ def test_a_protocol_scoring_above_the_all_points_fit_is_said_to_be_above_it():
     assert "-0.0" not in verdict.text()
     below = advice.ProtocolVerdict(advice.judge(0.9367, 0.9884), "the protocol", 12, 7)
     assert "R^2 0.9367 on all points, 0.0517 below the all-points fit's 0.9884" in below.line()
+
+
+def test_an_angle_next_to_a_measured_one_is_not_blamed_as_interpolation():
+    # held-out hetorrance-9623: the pilot had |gamma| 45 and 46 deg, the protocol measured
+    # 46, and the advice was "add an angle of incidence near |gamma| = 45 deg"
+    g = np.repeat([20.0, 45.0, 46.0, 60.0, 76.0], 5)
+    t = np.tile(np.linspace(-60.0, 60.0, 5), 5)
+    dense = SimpleNamespace(gamma_deg=-g, theta_deg=t, power=np.ones(g.size))
+    pred_a = np.ones(g.size)
+    pred_p = np.where(np.isin(g, [45.0, 46.0]), 3.0, 1.0)  # the protocol's model misses there
+    pred_p = np.where(g == 60.0, 1.5, pred_p)
+    pts = pd.DataFrame({"gamma_deg": [-20.0, -46.0, -76.0], "theta_deg": [0.0, 0.0, 0.0]})
+    sp = advice._split(dense, None, pts, pred_p, pred_a, None)
+    assert sp.between[g == 45.0].sum() == 0  # one degree from 46: read as measured
+    assert sp.between[g == 60.0].all()
+    cause = advice._interpolation(sp, "the protocol")
+    assert "near |gamma| = 60 deg" in cause.remedy
+    assert sp.s_between == pytest.approx(5 * 0.25 / (10 * 4 + 5 * 0.25))
