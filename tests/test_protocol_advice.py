@@ -647,3 +647,16 @@ def test_an_angle_next_to_a_measured_one_is_not_blamed_as_interpolation():
     cause = advice._interpolation(sp, "the protocol")
     assert "near |gamma| = 60 deg" in cause.remedy
     assert sp.s_between == pytest.approx(5 * 0.25 / (10 * 4 + 5 * 0.25))
+
+
+@pytest.mark.parametrize("reference, expect", [
+    (30.0, "its polar-area error is 130 % against the all-points fit's 30 %"),
+    (2e4, "its polar-area error and the all-points fit's are both > 1000 %"),
+])
+def test_the_polar_clause_sets_errors_against_each_other_only_when_they_say_something(
+        reference, expect):
+    # layered-9625's verdict read "> 1000 % against the all-points fit's > 1000 %"
+    j = advice.Judgement("fails", 0.5, 0.9, 0.01, 0.05, 0.0, 100.0, 70.0)
+    v = advice.ProtocolVerdict(j, "the protocol", 12, 7, polar_reference=reference)
+    assert expect in v.line()
+    assert "> 1000 % against" not in v.line()

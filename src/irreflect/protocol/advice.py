@@ -252,13 +252,24 @@ class ProtocolVerdict:
                 f"{j.r2:.4f} on all points{worse}, {gap} the all-points fit's "
                 f"{j.reference_r2:.4f} ({rule})")
         if np.isfinite(j.polar_excess) and j.polar_excess > POLAR_EXCESS_LIMIT:
-            text += (f"; at |gamma| = {j.polar_gamma:g} deg its polar-area error is "
-                     f"{metrics.format_polar_error(j.polar_excess + self.polar_reference)} % "
-                     "against the all-points fit's "
-                     f"{metrics.format_polar_error(self.polar_reference)} % (more than "
-                     f"{POLAR_EXCESS_LIMIT:g} "
-                     "points worse)")
+            text += self._polar_clause(j)
         return text
+
+    def _polar_clause(self, j) -> str:
+        """The verdict's polar-area clause; where both errors are beyond what a relative
+        error can say (layered-9625 read "> 1000 % against the all-points fit's > 1000 %"),
+        it says so instead of setting one against the other."""
+        mine = j.polar_excess + self.polar_reference
+        if self.polar_reference > metrics.POLAR_ERROR_SHOWN_MAX:
+            return (f"; at |gamma| = {j.polar_gamma:g} deg its polar-area error and the "
+                    f"all-points fit's are both > {metrics.POLAR_ERROR_SHOWN_MAX:g} % (the "
+                    "model's curve there is of another order than the readings, whatever "
+                    f"the points), its own the larger by more than {POLAR_EXCESS_LIMIT:g} "
+                    "points")
+        return (f"; at |gamma| = {j.polar_gamma:g} deg its polar-area error is "
+                f"{metrics.format_polar_error(mine)} % against the all-points fit's "
+                f"{metrics.format_polar_error(self.polar_reference)} % (more than "
+                f"{POLAR_EXCESS_LIMIT:g} points worse)")
 
     def lines(self) -> list[str]:
         """The verdict line, then one line per cause and per remedy."""
