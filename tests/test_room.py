@@ -679,3 +679,14 @@ def test_a_modulation_faster_than_the_paths_is_warned_of(capsys):
     _warn_wrapped(pd.DataFrame(rows | {"modulation_hz": [5e7, 5e7]}))
     _warn_wrapped(pd.DataFrame(rows | {"modulation_hz": [0.0, 0.0]}))
     assert capsys.readouterr().err == ""
+
+
+def test_load_scene_takes_a_bundled_name_as_the_command_line_does(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)  # no file named office here
+    by_name = load_scene("office")
+    by_path = load_scene(ROOMS / "office.toml")
+    assert by_name.room_materials == by_path.room_materials
+    assert sorted(by_name.materials) == sorted(by_path.materials)
+    assert len(by_name.receivers) == len(by_path.receivers) > 0
+    with pytest.raises(SceneError, match="offic"):
+        load_scene("offic")  # a typo is still a missing file, with its hint

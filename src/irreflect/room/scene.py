@@ -292,8 +292,11 @@ def load_scene(path, *, materials_dir=None) -> Scene:
     """Read and validate a scene TOML file (see the module docstring).
 
     ``materials_dir``: a folder from which material files may be read besides the scene's
-    own folder.
+    own folder. ``path`` may name a bundled scene (``"office"``), as on the command line.
     """
+    from ..data import find_bundled
+
+    path = find_bundled(path, "scene") or path
     try:
         _refuse_other_files(path, None)
         text = read_text(path, "scene", "a scene TOML file (see datasets/rooms/office.toml)",
