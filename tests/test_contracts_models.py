@@ -246,6 +246,16 @@ def test_a_registered_model_is_seen_everywhere():
         get_model("toy-lobe")
 
 
+def test_a_factory_that_returns_no_model_is_a_one_line_error():
+    model_registry.register_model("not-a-model", lambda: {"name": "not-a-model"})
+    try:
+        with pytest.raises(IrreflectError, match="must return a ReflectionModel, found dict"):
+            get_model("not-a-model")
+    finally:
+        model_registry.MODELS.pop("not-a-model")
+        model_registry._MODEL_CACHE.clear()
+
+
 def test_a_registered_extension_reaches_fit_and_diagnose():
     import dataclasses
 

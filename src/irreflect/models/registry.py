@@ -162,6 +162,11 @@ def get_model(model) -> ReflectionModel:
             except TypeError:
                 raise IrreflectError(
                     f"model '{spec.name}' takes no ':{spec.count}' size") from None
+        if not isinstance(built, ReflectionModel):
+            raise IrreflectError(
+                f"model '{spec.name}': its factory (register_model) must return a "
+                f"ReflectionModel, found {type(built).__name__}: return an instance of a "
+                "ReflectionModel subclass (docs/api.md, Models)")
         if spec.extensions:
             built = extend(built, spec.extensions)
         _MODEL_CACHE[key] = built
