@@ -365,3 +365,28 @@ def test_an_angle_whose_readings_are_all_zero_says_so_under_the_table():
     assert rows[-1] == ("(-: no polar area at |gamma| = 60 deg: all 28 readings are zero: an "
                         "area error is relative to the measured area, and there is none)")
     assert not any("needs two or more points" in row for row in rows)
+
+
+def _broad_lobe_table(clip=None, seed=3):
+    """A glossy paint on a 2-deg grid, trustworthy as measured; ``clip``: the detector's
+    top, as a fraction of the largest reading."""
+    p = (0.3, 0.5, 1.0, 0.5, 40.0, 0.0, 1.0)
+    g = np.repeat([-20.0, -40.0, -60.0], 81)
+    t = np.tile(np.arange(-80.0, 81.0, 2.0), 3)
+    clean = two_lobe_power(np.radians(g), np.radians(t), *p)
+    power = clean * (1 + 0.01 * np.random.default_rng(seed).standard_normal(clean.size))
+    if clip is not None:
+        power = np.minimum(power, clip * power.max())
+    return Measurements(g, t, power, name="paint")
+
+
+def test_a_clipped_detector_makes_the_fit_untrustworthy():
+    # held-out ward-9621: 92 of 453 readings at exactly the largest power, called trustworthy
+    clean = _fit(_broad_lobe_table()).verdict()
+    assert clean.trustworthy and not clean.clipped, clean.summary()
+    clipped = _fit(_broad_lobe_table(clip=0.6)).verdict()
+    assert not clipped.trustworthy
+    count, total, _ = clipped.clipped
+    assert 3 <= count <= total // 2 and total == 243
+    assert clipped.problems()[0].startswith(f"a saturated detector? {count} of 243 readings")
+    assert clipped.to_dict()["clipped_readings"] == count

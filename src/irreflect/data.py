@@ -333,18 +333,28 @@ def saturation_note(gamma, power, source) -> str | None:
     readings flatten the lobe's top, and a fit widens the lobe to match. (Held-out tables
     with a clipped peak tie 4-92 settings at the maximum; no real, bundled or other
     held-out table ties two.)"""
-    top = float(np.max(power))
+    found = saturated_readings(gamma, power)
+    if found is None:
+        return None
+    count, top, n_angles = found
+    return (f"{source}: {count} readings ({count / np.size(power):.0%}) equal the largest "
+            f"power, {top:g}, exactly, at {n_angles} angle(s) of incidence: a saturated "
+            "detector? Clipped readings flatten the lobe's top and widen the fitted lobe: "
+            "measure them again with less gain, or leave them out")
+
+
+def saturated_readings(gamma, power) -> tuple[int, float, int] | None:
+    """(how many readings equal the largest power exactly, that power, at how many angles of
+    incidence) when they look like a clipped detector (:func:`saturation_note`), else None."""
+    power = np.asarray(power, float)
+    top = float(np.max(power)) if power.size else float("nan")
     if not top > 0:
         return None
     at = np.abs(power - top) <= 1e-12 * top
     count = int(at.sum())
     if count < SATURATED_SETTINGS or count > power.size / 2:  # (all equal: power constant)
         return None
-    angles = np.unique(np.round(gamma[at], 6))
-    return (f"{source}: {count} readings ({count / power.size:.0%}) equal the largest power, "
-            f"{top:g}, exactly, at {angles.size} angle(s) of incidence: a saturated detector? "
-            "Clipped readings flatten the lobe's top and widen the fitted lobe: measure them "
-            "again with less gain, or leave them out")
+    return count, top, int(np.unique(np.round(np.asarray(gamma, float)[at], 6)).size)
 
 
 def _angle_notes(gamma, theta, partial, source) -> tuple[np.ndarray, list[str]]:

@@ -32,6 +32,12 @@ verdict looks at each angle of incidence:
   the table's points below :data:`irreflect.metrics.MISFIT_R2` (Phong at 10 deg on
   terrazzo: 6.2 % at 10 deg, R^2 0.224 on all 132 points).
 
+* **clipped readings**: three or more readings (at most half the table) equal to the
+  largest power exactly look like a saturated detector (:func:`irreflect.data.
+  saturated_readings`); the fit is of the clipped curve, its lobe wider and lower than the
+  material's (a held-out Ward table with 92 of 453 readings at the maximum was called
+  trustworthy).
+
 A fit is *trustworthy* when none of these is flagged. The summary line leads every fit
 report and is written into material files (``irreflect fit --save``).
 """
@@ -127,6 +133,9 @@ class FitVerdict:
     #: the table's points (``{"n_points", "r2", "rmse"}``); None for a fit of all points
     fitted_at_deg: float | None = None
     on_all_points: dict | None = None
+    #: readings that look clipped by a saturated detector: (how many, of how many, the
+    #: power they share); () when none (:func:`irreflect.data.saturated_readings`)
+    clipped: tuple = ()
 
     @property
     def misses_other_angles(self) -> bool:
@@ -154,11 +163,17 @@ class FitVerdict:
     def trustworthy(self) -> bool:
         return (self.converged and not self.at_bound and not self.ill_determined
                 and not self.unresolved and not self.misshapen and not self.undersampled
-                and not self.misses_other_angles)
+                and not self.misses_other_angles and not self.clipped)
 
     def problems(self) -> list[str]:
         """One phrase per kind of problem (empty when trustworthy)."""
         out = []
+        if self.clipped:  # first: every other finding is of the clipped curve
+            count, total, top = self.clipped
+            out.append(f"a saturated detector? {count} of {total} readings equal the largest "
+                       f"power, {top:g}, exactly: clipped readings flatten the lobe's top, so "
+                       "the fitted lobe is wider and lower than the material's (measure them "
+                       "again with less gain, or leave them out)")
         if self.misses_other_angles:
             out.append(f"fitted at |gamma| = {self.fitted_at_deg:g} deg only, it explains all "
                        f"{self.on_all_points['n_points']} points to R^2 "
@@ -243,6 +258,7 @@ class FitVerdict:
                 "problems": self.problems(), "at_bound": list(self.at_bound),
                 "ill_determined": list(self.ill_determined), "converged": self.converged,
                 "saturated_gammas_deg": list(self.saturated_gammas_deg), **at,
+                "clipped_readings": self.clipped[0] if self.clipped else 0,
                 "angles": [a.to_dict() for a in self.angles]}
 
 
@@ -410,4 +426,13 @@ def fit_verdict(result) -> FitVerdict:
                       saturated_gammas_deg=tuple(float(x) for x in
                                                  result.saturated_gammas_deg),
                       fitted_at_deg=float(g_abs[0]) if on_all and g_abs.size == 1 else None,
-                      on_all_points=dict(on_all) if on_all else None)
+                      on_all_points=dict(on_all) if on_all else None,
+                      clipped=_clipped(gamma_deg, result.power))
+
+
+def _clipped(gamma_deg, power) -> tuple:
+    """:attr:`FitVerdict.clipped` of a fit's readings."""
+    from .data import saturated_readings
+
+    found = saturated_readings(gamma_deg, power)
+    return () if found is None else (found[0], int(np.size(power)), found[1])

@@ -884,6 +884,7 @@ VERDICT_SCHEMA = sc.Table({
     "ill_determined": sc.ListOf(sc.Text(max_len=100, what="a parameter name"), max_items=64),
     "converged": sc.Boolean(),
     "saturated_gammas_deg": sc.ListOf(sc.Number(lo=-90.0, hi=90.0), max_items=10_000),
+    "clipped_readings": sc.Integer(lo=0),  # since stop 46; older files lack it
     "angles": sc.ListOf(sc.Table({
         "gamma_deg": sc.Number(lo=-90.0, hi=90.0), "n_points": sc.Integer(lo=0),
         "polar_error_pct": _VERDICT_NUMBER, "polar_error_at_points_pct": _VERDICT_NUMBER,
