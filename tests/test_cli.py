@@ -51,6 +51,34 @@ def test_fit_warns_when_the_sigma_column_decides_the_fit(tmp_path, capsys):
     assert "irreflect: warning: --ignore-sigma has no effect: bare has no sigma column" in err
 
 
+def test_compare_select_and_diagnose_say_when_the_sigma_column_decides(tmp_path, capsys):
+    # compare ranked the sigma-weighted fits without a word (held-out ggx-sigma-col:
+    # two-lobe R^2 0.271 weighted, 0.987 unweighted); select and diagnose build on that fit
+    from tests.test_fitting import _lorentzian_lobe_table
+
+    path = tmp_path / "lorentz.csv"
+    _lorentzian_lobe_table(sigma_rel=0.02).to_frame().to_csv(path, index=False)
+    assert main(["compare", str(path), "--models", "two-lobe,phong", "--json"]) == 0
+    captured = capsys.readouterr()
+    d = json.loads(captured.out)
+    (warning,) = d["warnings"]
+    assert "two-lobe: R^2 " in warning and "--ignore-sigma" in warning
+    assert warning in captured.err
+    weighted = d["models"]["two-lobe"]["r2"]
+    assert main(["compare", str(path), "--models", "two-lobe,phong", "--json",
+                 "--ignore-sigma"]) == 0
+    d2 = json.loads(capsys.readouterr().out)
+    assert d2["warnings"] == [] and d2["models"]["two-lobe"]["r2"] > weighted + 0.05
+    assert main(["diagnose", str(path), "--max-effects", "0"]) == 0
+    assert "lorentz, two-lobe on all points: weighted by the sigma column" in (
+        capsys.readouterr().err)
+    assert main(["diagnose", str(path), "--max-effects", "0", "--ignore-sigma"]) == 0
+    assert "sigma column" not in capsys.readouterr().err
+    # without a sigma column: nothing to say
+    assert main(["compare", "terrazzo", "--models", "two-lobe", "--json"]) == 0
+    assert json.loads(capsys.readouterr().out)["warnings"] == []
+
+
 def test_fit_carries_a_clipped_top_into_the_material_file(tmp_path, capsys):
     import numpy as np
     import pandas as pd

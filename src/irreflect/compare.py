@@ -107,6 +107,8 @@ class Comparison:
     skipped: dict = field(default_factory=dict)
     #: what was adapted to the table (e.g. phong@ fitted at another angle of incidence)
     notes: tuple = ()
+    #: what the numbers do not say on their own (a sigma column that decided the fits)
+    warnings: tuple = ()
 
     @property
     def gammas(self) -> list[float]:
@@ -141,6 +143,7 @@ class Comparison:
             "best_by_bic": self.best_by_bic,
             "skipped": dict(self.skipped),
             "notes": list(self.notes),
+            "warnings": list(self.warnings),
         }
 
     def format(self) -> str:
@@ -329,7 +332,7 @@ def compare_models(measurements, models=None, *, phong_at_deg: float | None = No
         fits = {}
         notes.append(f"every model fitted as its average over the receiver's {resolution:g} "
                      "deg resolution (the coefficients are the material's)")
-    scores, skipped = {}, {}
+    scores, skipped, sigma_decided = {}, {}, {}
     bar = tqdm(labels, desc=f"compare {meas.name}", unit="model", leave=False,
                disable=(not progress) if progress is not None else None)
     for label in bar:
@@ -344,6 +347,7 @@ def compare_models(measurements, models=None, *, phong_at_deg: float | None = No
                 if result is None or result.n_points != meas.n_points:
                     result = fit_averaged(meas, label, resolution, seed=seed)
                 scores[label] = score(meas, result, label)
+                sigma_decided[label] = _sigma_decided(meas, result, label, resolution, seed)
         except (IrreflectError, FitError) as exc:
             # the data cannot support this model (no usable optimum, too few points): left
             # out when asked; a request that cannot be met (an angle not measured) raises
@@ -354,7 +358,34 @@ def compare_models(measurements, models=None, *, phong_at_deg: float | None = No
         raise IrreflectError(f"{meas.name}: no model could be fitted: "
                              + "; ".join(f"{k}: {v}" for k, v in skipped.items()))
     return Comparison(data_name=meas.name, measurements=meas, scores=scores, skipped=skipped,
-                      notes=tuple(notes))
+                      notes=tuple(notes), warnings=_sigma_warnings(sigma_decided))
+
+
+def _sigma_decided(meas, result, label, resolution, seed) -> tuple | None:
+    """(R^2 on the power weighted, unweighted) when the table's sigma column rather than
+    the power decided ``result`` (:func:`irreflect.fitting.weights_check`), else None."""
+    if meas.sigma is None:
+        return None
+    from .fitting import weights_check
+
+    text, unweighted = weights_check(meas, result, label, resolution or 0.0, seed)
+    return (float(result.r2), float(unweighted)) if text else None
+
+
+def _sigma_warnings(decided: dict) -> tuple[str, ...]:
+    """One warning naming the models whose weighted fit the sigma column decided: the
+    comparison then ranks fits of the sigma, not of the power (a held-out GGX table:
+    two-lobe R^2 0.271 weighted, 0.987 unweighted)."""
+    hit = {k: v for k, v in decided.items() if v is not None}
+    if not hit:
+        return ()
+    listed = "; ".join(f"{k}: R^2 {w:.4f} on the power, {u:.4f} fitted unweighted"
+                       for k, (w, u) in hit.items())
+    return (f"weighted by the sigma column, {len(hit)} model(s) misfit beyond the noise and "
+            f"follow the points of smallest sigma ({listed}): the comparison ranks their fits "
+            "of the sigma, not of the power. Compare unweighted with --ignore-sigma (in "
+            "Python, dataclasses.replace(data, sigma=None)), or give a sigma that includes "
+            "the model's error",)
 
 
 def at_label(comparison: Comparison) -> str | None:

@@ -9,6 +9,7 @@ from .options import (
     FINITE,
     SEED,
     add_data_argument,
+    add_ignore_sigma_argument,
     add_resolution_argument,
     load_data,
     print_json,
@@ -44,6 +45,8 @@ def _cmd_compare(args) -> int:
                                     seed=args.seed, progress=None, skip_failures=True,
                                     resolution=args.resolution)
         written = write_outputs(comparison, args.out) if args.out is not None else []
+    for text in comparison.warnings:
+        print(f"irreflect: warning: {comparison.data_name}: {text}", file=sys.stderr)
     for label, why in comparison.skipped.items():  # said on stderr too, whatever the format
         print(f"irreflect: warning: {comparison.data_name}: {label} left out of the comparison: "
               f"{why}", file=sys.stderr)
@@ -77,6 +80,7 @@ def register(sub) -> None:
     p.add_argument("--seed", type=SEED, default=0, help="seed of every fit (default 0)")
     add_resolution_argument(p, "every model is fitted and scored as its average over it, "
                                "as 'fit --resolution' fits")
+    add_ignore_sigma_argument(p)
     p.add_argument("--json", action="store_true", help="one JSON object on stdout")
     p.add_argument("--out", default=None, metavar="DIR",
                    help="write polar plots per angle of incidence (Fig. 25), a line chart of "

@@ -10,9 +10,11 @@ from .options import (
     NON_NEGATIVE_INT,
     SEED,
     add_data_argument,
+    add_ignore_sigma_argument,
     add_model_argument,
     load_data,
     print_json,
+    warn_if_sigma_decides,
 )
 
 
@@ -33,6 +35,7 @@ def register(sub) -> None:
     )
     add_data_argument(p)
     add_model_argument(p, what="base model")
+    add_ignore_sigma_argument(p)
     p.add_argument("--json", action="store_true", help="one JSON object on stdout")
     p.add_argument("--out", metavar="DIR",
                    help="write residual maps before/after, polar fits and diagnosis.json here "
@@ -88,6 +91,7 @@ def _diagnose(args, extensions) -> int:
     from ..plots.diagnose import write_outputs
 
     meas = load_data(args)
+    warn_if_sigma_decides(meas, args.model, "diagnose looks for what it misses")
     bar = _progress()
     try:
         result = diagnose(meas, args.model, extensions=extensions, max_effects=args.max_effects,

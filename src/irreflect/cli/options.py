@@ -119,7 +119,45 @@ def load_data(args, command: str | None = None, path=None):
     path = args.data if path is None else path
     meas = read_measurements(path, average_duplicates=args.average_duplicates)
     check_points_budget(meas.n_points, command or args.command, str(path))
+    if getattr(args, "drop_sigma", False):
+        if meas.sigma is None:
+            print(f"irreflect: warning: --ignore-sigma has no effect: {meas.name} has no "
+                  "sigma column", file=sys.stderr)
+        else:
+            import dataclasses
+
+            meas = dataclasses.replace(meas, sigma=None)
     return meas
+
+
+def warn_if_sigma_decides(meas, model: str, what: str) -> None:
+    """Warn when the table's sigma column, not the power, decides the weighted all-points fit
+    of ``model`` (:func:`irreflect.fitting.weights_check`); ``what``: what the command does
+    with that fit."""
+    if meas.sigma is None:
+        return
+    import warnings
+
+    from ..errors import FitError, FitWarning
+    from ..fitting import fit, weights_check
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", FitWarning)  # the command's own fits say theirs
+        try:
+            text, _ = weights_check(meas, fit(meas, model), model)
+        except FitError:
+            return
+    if text:
+        print(f"irreflect: warning: {meas.name}, {model} on all points: {text}; {what} "
+              "(--ignore-sigma: unweighted)", file=sys.stderr)
+
+
+def add_ignore_sigma_argument(p) -> None:
+    """``--ignore-sigma``: the table's sigma column is left out (:func:`load_data`)."""
+    p.add_argument("--ignore-sigma", dest="drop_sigma", action="store_true",
+                   help="fit every model equally weighted, leaving the table's sigma column "
+                        "out (when a model misfits beyond the noise, the points of smallest "
+                        "sigma decide a weighted fit: for a curve of power, fit unweighted)")
 
 
 #: Up to this many points, a command that fits once uses the numpy fitter: loading the

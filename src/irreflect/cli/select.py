@@ -25,9 +25,11 @@ from .options import (
     POSITIVE_INT,
     SEED,
     add_data_argument,
+    add_ignore_sigma_argument,
     add_model_argument,
     int_at_least,
     load_data,
+    warn_if_sigma_decides,
 )
 
 PAPER_N = 12  # the paper's protocol size (irreflect.selection.run.PAPER_N)
@@ -159,6 +161,7 @@ def _cmd_select(args) -> int:
         tables = []
         for path in args.data:
             meas = load_data(args, "select", path)
+            warn_if_sigma_decides(meas, args.model, "select scores every subset against it")
             check_selection_budget(meas.n_points, args.max_points, str(path))
             check_search_budget(args.pop_size, args.generations, meas.n_points,
                                 pop_option="--pop-size", gen_option="--generations")
@@ -244,6 +247,7 @@ def register(sub) -> None:
     )
     add_data_argument(p, nargs="+")
     add_model_argument(p)
+    add_ignore_sigma_argument(p)
     p.add_argument("--selector", default="nsga2",
                    help=f"search strategy: {', '.join(SELECTORS)} (default nsga2)")
     p.add_argument("--pop-size", type=int_at_least(2), default=100,
