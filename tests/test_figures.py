@@ -385,6 +385,30 @@ def test_polar_flags_negative_power_and_an_unmeasured_model_peak():
     plt.close("all")
 
 
+def test_polar_flags_readings_it_cannot_draw_at_their_value():
+    # zero and negative readings (noise around zero) sat at the centre unflagged
+    import dataclasses
+
+    glossy = _glossy()
+    power = glossy.power.copy()
+    lows = np.flatnonzero(glossy.gamma_deg == glossy.gammas[0])[:3]
+    power[lows] = [0.0, -1e-4, 0.0]
+    meas = dataclasses.replace(glossy, power=power)
+    for radius, word in (("log", "below the radius' floor or <= 0"), ("linear", "< 0")):
+        ax = plot_polar(meas, radius=radius)
+        flagged = [ln for ln in ax.get_lines() if ln.get_label().startswith("measured ")
+                   and word in ln.get_label()]
+        assert len(flagged) == 1 and flagged[0].get_markerfacecolor() == "none"
+        assert len(flagged[0].get_xdata()) == (3 if radius == "log" else 1)
+    fig = plot_polar_per_gamma(meas, {}, radius="log")
+    assert "measured below the radius' floor or <= 0 (drawn at the centre, open)" in [
+        t.get_text() for t in fig.legends[0].get_texts()]
+    assert plot_polar(glossy, radius="log").get_lines()[0].get_label().startswith("gamma")
+    assert not [ln for ln in plot_polar(glossy, radius="log").get_lines()
+                if ln.get_label().startswith("measured ")]
+    plt.close("all")
+
+
 def test_selection_shows_the_ideal_point_over_the_knee_and_the_threshold_in_its_axis():
     meas = _matte()
     res = run_selection(meas, "two-lobe", pop_size=16, generations=6, max_points=20, seed=0)

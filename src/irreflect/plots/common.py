@@ -122,6 +122,18 @@ def _curve(ax, scale, theta_deg, values, **kw):
     return np.asarray(theta_deg)[low], np.asarray(values)[low]
 
 
+def _flag_undrawable_readings(ax, scale, theta_deg, colour, ms: float) -> None:
+    """Open markers at the centre for readings the radius cannot show: zero or negative
+    (noise around zero), or on a log radius below its floor; the legend says so (they sat
+    at the centre as if measured there, unflagged)."""
+    if len(theta_deg) == 0:
+        return
+    what = ("measured below the radius' floor or <= 0 (drawn at the centre, open)"
+            if scale.log else "measured power < 0 (drawn at the centre, open)")
+    ax.plot(np.radians(theta_deg), np.full(len(theta_deg), scale.floor), "o", ms=ms,
+            mfc="none", color=colour, zorder=5, clip_on=False, label=what)
+
+
 def _flag_negative(ax, scale, theta_deg, values) -> bool:
     """Red downward triangles at the bottom of the radius where a model predicts negative
     power (no power can be negative: such a fit is flawed there); True when any."""
@@ -184,7 +196,8 @@ def plot_polar(measurements, predict=None, ax=None, *, label="fit", title=None,
         :data:`LOG_RADIUS_RANGE`, as on glossy materials, else linear), ``"linear"`` or
         ``"log"``.
 
-    Every measured point is a marker; a model peak with no measured point near it is
+    Every measured point is a marker (open, at the centre, where the radius cannot show it:
+    a reading <= 0, or below a log radius' floor); a model peak with no measured point near it is
     marked (open diamond) and negative predicted power is flagged (red triangles at the
     centre); the legend, to the right of the diagram, names every marker.
     """
@@ -196,10 +209,11 @@ def plot_polar(measurements, predict=None, ax=None, *, label="fit", title=None,
         sel = measurements.gamma_deg == g
         th = measurements.theta_deg[sel]
         p = measurements.power[sel]
-        shown, _ = scale.clip(p)
-        ax.plot(np.radians(th), shown, "o", ms=3.5, color=colour,
+        shown, low = scale.clip(p)
+        ax.plot(np.radians(th[~low]), shown[~low], "o", ms=3.5, color=colour,
                 label=f"gamma = {g:g} deg, measured" if predict is not None
                 else f"gamma = {g:g} deg")
+        _flag_undrawable_readings(ax, scale, th[low], colour, ms=3.5)
         if predict is not None:
             grid = np.linspace(th.min(), th.max(), 721)
             curve = np.asarray(predict(np.full_like(grid, g), grid), float)
@@ -240,8 +254,10 @@ def plot_polar_per_gamma(measurements, curves: dict, fig=None, *, title=None, st
         ax = _polar_axes(fig.add_subplot(nrows, ncols, i + 1, projection="polar"))
         sel = measurements.gamma_deg == g
         th = measurements.theta_deg[sel]
-        shown, _ = scale.clip(measurements.power[sel])
-        ax.plot(np.radians(th), shown, "o", ms=3, color="k", label="measured", zorder=5)
+        shown, low = scale.clip(measurements.power[sel])
+        ax.plot(np.radians(th[~low]), shown[~low], "o", ms=3, color="k", label="measured",
+                zorder=5)
+        _flag_undrawable_readings(ax, scale, th[low], "k", ms=3)
         grid = np.linspace(th.min(), th.max(), 721)
         negative = []
         top = float(np.max(measurements.power[sel]))
