@@ -53,3 +53,17 @@ def test_diagnose_names_the_grazing_peak_not_an_offset(tmp_path, capsys):
     assert main(["diagnose", str(table)]) == 1
     err = capsys.readouterr().err
     assert "peak at grazing receivers" in err and "dominated by an offset" not in err
+
+
+def test_a_sigma_column_of_zeros_is_told_as_a_column_not_one_row(tmp_path, capsys):
+    rows = "".join(f"-{g},{t},{1 + 0.01 * t},0\n" for g in (10, 30, 50) for t in range(-60, 61, 10))
+    table = tmp_path / "zeros.csv"
+    table.write_text("gamma_deg,theta_deg,power,sigma\n" + rows)
+    assert main(["fit", str(table)]) == 2
+    err = capsys.readouterr().err
+    assert "found <= 0 in all 39 rows" in err and "delete the sigma column" in err
+    some = tmp_path / "some.csv"
+    some.write_text("gamma_deg,theta_deg,power,sigma\n"
+                    + rows.replace(",0\n", ",0.01\n").replace(",0.01\n", ",0\n", 3))
+    assert main(["fit", str(some)]) == 2
+    assert "in data row 1 (line 2) and 2 more row(s) (of 39)" in capsys.readouterr().err
