@@ -22,6 +22,7 @@ section: :mod:`irreflect.report.compare`.
 
 from __future__ import annotations
 
+import re
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -332,7 +333,7 @@ def compare_models(measurements, models=None, *, phong_at_deg: float | None = No
         fits = {}
         notes.append(f"every model fitted as its average over the receiver's {resolution:g} "
                      "deg resolution (the coefficients are the material's)")
-    scores, skipped, sigma_decided = {}, {}, {}
+    scores, skipped, sigma_decided, failed_fits = {}, {}, {}, 0
     bar = tqdm(labels, desc=f"compare {meas.name}", unit="model", leave=False,
                disable=(not progress) if progress is not None else None)
     for label in bar:
@@ -354,9 +355,9 @@ def compare_models(measurements, models=None, *, phong_at_deg: float | None = No
             if not skip_failures or not isinstance(exc, FitError | DataError):
                 raise
             skipped[label] = str(exc)
+            failed_fits += isinstance(exc, FitError)
     if not scores:
-        raise IrreflectError(f"{meas.name}: no model could be fitted: "
-                             + "; ".join(f"{k}: {v}" for k, v in skipped.items()))
+        raise _none_fitted(meas.name, skipped, failed_fits)
     return Comparison(data_name=meas.name, measurements=meas, scores=scores, skipped=skipped,
                       notes=tuple(notes), warnings=_sigma_warnings(sigma_decided))
 
@@ -386,6 +387,28 @@ def _sigma_warnings(decided: dict) -> tuple[str, ...]:
             "of the sigma, not of the power. Compare unweighted with --ignore-sigma (in "
             "Python, dataclasses.replace(data, sigma=None)), or give a sigma that includes "
             "the model's error",)
+
+
+_NO_CONSTANT = re.compile(
+    r"^fit of '[^']*' to .*? cannot beat a constant \(R\^2 = ([^ ]+) <= 0\): (.*)$")
+
+
+def _none_fitted(name: str, skipped: dict, failed_fits: int) -> Exception:
+    """The error when no model of a comparison could be fitted: a fit failure (exit 1)
+    when every model's fit failed, else a user error; the advice the models share said
+    once (a velvet-like table of ``experiments/unseen_tables3.py`` repeated it 8 times
+    on one 2,400-character line, exit code 2)."""
+    found = {k: _NO_CONSTANT.match(v) for k, v in skipped.items()}
+    if found and all(found.values()):  # the advice of the whole table's fits, once
+        scores = ", ".join(f"{k} R^2 {m.group(1)}" for k, m in found.items())
+        advice = [m.group(2) for k, m in found.items() if "@" not in k] or [
+            m.group(2) for m in found.values()]
+        text = (f"{name}: no model could be fitted: none beats a constant ({scores}): "
+                + max(advice, key=advice.count))
+    else:
+        text = f"{name}: no model could be fitted: " + "; ".join(
+            f"{k}: {v}" for k, v in skipped.items())
+    return FitError(text) if failed_fits == len(skipped) else IrreflectError(text)
 
 
 def at_label(comparison: Comparison) -> str | None:

@@ -259,6 +259,23 @@ def _separator_hint(header: str) -> str:
     return ""
 
 
+def _bad_sigma(sigma, rows, source) -> None:
+    """Refuse sigma <= 0, saying how many rows hold it: a column of zeros (an instrument
+    that writes 0 when it computes no uncertainty; unseen_tables3's sigma_all_zero) was
+    told only of its first row, as if one reading needed fixing."""
+    bad = np.nonzero(sigma <= 0)[0]
+    i = int(bad[0])
+    if bad.size == sigma.size > 1:
+        _fail(f"{source}: sigma must be > 0 (a 1-sigma uncertainty; fits are weighted by "
+              f"1/sigma^2); found <= 0 in all {sigma.size} rows (max {np.max(sigma):g}): the "
+              "column holds no uncertainties; delete the sigma column to fit unweighted")
+    many = f" and {bad.size - 1} more row(s)" if bad.size > 1 else ""
+    _fail(
+        f"{source}: sigma must be > 0 (a 1-sigma uncertainty; fits are weighted by "
+        f"1/sigma^2); found {sigma[i]:g} in {rows(i)}{many} (of {sigma.size}): give those "
+        "rows' uncertainty, or delete the sigma column to fit unweighted"
+    )
+
 def _numeric(df: pd.DataFrame, col: str, source: str, rows: _Rows) -> np.ndarray:
     raw = df[col]
     kind = pd.api.types.infer_dtype(raw, skipna=True)
@@ -635,12 +652,7 @@ def validate_table(df: pd.DataFrame, source: str = "table", *,
     if grazing:
         notes.append(grazing)
     if sigma is not None and np.any(sigma <= 0):
-        i = int(np.nonzero(sigma <= 0)[0][0])
-        _fail(
-            f"{source}: sigma must be > 0 (a 1-sigma uncertainty; fits are weighted by "
-            f"1/sigma^2); found {sigma[i]:g} in {rows(i)}: give that row's uncertainty, or "
-            "delete the sigma column to fit unweighted"
-        )
+        _bad_sigma(sigma, rows, source)
     peak = float(np.max(np.abs(power)))
     if partial and peak < POWER_RANGE[0]:
         peak = POWER_RANGE[0]

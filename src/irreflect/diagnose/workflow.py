@@ -62,6 +62,7 @@ from .._jsonio import finite
 from ..data import Measurements, as_measurements
 from ..errors import FitError, FitWarning, IrreflectError
 from ..fitting import FitResult, fit
+from ..fitting.shape_hint import peak_summary
 from ..metrics import format_polar_error
 from ..models import ReflectionModel, get_model
 from ..models.extensions import EXTENSIONS, applied_extensions, get_extension
@@ -785,13 +786,17 @@ def _base_fit(meas, base_model, seed):
         if "cannot beat a constant" not in str(exc):
             raise
         lo, hi = float(np.min(meas.power)), float(np.max(meas.power))
+        peaks = peak_summary(meas)
+        cause = ("a power dominated by an offset (stray light, a background) or angles "
+                 "against the convention (gamma < 0 on the source side, mirror at theta = "
+                 f"-gamma); check with 'irreflect fit TABLE --model {base_model.name}"
+                 "+background'")
+        if peaks is not None and peaks[0] != "mirror":  # the table says more (velvet)
+            cause = peaks[1]
         raise FitError(
             f"diagnosis of {meas.name}: the base model '{base_model.name}' cannot beat a "
             f"constant on this table (power {lo:.4g} to {hi:.4g}), and the diagnosis starts "
-            "from its fit: a power dominated by an offset (stray light, a background) or "
-            "angles against the convention (gamma < 0 on the source side, mirror at theta = "
-            f"-gamma); check with 'irreflect fit TABLE --model {base_model.name}+background'"
-        ) from exc
+            f"from its fit: {cause}") from exc
 
 
 def _base_fit_and_noise(meas, base_model, seed, alpha):

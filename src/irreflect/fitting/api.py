@@ -30,6 +30,7 @@ from .options import (
 )
 from .results import FitResult, _check_sigma, _radians_and_weights, check_fit_data, judge
 from .search import fit_plain_table, search_and_finish
+from .shape_hint import explained
 
 #: :func:`retry_reasons`: an R^2 below this, or (weighted by 1/sigma^2) a reduced chi^2
 #: above the other, looks like a local optimum rather than the model's best.
@@ -66,6 +67,15 @@ def _on_all_points(result, meas) -> dict:
         pred = model.predict_deg(result.values, meas.gamma_deg, meas.theta_deg)
     return {"n_points": int(meas.n_points), "r2": float(metrics.r2(meas.power, pred)),
             "rmse": float(metrics.rmse(meas.power, pred))}
+
+
+def _raise_explained(exc: FitError, meas):
+    """Raise ``exc``, its generic advice replaced by where the table's readings peak
+    (:func:`~.shape_hint.explained`) when that says more."""
+    better = explained(exc, meas)
+    if better is exc:
+        raise exc
+    raise better from exc
 
 
 def fit(measurements, model="two-lobe", options: FitOptions | None = None,
@@ -147,11 +157,14 @@ def fit(measurements, model="two-lobe", options: FitOptions | None = None,
         failure = None
     except FitError as exc:
         if not opts.retry:
-            raise
+            _raise_explained(exc, meas)
         result, failure = None, exc
     reasons = retry_reasons(result) if opts.retry else ()
     if reasons:
-        result = _search_again(meas, model, t0, result, failure, reasons, opts)
+        try:
+            result = _search_again(meas, model, t0, result, failure, reasons, opts)
+        except FitError as exc:
+            _raise_explained(exc, meas)
     source = getattr(meas, "name", None) or "table"
     for text in result.warnings:
         warn(FitWarning(f"{source}, {result.model}: {text}"), stacklevel=2)
