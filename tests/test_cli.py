@@ -269,3 +269,22 @@ def test_compare_leaves_out_a_model_that_cannot_be_fitted_and_says_so(tmp_path, 
     assert main(["compare", str(table), "--models", "two-lobe"]) != 0
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "no model could be fitted" in err[0]
+
+
+def test_ignore_sigma_reads_a_table_whose_sigma_column_would_be_refused(tmp_path, capsys):
+    # unseen_tables3 sigma_all_zero: the column was checked (and refused) before
+    # --ignore-sigma applied, so the option could not get around it
+    import pandas as pd
+
+    frame = pd.read_csv(TERRAZZO, comment="#")
+    frame["sigma"] = 0.0
+    path = tmp_path / "zeros.csv"
+    frame.to_csv(path, index=False)
+    assert main(["fit", str(path)]) == 2
+    assert "sigma" in capsys.readouterr().err
+    assert main(["fit", str(path), "--ignore-sigma", "--json"]) == 0
+    captured = capsys.readouterr()
+    assert json.loads(captured.out)["n_points"] == len(frame)
+    assert "has no effect" not in captured.err
+    assert main(["compare", str(path), "--models", "two-lobe", "--ignore-sigma"]) == 0
+    assert "has no effect" not in capsys.readouterr().err

@@ -700,10 +700,16 @@ def validate_table(df: pd.DataFrame, source: str = "table", *,
 _SUFFIXES = (".csv", ".txt", "", ".parquet", ".pq")
 
 
+#: The note a table read with ``ignore_sigma`` carries when it had a sigma column.
+SIGMA_LEFT_OUT = "sigma column left out, unchecked (ignore_sigma)"
+
+
 def read_measurements(path, *, average_duplicates: bool = False,
-                      partial: bool = False) -> Measurements:
+                      partial: bool = False, ignore_sigma: bool = False) -> Measurements:
     """Read and validate a CSV or Parquet measurement table (``partial``: a campaign's
-    readings so far, see :func:`validate_table`).
+    readings so far, see :func:`validate_table`). ``ignore_sigma``: a sigma column is left
+    out before it is checked (a column of zeros is then no error), and the table's notes
+    say so (:data:`SIGMA_LEFT_OUT`).
 
     CSV: UTF-8 text (a byte-order mark is allowed), a header line, commas between fields,
     ``.`` as decimal point, ``#`` starts a comment. Every row must have as many fields as
@@ -736,9 +742,14 @@ def read_measurements(path, *, average_duplicates: bool = False,
         lines = None
     else:
         df, lines = _read_csv(path, raw)
-    return validate_table(df, str(path), average_duplicates=average_duplicates,
-                          partial=partial, name=path.stem,
-                          _row_lines=lines)
+    dropped = ignore_sigma and "sigma" in df.columns
+    if dropped:
+        df = df.drop(columns=["sigma"])
+    meas = validate_table(df, str(path), average_duplicates=average_duplicates,
+                          partial=partial, name=path.stem, _row_lines=lines)
+    if dropped:
+        meas = replace(meas, notes=meas.notes + (SIGMA_LEFT_OUT,))
+    return meas
 
 
 _EXPECTED = "a CSV or Parquet measurement table"

@@ -53,10 +53,7 @@ def _cmd_fit(args) -> int:
     claim = (claim_output(args.save, "file", "--save", suffixes=(".json",))
              if args.save is not None else contextlib.nullcontext())
     with claim:  # the material file's path is checked and locked before any work
-        meas = load_data(args)
-        if args.ignore_sigma and meas.sigma is None:
-            print(f"irreflect: warning: --ignore-sigma has no effect: {meas.name} has no "
-                  "sigma column (the fit is unweighted)", file=sys.stderr)
+        meas = load_data(args)  # with --ignore-sigma, without its sigma column
         # resolution 0: the plain fit
         result = fit_averaged(meas, model, args.resolution, seed=args.seed or 0,
                               engine=_engine(meas.n_points), use_sigma=not args.ignore_sigma)

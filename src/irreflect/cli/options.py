@@ -113,20 +113,19 @@ def add_resolution_argument(parser: argparse.ArgumentParser, effect: str) -> Non
 def load_data(args, command: str | None = None, path=None):
     """Read the DATA table of a command and refuse it up front when it is larger than the
     command's memory budget (:data:`irreflect.validation.POINT_BUDGET`)."""
-    from ..data import read_measurements
+    from ..data import SIGMA_LEFT_OUT, read_measurements
     from ..validation import check_points_budget
 
     path = args.data if path is None else path
-    meas = read_measurements(path, average_duplicates=args.average_duplicates)
+    # --ignore-sigma: the column is left out before it is checked (a column of zeros is
+    # then no error: the option is the way around it)
+    drop = bool(getattr(args, "drop_sigma", False) or getattr(args, "ignore_sigma", False))
+    meas = read_measurements(path, average_duplicates=args.average_duplicates,
+                             ignore_sigma=drop)
     check_points_budget(meas.n_points, command or args.command, str(path))
-    if getattr(args, "drop_sigma", False):
-        if meas.sigma is None:
-            print(f"irreflect: warning: --ignore-sigma has no effect: {meas.name} has no "
-                  "sigma column", file=sys.stderr)
-        else:
-            import dataclasses
-
-            meas = dataclasses.replace(meas, sigma=None)
+    if drop and SIGMA_LEFT_OUT not in meas.notes:
+        print(f"irreflect: warning: --ignore-sigma has no effect: {meas.name} has no "
+              "sigma column", file=sys.stderr)
     return meas
 
 
