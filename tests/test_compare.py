@@ -295,3 +295,18 @@ def test_compare_with_the_receivers_resolution_fits_every_model_averaged(tmp_pat
     for bad in (-1, 95):  # checked as fit --resolution checks it
         with pytest.raises(IrreflectError, match=r"receiver's resolution \(--resolution, deg\)"):
             compare_models(meas, "two-lobe", resolution=bad)
+
+
+def test_a_table_of_one_angle_of_incidence_says_what_its_comparison_cannot_judge():
+    # unseen_tables3 one_gamma: 'best by BIC: ward' with no word that one angle of
+    # incidence cannot judge how the models vary with it
+    terrazzo = load_bundled("terrazzo")
+    keep = terrazzo.gamma_deg == terrazzo.gamma_deg[0]
+    one = Measurements(terrazzo.gamma_deg[keep], terrazzo.theta_deg[keep],
+                       terrazzo.power[keep], name="one")
+    notes = compare_models(one, "two-lobe,phong").notes
+    assert any("has one angle of incidence" in n for n in notes)
+    assert not any("one angle of incidence" in n
+                   for n in compare_models(terrazzo, "two-lobe,phong").notes)
+    assert not any("one angle of incidence" in n  # a single model is not compared
+                   for n in compare_models(one, "phong").notes)

@@ -328,6 +328,12 @@ def compare_models(measurements, models=None, *, phong_at_deg: float | None = No
         if note and any("@" in m and m in defaults for m in parse_model_list(text, phong_at_deg)):
             notes.append(note)
     labels = parse_model_list(text, phong_at_deg)
+    n_gammas = np.unique(np.round(np.abs(meas.gamma_deg), 6)).size
+    if n_gammas == 1 and len(labels) > 1:  # ward came out best by BIC on such a table
+        notes.append(f"{meas.name} has one angle of incidence ({abs(meas.gamma_deg[0]):g} "
+                     "deg): the comparison judges each model's curve there only, not how it "
+                     "varies with the angle of incidence (the two-lobe model's laws in gamma "
+                     "are not determined); measure two more angles to compare that")
     fits = fits or {}
     if resolution:
         fits = {}
