@@ -262,3 +262,23 @@ def test_columns_have_one_number_format(report_dir):
                 assert len({len(c.split(".")[1]) for c in fixed}) == 1, (path.name, column)
             elif cells:
                 assert not fixed, (path.name, column, cells[:4])  # all scientific
+
+
+def test_two_sections_findings_on_one_item_count_once():
+    # reproduce --quick printed "2 failure(s) listed first" over one listed item: two
+    # sections' failures on the same protocol (same key), merged in the list, counted apart
+    from types import SimpleNamespace
+
+    from irreflect.report.base import Finding, Section
+    from irreflect.report.runner import findings_section, merged_findings
+
+    ctx = SimpleNamespace(datasets={"a": None, "b": None})
+    one = Section("x", "X", "", findings=[Finding(0, "a", "snapped fails", "paper-protocol")])
+    two = Section("y", "Y", "", findings=[Finding(0, "a", "interpolated fails",
+                                                  "paper-protocol"),
+                                          Finding(1, "b", "a caution")])
+    items = merged_findings([one, two], ctx)
+    assert [f.severity for f in items] == [0, 1]
+    assert items[0].text == "snapped fails; interpolated fails"
+    md = findings_section([one, two], ctx).markdown
+    assert md.count("\n- ") + md.startswith("- ") == 2

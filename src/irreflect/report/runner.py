@@ -173,8 +173,11 @@ def _run_report(out_dir, datasets, recon, quick, seed, data_dir, t_start, bar, a
             tag(key, start)
         notes = fit_warnings.collect(tagged)
         sections.append(_warnings_section(notes, list(datasets)))
-        sections.insert(0, findings_section(
-            sections, ctx, extra=fit_warnings.findings(notes, list(datasets))))
+        extra = fit_warnings.findings(notes, list(datasets))
+        # counted as the findings section lists them: one per dataset and kind (two
+        # sections' findings on one protocol were "2 failure(s) listed first" over one item)
+        n_fail = sum(f.severity == 0 for f in merged_findings(sections, ctx, extra))
+        sections.insert(0, findings_section(sections, ctx, extra=extra))
         seconds = time.perf_counter() - t_start
         source = ("the bundled reconstructions, datasets/" if data_dir is None
                   else f"the tables of {data_dir}")
@@ -182,7 +185,6 @@ def _run_report(out_dir, datasets, recon, quick, seed, data_dir, t_start, bar, a
     bar.close()
     seconds = time.perf_counter() - t_start
     n_groups = len(sections[-1].tables.get("fit_warnings", ()))
-    n_fail = sum(f.severity == 0 for s in sections for f in s.findings)
     print(f"irreflect reproduce: wrote {out_dir}/report.md and {out_dir}/report.html "
           f"({sum(len(s.tables) for s in sections)} tables, "
           f"{sum(len(s.figures) for s in sections)} figures) in {seconds:.1f} s"
@@ -196,18 +198,12 @@ def _run_report(out_dir, datasets, recon, quick, seed, data_dir, t_start, bar, a
                          if f.severity == 0]}
 
 
-def findings_section(sections: list[Section], ctx: ReportContext, extra=()) -> Section:
-    """What the run found, failures first: every section's findings in one list, and
-    ``extra`` ones (the run's fit warnings, counted per table:
-    :func:`irreflect.report.fit_warnings.findings`). It says that nothing failed only when
-    nothing failed and nothing warned."""
-    items = [f for s in sections for f in s.findings] + list(extra)
-    if not items:
-        return Section("findings", "What this run found",
-                       "Nothing failed and no fit warned; the sections below give the numbers.")
+def merged_findings(sections: list[Section], ctx: ReportContext, extra=()) -> list:
+    """Every section's findings and ``extra``, one per (dataset, key) (the most severe
+    first, texts joined), failures first, then by dataset."""
     order = {name: i for i, name in enumerate(ctx.datasets)}
     merged: dict = {}
-    for f in items:  # one item per (dataset, key): the most severe first, texts joined
+    for f in [f for s in sections for f in s.findings] + list(extra):
         k = (f.dataset, f.key) if f.key else (f.dataset, f.text)
         if k in merged:
             first = merged[k]
@@ -215,8 +211,19 @@ def findings_section(sections: list[Section], ctx: ReportContext, extra=()) -> S
             merged[k] = Finding(a.severity, a.dataset, a.text + "; " + b.text, a.key)
         else:
             merged[k] = f
-    items = sorted(merged.values(),
-                   key=lambda f: (f.severity, order.get(f.dataset, len(order)), f.dataset))
+    return sorted(merged.values(),
+                  key=lambda f: (f.severity, order.get(f.dataset, len(order)), f.dataset))
+
+
+def findings_section(sections: list[Section], ctx: ReportContext, extra=()) -> Section:
+    """What the run found, failures first: every section's findings in one list, and
+    ``extra`` ones (the run's fit warnings, counted per table:
+    :func:`irreflect.report.fit_warnings.findings`). It says that nothing failed only when
+    nothing failed and nothing warned."""
+    items = merged_findings(sections, ctx, extra)
+    if not items:
+        return Section("findings", "What this run found",
+                       "Nothing failed and no fit warned; the sections below give the numbers.")
     md = []
     for severity, label in SEVERITIES.items():
         group = [f for f in items if f.severity == severity]
