@@ -1848,3 +1848,19 @@ def test_campaign_r2_against_reads_a_table_by_name_or_path_and_checks_its_name()
         campaign.r2_against([1.0, 2.0])
     with pytest.raises(IrreflectError, match="name must be text .*; found 5"):
         Campaign(Instrument(gammas_deg=(-10, -50)), name=5)
+
+
+def test_next_notes_readings_clipped_at_the_detector_top(tmp_path):
+    # a dense table with 3+ readings at exactly its largest power gets the saturation note;
+    # a campaign's readings did not (partial tables skipped it)
+    measured = tmp_path / "measured.csv"
+    rows = ["gamma_deg,theta_deg,power", "-20,20,5.0", "-40,40,5.0", "-60,60,5.0",
+            "-20,-30,0.8", "-40,0,0.9", "-60,0,0.7", "-20,21,4.1", "-60,10,0.6"]
+    measured.write_text("\n".join(rows) + "\n")
+    code, _, err = _run(["next", measured, "--gammas", "-20", "-40", "-60"])
+    assert code == 0, err
+    assert "3 readings (38%) equal the largest power, 5, exactly" in err
+    measured.write_text("\n".join(rows[:3] + ["-60,60,4.9"] + rows[4:]) + "\n")
+    code, _, err = _run(["next", measured, "--gammas", "-20", "-40", "-60"])
+    assert code == 0, err
+    assert "saturated detector" not in err

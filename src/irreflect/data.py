@@ -684,8 +684,11 @@ def validate_table(df: pd.DataFrame, source: str = "table", *,
         rows = _Rows()  # row numbers no longer match the file
     if partial:
         _check_partial_negative(power, sigma, source, rows, noise_floor)
-    for note in () if partial else (_check_negative_power(power, sigma, source, rows),
-                                    saturation_note(gamma, power, source)):
+    # a campaign's readings (partial) too can be clipped: 3 of its first 8 at exactly the
+    # largest power say as much as 3 of a dense table's
+    for note in ((saturation_note(gamma, power, source),) if partial else
+                 (_check_negative_power(power, sigma, source, rows),
+                  saturation_note(gamma, power, source))):
         if note:
             notes.append(note)
     for note in notes:  # said once per table; the CLI prints them as "irreflect: note: ..."
