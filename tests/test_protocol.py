@@ -329,8 +329,12 @@ def test_gaps_wider_than_the_tolerance_or_absent_gammas_are_refused():
     assert frame["source"].iloc[6] == "nearest" and meas.power[6] == dense.power[
         (dense.gamma_deg == -20) & (dense.theta_deg == 70)][0]
     absent = pd.DataFrame({"gamma_deg": [-25, -40], "theta_deg": [25, 40]})
-    with pytest.raises(IrreflectError, match="angle of incidence -25 deg is not in"):
+    with pytest.raises(IrreflectError, match="angle of incidence -25 deg is not in") as info:
         sample_protocol(absent, dense)
+    assert "snapping" not in str(info.value)
+    # --snap does not move an angle of incidence, and says so (a user expected it to)
+    with pytest.raises(IrreflectError, match="snapping moves receiver angles only"):
+        sample_protocol(absent, dense, method="snap")
 
 
 @pytest.mark.real

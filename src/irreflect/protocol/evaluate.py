@@ -156,7 +156,6 @@ def sample_protocol(protocol, dense, *, tolerance_deg: float = 5.0,
     protocol = as_protocol(protocol)
     dense = as_measurements(dense)
     if method not in METHODS:
-
         raise unknown_name("protocol sampling method", method, METHODS)
     if not tolerance_deg >= 0:
         raise IrreflectError(f"tolerance must be >= 0 degrees; found {tolerance_deg:g}")
@@ -171,6 +170,8 @@ def sample_protocol(protocol, dense, *, tolerance_deg: float = 5.0,
                 f"the protocol's angle of incidence {g:g} deg is not in {dense.name} (it has "
                 f"{have}): evaluate on a dataset measured at that gamma, or make the protocol "
                 "for the dataset's gammas"
+                + (" (snapping moves receiver angles only: an angle of incidence is the "
+                   "sample's setting, not bridged)" if method == "snap" else "")
             )
         th = dense.theta_deg[sel]
         order = np.argsort(th)
