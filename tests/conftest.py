@@ -27,6 +27,16 @@ from irreflect.paper import TABLE3 as PAPER_TABLE3
 TABLE3 = PAPER_TABLE3
 
 
+def pytest_sessionstart(session):
+    """Build the fitting kernel before the first test when numba's cache is cold (a bare
+    ``pytest`` on a fresh clone; ``make test`` warms it first): the build announces itself
+    on stderr, and in the first test that fits, those two lines broke a test of a command's
+    one-line error (test_hostile). A warm cache costs a look at numba's index."""
+    from irreflect._compiled import ensure_compiled
+
+    ensure_compiled()
+
+
 def blurred_glossy(width: float = 4.0) -> Measurements:
     """A glossy two-lobe table (lobe half width about 1.2 deg) read by a receiver ``width``
     deg wide: every degree at gamma -10, -30, -50, -70, nothing within 3 deg of the
