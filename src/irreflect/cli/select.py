@@ -161,10 +161,11 @@ def _cmd_select(args) -> int:
         tables = []
         for path in args.data:
             meas = load_data(args, "select", path)
-            warn_if_sigma_decides(meas, args.model, "select scores every subset against it")
             check_selection_budget(meas.n_points, args.max_points, str(path))
             check_search_budget(args.pop_size, args.generations, meas.n_points,
                                 pop_option="--pop-size", gen_option="--generations")
+            # a fit: after the budgets, which refuse before any work
+            warn_if_sigma_decides(meas, args.model, "select scores every subset against it")
             if args.max_points is not None and args.max_points > meas.n_points:
                 # the search clamps it (run_selection): said before the work, not hidden
                 # behind the run line's "all points"
