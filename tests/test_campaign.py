@@ -1864,3 +1864,13 @@ def test_next_notes_readings_clipped_at_the_detector_top(tmp_path):
     code, _, err = _run(["next", measured, "--gammas", "-20", "-40", "-60"])
     assert code == 0, err
     assert "saturated detector" not in err
+
+
+def test_instrument_settings_at_an_unlisted_angle_of_incidence_are_refused():
+    # settings at gamma 50 were taken by an instrument that lists 20 and 40 only, and
+    # proposed as if it could set 50
+    with pytest.raises(IrreflectError, match=r"angle\(s\) of incidence 50 deg are not among "
+                                             r"gammas_deg \(20, 40\)"):
+        Instrument(gammas_deg=(20, 40), settings_deg=[(-20, 10), (-40, 30), (-50, 40)])
+    tool = Instrument(gammas_deg=(20, 40), settings_deg=[(20, 10), (40, 30), (40, 50)])
+    assert sorted(np.unique(tool.settings()[:, 0])) == [-40.0, -20.0]

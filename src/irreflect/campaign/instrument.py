@@ -151,6 +151,7 @@ class Instrument:
             object.__setattr__(self, name, float(value))
         if self.settings_deg is not None:
             object.__setattr__(self, "settings_deg", _checked_settings(self.settings_deg))
+            _check_settings_gammas(self.settings_deg, self.gammas)
         if not len(self.settings()):
             raise IrreflectError(
                 f"the instrument can take no reading: every receiver angle in [{lo:g}, "
@@ -359,6 +360,19 @@ def thin_settings(settings: np.ndarray, limit: int = MAX_SETTINGS, keep=None) ->
         pick = np.unique(np.round(np.linspace(0, rest.size - 1, room)).astype(int))
         chosen += list(rest[pick])
     return np.sort(np.asarray(chosen, int))
+
+
+def _check_settings_gammas(settings: np.ndarray, gammas) -> None:
+    """Every angle of incidence of ``settings_deg`` is one the instrument lists: a setting at
+    another was proposed as if the instrument could set it."""
+    listed = np.abs(np.asarray(gammas, float))
+    mags = np.unique(np.round(np.abs(settings[:, 0]), 9))
+    off = [m for m in mags if not np.any(np.abs(listed - m) <= 1e-6)]
+    if off:
+        raise IrreflectError(
+            f"settings_deg: angle(s) of incidence {', '.join(f'{m:g}' for m in off[:5])} deg "
+            f"are not among gammas_deg ({', '.join(f'{m:g}' for m in listed)}): list them "
+            "in gammas_deg, or leave those settings out")
 
 
 def _checked_settings(settings_deg) -> np.ndarray:
