@@ -11,6 +11,7 @@ from .options import (
     POSITIVE,
     SEED,
     add_data_argument,
+    add_ignore_sigma_argument,
     add_model_argument,
     add_resolution_argument,
     load_data,
@@ -56,9 +57,9 @@ def _cmd_fit(args) -> int:
         meas = load_data(args)  # with --ignore-sigma, without its sigma column
         # resolution 0: the plain fit
         result = fit_averaged(meas, model, args.resolution, seed=args.seed or 0,
-                              engine=_engine(meas.n_points), use_sigma=not args.ignore_sigma)
+                              engine=_engine(meas.n_points))
         unweighted = math.nan
-        if meas.sigma is not None and not args.ignore_sigma:
+        if meas.sigma is not None:
             from ..fitting import weights_check
 
             text, unweighted = weights_check(meas, result, model, args.resolution,
@@ -161,10 +162,7 @@ def register(sub) -> None:
     p.add_argument("--seed", type=SEED, default=0,
                    help="seed of the random extra starts (default 0)")
     p.add_argument("--json", action="store_true", help="one JSON object on stdout")
-    p.add_argument("--ignore-sigma", action="store_true",
-                   help="fit unweighted although the table has a sigma column (default: "
-                        "weighted by 1/sigma^2; a weighted fit the sigma column decides is "
-                        "warned of)")
+    add_ignore_sigma_argument(p)
     add_resolution_argument(p, "the readings are fitted as the model averaged over it, so "
                                "the coefficients are the material's")
     p.add_argument("--save", metavar="MATERIAL.json",

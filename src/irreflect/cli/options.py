@@ -119,7 +119,7 @@ def load_data(args, command: str | None = None, path=None):
     path = args.data if path is None else path
     # --ignore-sigma: the column is left out before it is checked (a column of zeros is
     # then no error: the option is the way around it)
-    drop = bool(getattr(args, "drop_sigma", False) or getattr(args, "ignore_sigma", False))
+    drop = bool(getattr(args, "ignore_sigma", False))
     meas = read_measurements(path, average_duplicates=args.average_duplicates,
                              ignore_sigma=drop)
     check_points_budget(meas.n_points, command or args.command, str(path))
@@ -153,10 +153,11 @@ def warn_if_sigma_decides(meas, model: str, what: str) -> None:
 
 def add_ignore_sigma_argument(p) -> None:
     """``--ignore-sigma``: the table's sigma column is left out (:func:`load_data`)."""
-    p.add_argument("--ignore-sigma", dest="drop_sigma", action="store_true",
-                   help="fit every model equally weighted, leaving the table's sigma column "
-                        "out (when a model misfits beyond the noise, the points of smallest "
-                        "sigma decide a weighted fit: for a curve of power, fit unweighted)")
+    p.add_argument("--ignore-sigma", action="store_true",
+                   help="fit unweighted, leaving the table's sigma column out before it is "
+                        "checked (default: weighted by 1/sigma^2; when a model misfits beyond "
+                        "the noise, the points of smallest sigma decide a weighted fit, which "
+                        "is warned of: for a curve of power, fit unweighted)")
 
 
 #: Up to this many points, a command that fits once uses the numpy fitter: loading the
