@@ -1874,3 +1874,29 @@ def test_instrument_settings_at_an_unlisted_angle_of_incidence_are_refused():
         Instrument(gammas_deg=(20, 40), settings_deg=[(-20, 10), (-40, 30), (-50, 40)])
     tool = Instrument(gammas_deg=(20, 40), settings_deg=[(20, 10), (40, 30), (40, 50)])
     assert sorted(np.unique(tool.settings()[:, 0])) == [-40.0, -20.0]
+
+
+def test_a_stop_on_one_angle_of_incidence_says_the_laws_in_gamma_stay_open():
+    # unseen_tables3 one_gamma stopped at 11 readings with every law in gamma ill-determined
+    # and no word that this is what one angle allows
+    from irreflect.models import two_lobe_power
+
+    t = np.arange(-80.0, 81.0, 4.0)
+    t = t[np.abs(t + 30.0) >= 5]
+    g = np.full(t.size, -30.0)
+    clean = two_lobe_power(np.radians(g), np.radians(t), 0.3, 0.5, 1.0, 0.5, 40.0, 0.0, 1.0)
+    power = clean * (1 + 0.002 * np.random.default_rng(0).standard_normal(t.size))
+    tool = Instrument(gammas_deg=(30,), theta_min=-80, theta_max=80, theta_step=4)
+    verdict = Campaign(tool, list(zip(g, t, power, strict=True))).verdict()
+    assert verdict.stop, verdict.text
+    assert "one angle of incidence (30 deg): the laws in gamma stay ill-determined" in (
+        verdict.text)
+    # at three angles the same material's stop says nothing of the kind
+    g3 = np.repeat([-20.0, -40.0, -60.0], t.size)
+    t3 = np.tile(t, 3)
+    keep = np.abs(t3 - g3) >= 5
+    g3, t3 = g3[keep], t3[keep]
+    p3 = two_lobe_power(np.radians(g3), np.radians(t3), 0.3, 0.5, 1.0, 0.5, 40.0, 0.0, 1.0)
+    three = Campaign(Instrument(gammas_deg=(20, 40, 60), theta_min=-80, theta_max=80,
+                                theta_step=4), list(zip(g3, t3, p3, strict=True))).verdict()
+    assert "one angle of incidence" not in three.text

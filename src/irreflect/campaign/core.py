@@ -871,10 +871,20 @@ class Campaign:
             why += (f"extrapolated to |gamma| {short_list([f'{abs(g):g}' for g in outside], 4)}"
                     f" deg: the {limit} angle{'s' if limit != 1 else ''} of incidence the instrument "
                     f"allows {'are' if limit != 1 else 'is'} set",)
+        why += self._one_angle(stopping=not reasons)
         shown = state.estimate if state.estimate is not None else res  # what fit reports
         state.extra["blocking"] = tuple(reasons)  # what keeps it from stopping
         return Verdict(not reasons, n, (float(r2_lo), float(r2_hi)), stability,
                        tuple(shown.ill_determined), tuple(shown.at_bound), why)
+
+    def _one_angle(self, stopping: bool) -> tuple[str, ...]:
+        """What a stop on an instrument of one angle of incidence leaves open (unseen_tables3
+        one_gamma stopped at 11 readings with every law in gamma ill-determined, and no
+        word that one angle allows no more)."""
+        if not stopping or len(self.instrument.gammas) != 1:
+            return ()
+        return (f"one angle of incidence ({abs(self.instrument.gammas[0]):g} deg): the laws "
+                "in gamma stay ill-determined, and the fit describes that angle only",)
 
     def _stability(self, state: _State, n: int, spent: bool) -> float:
         """How far the fits on the first n - 1, n - 2 and n - 3 readings lie from the current
