@@ -25,6 +25,7 @@ from .local import (
     _gauss_newton_decrease,
     _polish,
 )
+from .shape_hint import GENERIC_ADVICE
 
 
 # ----------------------------------------------------------------------------- fit()
@@ -235,7 +236,6 @@ def _check_r2(model, r2, source, sigma=None, weights=None) -> float:
     if not np.isfinite(r2) or r2 <= 0:
         raise FitError(
             f"fit of '{model.name}' to {source} cannot beat a constant (R^2 = {r2:.4g} "
-            "<= 0): check that power is the reflected power and that the angles follow the "
-            "convention (gamma < 0 on the source side, mirror at theta = -gamma)"
+            f"<= 0): {GENERIC_ADVICE}"
         )
     return r2

@@ -13,7 +13,8 @@ import numpy as np
 
 from ..errors import FitError
 
-#: The generic advice of :func:`irreflect.fitting.finish._check_r2`, replaced when the
+#: The generic advice of a fit that cannot beat a constant
+#: (:func:`irreflect.fitting.finish._check_r2` writes this constant), replaced when the
 #: table's peaks say more.
 GENERIC_ADVICE = ("check that power is the reflected power and that the angles follow the "
                   "convention (gamma < 0 on the source side, mirror at theta = -gamma)")
