@@ -107,7 +107,8 @@ def _findings(ctx: ReportContext, name: str, result, n_max: int) -> list:
         + "; the hindsight subsets show "
         + (f"N = {curves['hindsight'].reached(result.target)}"
            if curves["hindsight"].reached(result.target) else "no N")
-        + " is possible with every reading known"), key="campaign")]
+        + " is possible with every reading known"
+        + "".join(f"; {w}" for w in result.warnings)), key="campaign")]
 
 
 def render(ctx: ReportContext, res: CampaignResults) -> Section:
