@@ -127,8 +127,9 @@ def test_an_opening_reading_the_receiver_cannot_place_is_not_called_what_it_miss
     assert not plan["why"].str.contains("specular peak|source side$").any(), plan["why"]
     first = plan.iloc[0]
     assert (first["theta_deg"], first["why"]) == (
-        50.0, "opening design: mirror direction: not available (out of the receiver's range "
-              "or taken), so the nearest free setting, 20 deg beyond the mirror direction")
+        50.0, "opening design: mirror direction: not available (the mirror direction is "
+              "beyond the receiver's range), so the nearest free setting, 20 deg beyond the "
+              "mirror direction")
     # where the plan's setting is possible its reason stays
     wide = Campaign(Instrument(gammas_deg=(-10, -40, -70), theta_min=-30, theta_max=40,
                                theta_step=5)).propose(8)

@@ -314,6 +314,11 @@ def _said(why: str, short: str, kind: str, gamma: float, theta: float, tol: floa
         return f"{short}: the setting nearest it, {abs(off):.3g} deg {shy} it ({cause})"
     if where(theta):
         return why.replace("{off}", f"{abs(off):.3g}")
+    if kind == "mirror" and blocked:  # no setting can stand there: say why, not "or taken"
+        cause = ("within the source clearance" if blocked == "source"
+                 else "beyond the receiver's range")
+        return (f"{short}: not available (the mirror direction is {cause}), so the nearest "
+                f"free setting, {abs(off):.3g} deg {shy} the mirror direction")
     if target is not None and not where(target):
         place = "near the normal" if abs(theta) <= 10.0 else "on the far side"
         return f"diffuse lobe {place}, {abs(off):.3g} deg {shy} the mirror direction"
