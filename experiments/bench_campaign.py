@@ -264,6 +264,9 @@ def run_one(job):
         "curve": ad.r2, "bands": {n: v.r2_band for n, v in result.verdicts.items()},
         "stability": {n: v.stability for n, v in result.verdicts.items()},
         "stops": {n: bool(v.stop) for n, v in result.verdicts.items()},
+        # the replay's warnings on its target (an all-points fit that misfits the table or
+        # whose lobe no reading sees) and on the table (mirror gaps)
+        "warnings": list(result.warnings),
     }
 
 
@@ -310,6 +313,16 @@ def print_table(rows, title):
               f"{r['t_med']:>6.2f}/{r['t_max']:.2f}/{r['t_campaign']:.1f}")
 
 
+def _flag(row) -> str:
+    """' [target: ...]' when the replay warned that its target, the all-points fit, misfits
+    the table or puts a lobe where no reading falls (``irreflect campaign`` prints the
+    warning in full); '' otherwise."""
+    said = [w for w in row.get("warnings", ()) if w.startswith("the all-points fit")]
+    kinds = ["unseen lobe" if "no reading of the table falls" in w else "misfit"
+             for w in said]
+    return f" [target: {', '.join(kinds)}]" if kinds else ""
+
+
 def targets(real, gen) -> list[str]:
     lines = []
     done_r = [r for r in real if "skipped" not in r]
@@ -319,14 +332,14 @@ def targets(real, gen) -> list[str]:
         return "met" if flag else "NOT met"
 
     within = [r for r in done_r if r["N"] is not None and r["N"] <= TARGET_N]
-    miss = [f"{r['label']} ({fmt(r['N'], 'd')})" for r in done_r if r not in within]
+    miss = [f"{r['label']} ({fmt(r['N'], 'd')}){_flag(r)}" for r in done_r if r not in within]
     lines.append(f"adaptive holds within {TOL} of the all-points R^2 by N <= {TARGET_N}: real "
                  f"{len(within)}/{len(done_r)} ({ok(len(within) == len(done_r))})"
                  + (f"; missed: {', '.join(miss)}" if miss else ""))
     if done_g:
         within_g = [r for r in done_g if r["N"] is not None and r["N"] <= TARGET_N]
         share = len(within_g) / len(done_g)
-        miss = [r["label"] for r in done_g if r not in within_g]
+        miss = [r["label"] + _flag(r) for r in done_g if r not in within_g]
         lines.append(f"  generated {len(within_g)}/{len(done_g)} = {share:.0%} (target >= "
                      f"{GENERATED_SHARE:.0%}: {ok(share >= GENERATED_SHARE)})"
                      + (f"; missed: {', '.join(miss[:12])}" + (" ..." if len(miss) > 12 else "")
