@@ -213,6 +213,29 @@ def test_a_glossy_table_in_the_mirrored_frame_reads_as_the_paper_frame(seed):
     np.testing.assert_array_equal(read.theta_deg, flat.theta_deg)
 
 
+def test_a_curve_whose_highest_readings_tie_has_no_peak_side():
+    """Readings tied at the highest power all over a curve show no peak: a near-flat table
+    (its first reading, on the source side, had been taken for the peak) is not told that
+    it peaks at the source direction. A clipped lobe, its tied top at the mirror, still
+    shows the side it peaks on."""
+    import warnings as _w
+
+    from irreflect.data import _peak_sides
+
+    theta = np.tile(np.arange(-30.0, 31.0, 10.0), 2)
+    gamma = np.repeat([-20.0, -40.0], 7)
+    power = np.full(14, 2.5)
+    power[[6, 13]] = 2.0
+    with _w.catch_warnings(record=True) as said:
+        _w.simplefilter("always")
+        validate_table(pd.DataFrame({"gamma_deg": gamma, "theta_deg": theta, "power": power}))
+    assert not [w for w in said if "peak at theta = gamma" in str(w.message)]
+    assert _peak_sides(gamma, theta, power) == [0, 0]
+    lobe = np.exp(-((theta + gamma) / 8.0) ** 2) + 0.1
+    clipped = np.minimum(lobe, 0.3)  # three readings tied at the top of each lobe
+    assert _peak_sides(-gamma, -theta, clipped) == [-1, -1]
+
+
 def test_additive_noise_on_dark_readings_is_kept_and_an_offset_is_not():
     """Without a sigma column, negative readings deeper than 2 % of the largest are kept
     when they look like noise around zero (their own RMS sets the allowance); a sign

@@ -467,8 +467,12 @@ def _peak_sides(gamma, theta, power) -> list[int]:
             continue
         step = float(np.median(np.diff(np.unique(t)))) if np.unique(t).size > 1 else 1.0
         near = max(3.0, 1.5 * step)
-        top = float(t[int(np.argmax(p))])
-        plus, minus = abs(top - g) <= near, abs(top + g) <= near
+        # every reading tied at the highest power (a clipped lobe's top, or a constant
+        # curve): a side only when all of them stand at it (a flat table's first reading
+        # had made it 'peak at the source direction')
+        top = t[p >= np.max(p)]
+        plus = bool(np.all(np.abs(top - g) <= near))
+        minus = bool(np.all(np.abs(top + g) <= near))
         sides.append(int(plus) - int(minus))
     return sides
 
