@@ -1938,3 +1938,23 @@ def test_a_replay_warns_when_its_target_fit_hides_a_lobe_between_the_receivers(r
     assert "where no reading of the table falls, at each of its 7 angles" in said, said
     assert f"({matte.r2:.4g})" in said and "NOT TRUSTWORTHY" in said
     assert _reference_unseen_lobe(glossy) == ""
+
+
+def test_a_hindsight_curve_below_the_papers_12_points_is_called_no_bound():
+    """One rule for 'no bound' (the benchmark's, select's warning and irreflect campaign's
+    hindsight line): best 12 points more than 0.01 below the paper's 12 are no bound, and
+    the campaign's note says so; within 0.01 they are."""
+    from irreflect.campaign.replay import NO_BOUND, StrategyCurve, _below_paper
+
+    def curves(h12, p12):
+        return {"hindsight": StrategyCurve("hindsight", {12: h12}, pd.DataFrame(), 1.0,
+                                           note="select's best subsets"),
+                "paper": StrategyCurve("paper", {12: p12}, pd.DataFrame(), 1.0)}
+
+    low = curves(0.95, 0.9701)
+    _below_paper(low)
+    assert f"{NO_BOUND}: its best 12 points give R^2 0.95, more than 0.01 below the paper's " \
+           "12 points' 0.9701" in low["hindsight"].note
+    close = curves(0.961, 0.9701)
+    _below_paper(close)
+    assert NO_BOUND not in close["hindsight"].note

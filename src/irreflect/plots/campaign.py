@@ -57,8 +57,10 @@ def plot_campaign(result, ax=None, *, title=None, span: float = 0.25):
         shown = np.where(np.isfinite(r2), np.maximum(r2, bottom), np.nan)
         reached = curve.reached(target)
         label = _LABEL.get(name, name) + (f" (holds from N = {reached})" if reached else "")
-        if NO_BOUND in curve.note:  # see replay_hindsight
-            label += f" ({NO_BOUND}: their thorough fits settle elsewhere)"
+        if NO_BOUND in curve.note:  # see replay_hindsight and _below_paper
+            label += (f" ({NO_BOUND}: below the paper's 12 points)"
+                      if "below the paper's" in curve.note
+                      else f" ({NO_BOUND}: their thorough fits settle elsewhere)")
         ax.plot(ns, shown, label=label, **style)
         low = np.isfinite(r2) & (r2 < bottom)
         if low.any():
