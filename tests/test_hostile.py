@@ -951,3 +951,31 @@ def test_a_separating_table_that_is_the_output_folder_is_refused_up_front(data, 
     line = _one_error(["diagnose", data, "--out", out, "--separate-out", out])
     assert f"--separate-out {out}: is the --out folder of this run" in line
     assert [p.name for p in tmp_path.iterdir() if "d2" in p.name] == []  # nor a lock left
+
+
+@pytest.mark.parametrize("values, instrument", [
+    (["-2e1", "-40"], "angles of incidence -20, -40 deg"),
+    (["-20,", "-40"], "angles of incidence -20, -40 deg"),
+    (["-20,,-40"], "angles of incidence -20, -40 deg"),
+    (["-1.5e1,-3e1"], "angles of incidence -15, -30 deg"),
+])
+def test_negative_numbers_in_any_spelling_are_values_not_options(tmp_path, values, instrument):
+    """'--gammas -2e1 -40', '--gammas -20, -40' or '--theta-min -1e1' ended in "expected at
+    least one argument": argparse took only -20 and -2.5 for negative numbers, anything else
+    starting with '-' for an unknown option."""
+    measured = tmp_path / "m.csv"
+    measured.write_text("gamma_deg,theta_deg,power\n")
+    code, out, err = _run(["next", measured, "--gammas", *values, "--theta-min", "-6e1"])
+    assert code == 0, err
+    assert instrument in out and "receiver -60..80 deg" in out
+
+
+@pytest.mark.parametrize("argv, words", [
+    (["--theta-min", "-inf"], "argument --theta-min: expected an angle in degrees strictly "
+                              "between -90 and 90, found '-inf'"),
+    (["--gammas", "-20x"], "found '-20x'"),
+])
+def test_a_malformed_negative_number_names_itself(tmp_path, argv, words):
+    measured = tmp_path / "m.csv"
+    measured.write_text("gamma_deg,theta_deg,power\n")
+    assert words in _one_error(["next", measured, *argv])
