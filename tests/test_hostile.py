@@ -979,3 +979,18 @@ def test_a_malformed_negative_number_names_itself(tmp_path, argv, words):
     measured = tmp_path / "m.csv"
     measured.write_text("gamma_deg,theta_deg,power\n")
     assert words in _one_error(["next", measured, *argv])
+
+
+def test_next_says_when_it_proposes_fewer_settings_than_asked(tmp_path):
+    """'next --n 100000' printed "next 900 setting(s)" without a word on the rest."""
+    measured = tmp_path / "m.csv"
+    measured.write_text("gamma_deg,theta_deg,power\n")
+    small = ["--gammas", "-30", "--theta-min", "-40", "--theta-max", "40", "--theta-step", "10"]
+    code, out, err = _run(["next", measured, "--n", "50", *small])
+    assert code == 0 and "next 8 setting(s)" in out
+    assert ("note: --n 50 asked for more settings than are free: proposing 8, every setting "
+            "not yet measured") in err
+    code, out, err = _run(["next", measured, "--n", "50", *small, "--json"])
+    assert code == 0 and any("proposing 8" in n for n in json.loads(out)["notes"])
+    code, out, err = _run(["next", measured, "--n", "8", *small])
+    assert code == 0 and "asked for more" not in err
