@@ -994,3 +994,22 @@ def test_next_says_when_it_proposes_fewer_settings_than_asked(tmp_path):
     assert code == 0 and any("proposing 8" in n for n in json.loads(out)["notes"])
     code, out, err = _run(["next", measured, "--n", "8", *small])
     assert code == 0 and "asked for more" not in err
+
+
+@pytest.mark.parametrize("rows, words", [
+    ([(-20, 20, 0.1), (-40, 40)], "found reading 2 with 2 value(s) after rows of 3"),
+    ([(-20, 20, "1.2 mW")], "found '1.2 mW' in reading 1: give the number alone"),
+    ((-20, 20, 0.1), "found one row of 3 numbers, not in a list: pass [(-20.0, 20.0, 0.1)]"),
+    ({"gamma_deg": [-20], "theta_deg": [20], "power": [0.1]}, "found a dict: pass "
+                                                               "pandas.DataFrame"),
+])
+def test_campaign_add_names_what_is_wrong_with_the_rows(rows, words):
+    """A ragged list or a power with its unit was refused as "found list", a single reading
+    not wrapped in a list as "found shape (3,)": neither said what to change."""
+    from irreflect.campaign import Campaign, Instrument
+
+    campaign = Campaign(Instrument(gammas_deg=(-20, -40, -60)))
+    with pytest.raises(IrreflectError, match=r"^readings must be") as info:
+        campaign.add(rows)
+    assert words in str(info.value) and "\n" not in str(info.value)
+    assert campaign.n_measured == 0

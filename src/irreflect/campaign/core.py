@@ -1116,6 +1116,37 @@ def _farthest(settings, free, taken) -> int:
     return int(np.argmax(d))
 
 
+def _not_rows(rows) -> str:
+    """Why ``rows`` are not (gamma, theta, power[, sigma]) rows of numbers: the first row of
+    another length, or the first value that is not a number ("found list" said neither)."""
+    head = "readings must be a table or (gamma, theta, power[, sigma]) rows of numbers"
+    if isinstance(rows, dict):
+        return (f"{head}; found a dict: pass pandas.DataFrame(...) of it, with columns "
+                "gamma_deg, theta_deg, power[, sigma]")
+    try:
+        items = list(rows)
+    except TypeError:
+        return f"{head}; found {type(rows).__name__}"
+    lengths = set()
+    for i, row in enumerate(items, 1):
+        try:
+            values = list(row)
+        except TypeError:
+            return (f"{head}; found {row!r} as reading {i}, not a row: pass one tuple per "
+                    "reading, e.g. [(-20, 20, 0.1)]")
+        lengths.add(len(values))
+        for value in values:
+            try:
+                float(value)
+            except (TypeError, ValueError):
+                return (f"{head}; found {value!r} in reading {i}: give the number alone (power "
+                        "in any one unit, without the unit's name)")
+        if len(lengths) > 1:
+            return (f"{head}; found reading {i} with {len(values)} value(s) after rows of "
+                    f"{len(items[0])}: give every reading the same values")
+    return f"{head}; found {type(rows).__name__}"
+
+
 def _as_rows(rows) -> pd.DataFrame:
     """Readings as a DataFrame ``gamma_deg, theta_deg, power[, sigma]``."""
     if rows is None:
@@ -1130,10 +1161,13 @@ def _as_rows(rows) -> pd.DataFrame:
         try:
             arr = np.asarray(list(rows), float)
         except (TypeError, ValueError) as exc:
-            raise DataError(f"readings must be a table or (gamma, theta, power) rows; found "
-                            f"{type(rows).__name__}") from exc
+            raise DataError(_not_rows(rows)) from exc
         if arr.size == 0:
             return pd.DataFrame(columns=["gamma_deg", "theta_deg", "power"])
+        if arr.ndim == 1 and arr.size in (3, 4):
+            raise DataError(f"readings must be (gamma, theta, power[, sigma]) rows; found one "
+                            f"row of {arr.size} numbers, not in a list: pass "
+                            f"[{tuple(float(x) for x in arr)}]")
         if arr.ndim != 2 or arr.shape[1] not in (3, 4):
             raise DataError(f"readings must be (gamma, theta, power[, sigma]) rows; found "
                             f"shape {arr.shape}")
