@@ -1013,3 +1013,15 @@ def test_campaign_add_names_what_is_wrong_with_the_rows(rows, words):
         campaign.add(rows)
     assert words in str(info.value) and "\n" not in str(info.value)
     assert campaign.n_measured == 0
+
+
+def test_a_table_mixing_signs_of_gamma_names_a_value_of_each_sign(tmp_path):
+    """One gamma of 1e-12 (a rounding residue) among negative angles was refused as "mixes
+    positive and negative angles of incidence" without saying where."""
+    table = pd.read_csv(TERRAZZO)
+    table.loc[40, "gamma_deg"] = 1e-12
+    path = tmp_path / "mixed.csv"
+    table.to_csv(path, index=False)
+    line = _one_error(["fit", path])
+    assert ("found 1 positive (first 1e-12 at data row 41 (line 42)) and 131 negative (first "
+            "-10 at data row 1 (line 2))") in line

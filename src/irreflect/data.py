@@ -667,9 +667,15 @@ def validate_table(df: pd.DataFrame, source: str = "table", *,
         check_sigma(power, sigma, source, rows)
     positive, negative = np.any(gamma > 0), np.any(gamma < 0)
     if positive and negative:
+        # name a value of each sign: a lone 1e-12 among negative angles read as a bare
+        # "mixes positive and negative" left the user to search the file for it
+        ip, ineg = int(np.flatnonzero(gamma > 0)[0]), int(np.flatnonzero(gamma < 0)[0])
         _fail(
             f"{source}: gamma_deg mixes positive and negative angles of incidence, which is "
-            "ambiguous: use the paper's convention (all <= 0, source side) or magnitudes (all >= 0)"
+            f"ambiguous; found {int(np.sum(gamma > 0))} positive (first {gamma[ip]:g} at "
+            f"{rows(ip)}) and {int(np.sum(gamma < 0))} negative (first {gamma[ineg]:g} at "
+            f"{rows(ineg)}): use the paper's convention (all <= 0, source side) or magnitudes "
+            "(all >= 0)"
         )
     if positive or not partial:
         gamma, theta, frame_notes = _frame(gamma, theta, power, positive, partial, source)
