@@ -1025,3 +1025,18 @@ def test_a_table_mixing_signs_of_gamma_names_a_value_of_each_sign(tmp_path):
     line = _one_error(["fit", path])
     assert ("found 1 positive (first 1e-12 at data row 41 (line 42)) and 131 negative (first "
             "-10 at data row 1 (line 2))") in line
+
+
+def test_an_angle_written_minus_zero_is_zero(tmp_path):
+    """A table whose normal-incidence rows say gamma -0.0 (a script's rounding) was
+    reported as "angles of incidence -0, -10, ..."."""
+    table = pd.read_csv(TERRAZZO)
+    normal = table[table.gamma_deg == -10].assign(gamma_deg=-0.0, theta_deg=lambda t: -t.theta_deg)
+    path = tmp_path / "zero.csv"
+    pd.concat([normal, table]).to_csv(path, index=False)
+    assert "-0.0," in path.read_text()
+    meas = read_measurements(path)
+    assert not np.any(np.signbit(meas.gamma_deg) & (meas.gamma_deg == 0))
+    code, out, err = _run(["fit", path, "--model", "phong"])
+    assert code == 0, err
+    assert "angles of incidence 0, -10, -20" in out and "-0," not in out

@@ -642,8 +642,9 @@ def validate_table(df: pd.DataFrame, source: str = "table", *,
     if len(df) > MAX_TABLE_ROWS:
         _fail(f"{source}: {len(df)} rows is more than irreflect reads ({MAX_TABLE_ROWS}): "
               "subsample the table")
-    gamma = _numeric(df, "gamma_deg", source, rows)
-    theta = _numeric(df, "theta_deg", source, rows)
+    # + 0.0: an angle written -0.0 (a script's rounding) is 0, not "-0" in every message
+    gamma = _numeric(df, "gamma_deg", source, rows) + 0.0
+    theta = _numeric(df, "theta_deg", source, rows) + 0.0
     power = _numeric(df, "power", source, rows)
     sigma = _numeric(df, "sigma", source, rows) if "sigma" in df.columns else None
     notes = []
