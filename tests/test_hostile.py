@@ -1056,3 +1056,26 @@ def test_a_long_compare_says_which_model_it_fits_through_a_pipe(monkeypatch):
     assert lines[0].startswith("compare terrazzo: [0/2] fitting two-lobe (")
     assert lines[1].startswith("compare terrazzo: [1/2] fitting phong (")
     assert lines[2].startswith("compare terrazzo: done (2/2 models, ")
+
+
+@pytest.mark.parametrize("column, values, words", [
+    ("power", lambda p: [f"{x * 1000:.4f} mW" for x in p],
+     "found '53.2560 mW' in data row 1 (line 2): write the numbers alone, without their unit "
+     "'mW' (every row carries it"),
+    ("power", lambda p: [f"{x:.6f}" for x in p[:3]] + ["1.2 mW"] + [f"{x:.6f}" for x in p[4:]],
+     "found '1.2 mW' in data row 4 (line 5): 1 of 132 rows carry a unit ('mW'): write them as "
+     "numbers alone, in the unit of the other rows"),
+    ("power", lambda p: [f"{10 * np.log10(x):.2f} dBm" for x in p],
+     "convert decibels to it (mW = 10^(dBm/10))"),
+    ("theta_deg", lambda t: [f"{x:g} deg" for x in t], "write the angles alone, in degrees"),
+])
+def test_numbers_written_with_their_unit_are_named_as_such(tmp_path, column, values, words):
+    """A power column of '53.2 mW' was refused with "fix or remove that row" though every
+    row said the same; dBm would need converting, not just the unit removed."""
+    table = pd.read_csv(TERRAZZO)
+    table[column] = values(table[column].to_numpy())
+    path = tmp_path / "units.csv"
+    table.to_csv(path, index=False)
+    line = _one_error(["fit", path])
+    assert f"column '{column}' must be numeric" in line and words in line
+    assert "fix or remove" not in line

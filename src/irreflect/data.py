@@ -13,6 +13,7 @@ from __future__ import annotations
 import csv
 import difflib
 import os
+import re
 import warnings
 from dataclasses import dataclass, field, replace
 from importlib import resources
@@ -238,6 +239,31 @@ def _check_columns(df: pd.DataFrame, source: str) -> pd.DataFrame:
     return df
 
 
+#: A number followed by a unit's name ("1.2 mW", "-3dBm", "45 deg", "12%").
+_WITH_UNIT = re.compile(r"^[-+]?(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?\s*([^\d\s.,+-].*)$")
+
+
+def _unit_hint(bad_text: pd.Series, n_bad: int, n_rows: int, col: str) -> str:
+    """How to fix numbers written with their unit: "fix or remove that row" misled when
+    every row of the column said "1.2 mW"."""
+    units = sorted({m.group(3).strip() for t in bad_text
+                    if (m := _WITH_UNIT.match(str(t).strip()))})
+    shown = ", ".join(f"'{u}'" for u in units[:4]) + (", ..." if len(units) > 4 else "")
+    if col != "power":
+        return f"{n_bad} of {n_rows} rows carry a unit ({shown}): write the angles alone, in degrees"
+    if any(u.lower().startswith("db") for u in units):
+        return (f"{n_bad} of {n_rows} rows carry a unit ({shown}): the model fits linear power; "
+                "convert decibels to it (mW = 10^(dBm/10)) and write the numbers alone")
+    if len(units) > 1:
+        return (f"{n_bad} of {n_rows} rows carry a unit and they differ ({shown}): convert "
+                "the column to one unit and write the numbers alone")
+    if n_bad < n_rows:
+        return (f"{n_bad} of {n_rows} rows carry a unit ({shown}): write them as numbers alone, "
+                "in the unit of the other rows")
+    return (f"write the numbers alone, without their unit {shown} (every row carries it; any "
+            "one unit works for the whole column)")
+
+
 def _looks_numeric(text: str) -> bool:
     try:
         float(text)
@@ -300,6 +326,10 @@ def _numeric(df: pd.DataFrame, col: str, source: str, rows: _Rows) -> np.ndarray
             hint = "fix or remove that row"
             if "," in found and _looks_numeric(found.replace(",", ".")):
                 hint = "use '.' as the decimal point (found a decimal comma)"
+            elif _WITH_UNIT.match(found.strip()):
+                hint = _unit_hint(text[bad], int(bad.sum()), len(raw), col)
+            elif bad.sum() > 1:
+                hint = f"fix or remove that row ({int(bad.sum()) - 1} more row(s) like it)"
             _fail(
                 f"{source}: column '{col}' must be numeric; found '{found}' in {rows(i)}: {hint}"
             )
