@@ -1079,3 +1079,20 @@ def test_numbers_written_with_their_unit_are_named_as_such(tmp_path, column, val
     line = _one_error(["fit", path])
     assert f"column '{column}' must be numeric" in line and words in line
     assert "fix or remove" not in line
+
+
+def test_averaged_duplicates_say_how_far_the_repeats_disagree(tmp_path):
+    """--average-duplicates merged repeats 50 % apart with only "averaged 5 duplicated
+    (gamma, theta) row(s)"."""
+    table = pd.read_csv(TERRAZZO)[["gamma_deg", "theta_deg", "power"]]
+    repeats = table.iloc[[4]].assign(power=lambda t: t.power * 1.5)
+    path = tmp_path / "dups.csv"
+    pd.concat([table, repeats]).to_csv(path, index=False)
+    code, out, err = _run(["fit", path, "--model", "phong", "--average-duplicates"])
+    assert code == 0, err
+    assert ("averaged 1 duplicated (gamma, theta) row(s); the repeats of one setting differ by "
+            "up to 0.0577 (40% of their mean,") in err and "at gamma -10, theta -30" in err
+    same = tmp_path / "same.csv"
+    pd.concat([table, table.iloc[[4]]]).to_csv(same, index=False)
+    code, out, err = _run(["fit", same, "--model", "phong", "--average-duplicates"])
+    assert code == 0 and "averaged 1 duplicated (gamma, theta) row(s) (equal powers)" in err

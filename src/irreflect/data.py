@@ -470,7 +470,7 @@ def _merge_duplicates(gamma, theta, power, sigma, source, rows, average):
         if sigma is not None:
             frame["s2"] = sigma**2
         grouped = frame.groupby(["g", "t"], sort=False)
-        agg = grouped.agg(p=("p", "mean"), k=("p", "size"))
+        agg = grouped.agg(p=("p", "mean"), k=("p", "size"), lo=("p", "min"), hi=("p", "max"))
         if sigma is not None:
             agg["s"] = np.sqrt(grouped["s2"].sum()) / agg["k"]
         n_merged = int(len(frame) - len(agg))
@@ -478,8 +478,24 @@ def _merge_duplicates(gamma, theta, power, sigma, source, rows, average):
         theta = agg.index.get_level_values(1).to_numpy(float)
         power = agg["p"].to_numpy(float)
         sigma = agg["s"].to_numpy(float) if sigma is not None else None
-        return gamma, theta, power, sigma, n_merged
-    return gamma, theta, power, sigma, 0
+        return gamma, theta, power, sigma, _merged_note(agg, n_merged, source)
+    return gamma, theta, power, sigma, ""
+
+
+def _merged_note(agg: pd.DataFrame, n_merged: int, source: str) -> str:
+    """The note on averaged duplicates, with how far the repeats of one setting disagree
+    (repeats 50 % apart were averaged with only "averaged 5 duplicated row(s)")."""
+    note = f"{source}: averaged {n_merged} duplicated (gamma, theta) row(s)"
+    spread = (agg["hi"] - agg["lo"]).to_numpy(float)
+    scale = float(np.max(np.abs(agg["p"].to_numpy(float))))
+    if not np.any(spread > 0) or scale <= 0:
+        return note + " (equal powers)"
+    i = int(np.argmax(spread))
+    g, t = agg.index[i]
+    mean = abs(float(agg["p"].iloc[i]))
+    rel = f"{spread[i] / mean:.0%} of their mean, " if mean > 0 else ""
+    return (note + f"; the repeats of one setting differ by up to {spread[i]:.3g} ({rel}"
+            f"{spread[i] / scale:.1%} of the largest power) at gamma {g:g}, theta {t:g}")
 
 
 def _peak_sides(gamma, theta, power) -> list[int]:
@@ -717,7 +733,7 @@ def validate_table(df: pd.DataFrame, source: str = "table", *,
     gamma, theta, power, sigma, merged = _merge_duplicates(gamma, theta, power, sigma, source,
                                                            rows, average_duplicates)
     if merged:
-        notes.append(f"{source}: averaged {merged} duplicated (gamma, theta) row(s)")
+        notes.append(merged)
         rows = _Rows()  # row numbers no longer match the file
     if partial:
         _check_partial_negative(power, sigma, source, rows, noise_floor)
