@@ -1096,3 +1096,23 @@ def test_averaged_duplicates_say_how_far_the_repeats_disagree(tmp_path):
     pd.concat([table, table.iloc[[4]]]).to_csv(same, index=False)
     code, out, err = _run(["fit", same, "--model", "phong", "--average-duplicates"])
     assert code == 0 and "averaged 1 duplicated (gamma, theta) row(s) (equal powers)" in err
+
+
+def test_a_reading_taken_at_the_instruments_angle_says_so_when_it_meets_another(tmp_path):
+    """A reading at gamma -20.1 (the goniometer's jitter) is taken at -20; when one at -20
+    holds the same theta, "reading (-20, 20) is given twice" named a row the file does not
+    hold."""
+    from irreflect.campaign import Campaign, Instrument
+
+    campaign = Campaign(Instrument(gammas_deg=(-20, -40)))
+    campaign.add([(-20, 20, 0.1)])
+    with pytest.raises(IrreflectError, match=r"reading \(-20, 20\) is given twice \(gamma "
+                                             r"-20\.1 is taken at -20, an angle of incidence"):
+        campaign.add([(-20.1, 20, 0.2)])
+    with pytest.raises(IrreflectError, match=r"is given twice: average"):
+        campaign.add([(-20, 20, 0.2)])
+    assert campaign.n_measured == 1
+    measured = tmp_path / "m.csv"
+    measured.write_text("gamma_deg,theta_deg,power\n-20,20,0.1\n-20.1,20,0.12\n-40,30,0.1\n")
+    line = _one_error(["next", measured, "--gammas", "-20", "-40"])
+    assert "is given twice (gamma -20.1 is taken at -20" in line

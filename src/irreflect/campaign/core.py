@@ -271,7 +271,8 @@ class Campaign:
         0.25 deg of the instrument's are taken at them (the goniometer's jitter), and
         readings where the instrument does not reach are fitted; both with a
         :class:`~irreflect.data.DataNotice` (:meth:`Instrument.reading_notes`)."""
-        new, snapped = self.instrument.snap_gammas(_as_rows(rows))
+        raw = _as_rows(rows)
+        new, snapped = self.instrument.snap_gammas(raw)
         if not len(new):
             return self
         has_sigma = "sigma" in new.columns
@@ -283,9 +284,19 @@ class Campaign:
         dup = key.duplicated(keep=False)
         if dup.any():
             i = int(np.flatnonzero(dup)[0])
+            moved = ""
+            if snapped:  # a reading at -20.1 taken at -20 met one at -20: say why
+                n_old = len(combined) - len(new)
+                same = np.flatnonzero((key == key.iloc[i]).all(axis=1).to_numpy())
+                at = float(combined["gamma_deg"].iloc[i])
+                given = [float(raw["gamma_deg"].iloc[x - n_old]) for x in same if x >= n_old]
+                off = [g for g in given if round(g, 9) != round(at, 9)]
+                if off:
+                    moved = (f" (gamma {off[0]:g} is taken at {at:g}, an angle of incidence of "
+                             "the instrument: within the goniometer's jitter of it)")
             raise DataError(
                 f"reading ({combined['gamma_deg'].iloc[i]:g}, "
-                f"{combined['theta_deg'].iloc[i]:g}) is given twice: average the "
+                f"{combined['theta_deg'].iloc[i]:g}) is given twice{moved}: average the "
                 "repeated readings into one row, or remove one")
         frame = combined.copy()
         # the table's checks (signs, sigma)
