@@ -951,3 +951,168 @@ def test_a_separating_table_that_is_the_output_folder_is_refused_up_front(data, 
     line = _one_error(["diagnose", data, "--out", out, "--separate-out", out])
     assert f"--separate-out {out}: is the --out folder of this run" in line
     assert [p.name for p in tmp_path.iterdir() if "d2" in p.name] == []  # nor a lock left
+
+
+@pytest.mark.parametrize("values, instrument", [
+    (["-2e1", "-40"], "angles of incidence -20, -40 deg"),
+    (["-20,", "-40"], "angles of incidence -20, -40 deg"),
+    (["-20,,-40"], "angles of incidence -20, -40 deg"),
+    (["-1.5e1,-3e1"], "angles of incidence -15, -30 deg"),
+])
+def test_negative_numbers_in_any_spelling_are_values_not_options(tmp_path, values, instrument):
+    """'--gammas -2e1 -40', '--gammas -20, -40' or '--theta-min -1e1' ended in "expected at
+    least one argument": argparse took only -20 and -2.5 for negative numbers, anything else
+    starting with '-' for an unknown option."""
+    measured = tmp_path / "m.csv"
+    measured.write_text("gamma_deg,theta_deg,power\n")
+    code, out, err = _run(["next", measured, "--gammas", *values, "--theta-min", "-6e1"])
+    assert code == 0, err
+    assert instrument in out and "receiver -60..80 deg" in out
+
+
+@pytest.mark.parametrize("argv, words", [
+    (["--theta-min", "-inf"], "argument --theta-min: expected an angle in degrees strictly "
+                              "between -90 and 90, found '-inf'"),
+    (["--gammas", "-20x"], "found '-20x'"),
+])
+def test_a_malformed_negative_number_names_itself(tmp_path, argv, words):
+    measured = tmp_path / "m.csv"
+    measured.write_text("gamma_deg,theta_deg,power\n")
+    assert words in _one_error(["next", measured, *argv])
+
+
+def test_next_says_when_it_proposes_fewer_settings_than_asked(tmp_path):
+    """'next --n 100000' printed "next 900 setting(s)" without a word on the rest."""
+    measured = tmp_path / "m.csv"
+    measured.write_text("gamma_deg,theta_deg,power\n")
+    small = ["--gammas", "-30", "--theta-min", "-40", "--theta-max", "40", "--theta-step", "10"]
+    code, out, err = _run(["next", measured, "--n", "50", *small])
+    assert code == 0 and "next 8 setting(s)" in out
+    assert ("note: --n 50 asked for more settings than are free: proposing 8, every setting "
+            "not yet measured") in err
+    code, out, err = _run(["next", measured, "--n", "50", *small, "--json"])
+    assert code == 0 and any("proposing 8" in n for n in json.loads(out)["notes"])
+    code, out, err = _run(["next", measured, "--n", "8", *small])
+    assert code == 0 and "asked for more" not in err
+
+
+@pytest.mark.parametrize("rows, words", [
+    ([(-20, 20, 0.1), (-40, 40)], "found reading 2 with 2 value(s) after rows of 3"),
+    ([(-20, 20, "1.2 mW")], "found '1.2 mW' in reading 1: give the number alone"),
+    ((-20, 20, 0.1), "found one row of 3 numbers, not in a list: pass [(-20.0, 20.0, 0.1)]"),
+    ({"gamma_deg": [-20], "theta_deg": [20], "power": [0.1]}, "found a dict: pass "
+                                                               "pandas.DataFrame"),
+])
+def test_campaign_add_names_what_is_wrong_with_the_rows(rows, words):
+    """A ragged list or a power with its unit was refused as "found list", a single reading
+    not wrapped in a list as "found shape (3,)": neither said what to change."""
+    from irreflect.campaign import Campaign, Instrument
+
+    campaign = Campaign(Instrument(gammas_deg=(-20, -40, -60)))
+    with pytest.raises(IrreflectError, match=r"^readings must be") as info:
+        campaign.add(rows)
+    assert words in str(info.value) and "\n" not in str(info.value)
+    assert campaign.n_measured == 0
+
+
+def test_a_table_mixing_signs_of_gamma_names_a_value_of_each_sign(tmp_path):
+    """One gamma of 1e-12 (a rounding residue) among negative angles was refused as "mixes
+    positive and negative angles of incidence" without saying where."""
+    table = pd.read_csv(TERRAZZO)
+    table.loc[40, "gamma_deg"] = 1e-12
+    path = tmp_path / "mixed.csv"
+    table.to_csv(path, index=False)
+    line = _one_error(["fit", path])
+    assert ("found 1 positive (first 1e-12 at data row 41 (line 42)) and 131 negative (first "
+            "-10 at data row 1 (line 2))") in line
+
+
+def test_an_angle_written_minus_zero_is_zero(tmp_path):
+    """A table whose normal-incidence rows say gamma -0.0 (a script's rounding) was
+    reported as "angles of incidence -0, -10, ..."."""
+    table = pd.read_csv(TERRAZZO)
+    normal = table[table.gamma_deg == -10].assign(gamma_deg=-0.0, theta_deg=lambda t: -t.theta_deg)
+    path = tmp_path / "zero.csv"
+    pd.concat([normal, table]).to_csv(path, index=False)
+    assert "-0.0," in path.read_text()
+    meas = read_measurements(path)
+    assert not np.any(np.signbit(meas.gamma_deg) & (meas.gamma_deg == 0))
+    code, out, err = _run(["fit", path, "--model", "phong"])
+    assert code == 0, err
+    assert "angles of incidence 0, -10, -20" in out and "-0," not in out
+
+
+def test_a_long_compare_says_which_model_it_fits_through_a_pipe(monkeypatch):
+    """compare of a 200,000-point table (within its budget) ran 15 min through a pipe
+    without a line: its progress bar was shown on a terminal only."""
+    import irreflect.compare as compare_module
+
+    code, _, err = _run(["compare", TERRAZZO, "--models", "two-lobe,phong"])
+    assert code == 0 and "fitting" not in err  # a quick comparison stays silent
+    monkeypatch.setattr(compare_module, "PROGRESS_LINES_AFTER_S", 0.0)
+    code, out, err = _run(["compare", TERRAZZO, "--models", "two-lobe,phong"])
+    assert code == 0 and "best by BIC" in out
+    lines = err.splitlines()
+    assert lines[0].startswith("compare terrazzo: [0/2] fitting two-lobe (")
+    assert lines[1].startswith("compare terrazzo: [1/2] fitting phong (")
+    assert lines[2].startswith("compare terrazzo: done (2/2 models, ")
+
+
+@pytest.mark.parametrize("column, values, words", [
+    ("power", lambda p: [f"{x * 1000:.4f} mW" for x in p],
+     "found '53.2560 mW' in data row 1 (line 2): write the numbers alone, without their unit "
+     "'mW' (every row carries it"),
+    ("power", lambda p: [f"{x:.6f}" for x in p[:3]] + ["1.2 mW"] + [f"{x:.6f}" for x in p[4:]],
+     "found '1.2 mW' in data row 4 (line 5): 1 of 132 rows carry a unit ('mW'): write them as "
+     "numbers alone, in the unit of the other rows"),
+    ("power", lambda p: [f"{10 * np.log10(x):.2f} dBm" for x in p],
+     "convert decibels to it (mW = 10^(dBm/10))"),
+    ("theta_deg", lambda t: [f"{x:g} deg" for x in t], "write the angles alone, in degrees"),
+])
+def test_numbers_written_with_their_unit_are_named_as_such(tmp_path, column, values, words):
+    """A power column of '53.2 mW' was refused with "fix or remove that row" though every
+    row said the same; dBm would need converting, not just the unit removed."""
+    table = pd.read_csv(TERRAZZO)
+    table[column] = values(table[column].to_numpy())
+    path = tmp_path / "units.csv"
+    table.to_csv(path, index=False)
+    line = _one_error(["fit", path])
+    assert f"column '{column}' must be numeric" in line and words in line
+    assert "fix or remove" not in line
+
+
+def test_averaged_duplicates_say_how_far_the_repeats_disagree(tmp_path):
+    """--average-duplicates merged repeats 50 % apart with only "averaged 5 duplicated
+    (gamma, theta) row(s)"."""
+    table = pd.read_csv(TERRAZZO)[["gamma_deg", "theta_deg", "power"]]
+    repeats = table.iloc[[4]].assign(power=lambda t: t.power * 1.5)
+    path = tmp_path / "dups.csv"
+    pd.concat([table, repeats]).to_csv(path, index=False)
+    code, out, err = _run(["fit", path, "--model", "phong", "--average-duplicates"])
+    assert code == 0, err
+    assert ("averaged 1 duplicated (gamma, theta) row(s); the repeats of one setting differ by "
+            "up to 0.0577 (40% of their mean,") in err and "at gamma -10, theta -30" in err
+    same = tmp_path / "same.csv"
+    pd.concat([table, table.iloc[[4]]]).to_csv(same, index=False)
+    code, out, err = _run(["fit", same, "--model", "phong", "--average-duplicates"])
+    assert code == 0 and "averaged 1 duplicated (gamma, theta) row(s) (equal powers)" in err
+
+
+def test_a_reading_taken_at_the_instruments_angle_says_so_when_it_meets_another(tmp_path):
+    """A reading at gamma -20.1 (the goniometer's jitter) is taken at -20; when one at -20
+    holds the same theta, "reading (-20, 20) is given twice" named a row the file does not
+    hold."""
+    from irreflect.campaign import Campaign, Instrument
+
+    campaign = Campaign(Instrument(gammas_deg=(-20, -40)))
+    campaign.add([(-20, 20, 0.1)])
+    with pytest.raises(IrreflectError, match=r"reading \(-20, 20\) is given twice \(gamma "
+                                             r"-20\.1 is taken at -20, an angle of incidence"):
+        campaign.add([(-20.1, 20, 0.2)])
+    with pytest.raises(IrreflectError, match=r"is given twice: average"):
+        campaign.add([(-20, 20, 0.2)])
+    assert campaign.n_measured == 1
+    measured = tmp_path / "m.csv"
+    measured.write_text("gamma_deg,theta_deg,power\n-20,20,0.1\n-20.1,20,0.12\n-40,30,0.1\n")
+    line = _one_error(["next", measured, "--gammas", "-20", "-40"])
+    assert "is given twice (gamma -20.1 is taken at -20" in line

@@ -13,6 +13,7 @@ from __future__ import annotations
 import csv
 import difflib
 import os
+import re
 import warnings
 from dataclasses import dataclass, field, replace
 from importlib import resources
@@ -238,6 +239,31 @@ def _check_columns(df: pd.DataFrame, source: str) -> pd.DataFrame:
     return df
 
 
+#: A number followed by a unit's name ("1.2 mW", "-3dBm", "45 deg", "12%").
+_WITH_UNIT = re.compile(r"^[-+]?(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?\s*([^\d\s.,+-].*)$")
+
+
+def _unit_hint(bad_text: pd.Series, n_bad: int, n_rows: int, col: str) -> str:
+    """How to fix numbers written with their unit: "fix or remove that row" misled when
+    every row of the column said "1.2 mW"."""
+    units = sorted({m.group(3).strip() for t in bad_text
+                    if (m := _WITH_UNIT.match(str(t).strip()))})
+    shown = ", ".join(f"'{u}'" for u in units[:4]) + (", ..." if len(units) > 4 else "")
+    if col != "power":
+        return f"{n_bad} of {n_rows} rows carry a unit ({shown}): write the angles alone, in degrees"
+    if any(u.lower().startswith("db") for u in units):
+        return (f"{n_bad} of {n_rows} rows carry a unit ({shown}): the model fits linear power; "
+                "convert decibels to it (mW = 10^(dBm/10)) and write the numbers alone")
+    if len(units) > 1:
+        return (f"{n_bad} of {n_rows} rows carry a unit and they differ ({shown}): convert "
+                "the column to one unit and write the numbers alone")
+    if n_bad < n_rows:
+        return (f"{n_bad} of {n_rows} rows carry a unit ({shown}): write them as numbers alone, "
+                "in the unit of the other rows")
+    return (f"write the numbers alone, without their unit {shown} (every row carries it; any "
+            "one unit works for the whole column)")
+
+
 def _looks_numeric(text: str) -> bool:
     try:
         float(text)
@@ -300,6 +326,10 @@ def _numeric(df: pd.DataFrame, col: str, source: str, rows: _Rows) -> np.ndarray
             hint = "fix or remove that row"
             if "," in found and _looks_numeric(found.replace(",", ".")):
                 hint = "use '.' as the decimal point (found a decimal comma)"
+            elif _WITH_UNIT.match(found.strip()):
+                hint = _unit_hint(text[bad], int(bad.sum()), len(raw), col)
+            elif bad.sum() > 1:
+                hint = f"fix or remove that row ({int(bad.sum()) - 1} more row(s) like it)"
             _fail(
                 f"{source}: column '{col}' must be numeric; found '{found}' in {rows(i)}: {hint}"
             )
@@ -440,7 +470,7 @@ def _merge_duplicates(gamma, theta, power, sigma, source, rows, average):
         if sigma is not None:
             frame["s2"] = sigma**2
         grouped = frame.groupby(["g", "t"], sort=False)
-        agg = grouped.agg(p=("p", "mean"), k=("p", "size"))
+        agg = grouped.agg(p=("p", "mean"), k=("p", "size"), lo=("p", "min"), hi=("p", "max"))
         if sigma is not None:
             agg["s"] = np.sqrt(grouped["s2"].sum()) / agg["k"]
         n_merged = int(len(frame) - len(agg))
@@ -448,8 +478,24 @@ def _merge_duplicates(gamma, theta, power, sigma, source, rows, average):
         theta = agg.index.get_level_values(1).to_numpy(float)
         power = agg["p"].to_numpy(float)
         sigma = agg["s"].to_numpy(float) if sigma is not None else None
-        return gamma, theta, power, sigma, n_merged
-    return gamma, theta, power, sigma, 0
+        return gamma, theta, power, sigma, _merged_note(agg, n_merged, source)
+    return gamma, theta, power, sigma, ""
+
+
+def _merged_note(agg: pd.DataFrame, n_merged: int, source: str) -> str:
+    """The note on averaged duplicates, with how far the repeats of one setting disagree
+    (repeats 50 % apart were averaged with only "averaged 5 duplicated row(s)")."""
+    note = f"{source}: averaged {n_merged} duplicated (gamma, theta) row(s)"
+    spread = (agg["hi"] - agg["lo"]).to_numpy(float)
+    scale = float(np.max(np.abs(agg["p"].to_numpy(float))))
+    if not np.any(spread > 0) or scale <= 0:
+        return note + " (equal powers)"
+    i = int(np.argmax(spread))
+    g, t = agg.index[i]
+    mean = abs(float(agg["p"].iloc[i]))
+    rel = f"{spread[i] / mean:.0%} of their mean, " if mean > 0 else ""
+    return (note + f"; the repeats of one setting differ by up to {spread[i]:.3g} ({rel}"
+            f"{spread[i] / scale:.1%} of the largest power) at gamma {g:g}, theta {t:g}")
 
 
 def _peak_sides(gamma, theta, power) -> list[int]:
@@ -646,8 +692,9 @@ def validate_table(df: pd.DataFrame, source: str = "table", *,
     if len(df) > MAX_TABLE_ROWS:
         _fail(f"{source}: {len(df)} rows is more than irreflect reads ({MAX_TABLE_ROWS}): "
               "subsample the table")
-    gamma = _numeric(df, "gamma_deg", source, rows)
-    theta = _numeric(df, "theta_deg", source, rows)
+    # + 0.0: an angle written -0.0 (a script's rounding) is 0, not "-0" in every message
+    gamma = _numeric(df, "gamma_deg", source, rows) + 0.0
+    theta = _numeric(df, "theta_deg", source, rows) + 0.0
     power = _numeric(df, "power", source, rows)
     sigma = _numeric(df, "sigma", source, rows) if "sigma" in df.columns else None
     notes = []
@@ -671,9 +718,15 @@ def validate_table(df: pd.DataFrame, source: str = "table", *,
         check_sigma(power, sigma, source, rows)
     positive, negative = np.any(gamma > 0), np.any(gamma < 0)
     if positive and negative:
+        # name a value of each sign: a lone 1e-12 among negative angles read as a bare
+        # "mixes positive and negative" left the user to search the file for it
+        ip, ineg = int(np.flatnonzero(gamma > 0)[0]), int(np.flatnonzero(gamma < 0)[0])
         _fail(
             f"{source}: gamma_deg mixes positive and negative angles of incidence, which is "
-            "ambiguous: use the paper's convention (all <= 0, source side) or magnitudes (all >= 0)"
+            f"ambiguous; found {int(np.sum(gamma > 0))} positive (first {gamma[ip]:g} at "
+            f"{rows(ip)}) and {int(np.sum(gamma < 0))} negative (first {gamma[ineg]:g} at "
+            f"{rows(ineg)}): use the paper's convention (all <= 0, source side) or magnitudes "
+            "(all >= 0)"
         )
     if positive or not partial:
         gamma, theta, frame_notes = _frame(gamma, theta, power, positive, partial, source)
@@ -684,7 +737,7 @@ def validate_table(df: pd.DataFrame, source: str = "table", *,
     gamma, theta, power, sigma, merged = _merge_duplicates(gamma, theta, power, sigma, source,
                                                            rows, average_duplicates)
     if merged:
-        notes.append(f"{source}: averaged {merged} duplicated (gamma, theta) row(s)")
+        notes.append(merged)
         rows = _Rows()  # row numbers no longer match the file
     if partial:
         _check_partial_negative(power, sigma, source, rows, noise_floor)

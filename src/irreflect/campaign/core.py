@@ -271,7 +271,8 @@ class Campaign:
         0.25 deg of the instrument's are taken at them (the goniometer's jitter), and
         readings where the instrument does not reach are fitted; both with a
         :class:`~irreflect.data.DataNotice` (:meth:`Instrument.reading_notes`)."""
-        new, snapped = self.instrument.snap_gammas(_as_rows(rows))
+        raw = _as_rows(rows)
+        new, snapped = self.instrument.snap_gammas(raw)
         if not len(new):
             return self
         has_sigma = "sigma" in new.columns
@@ -283,9 +284,19 @@ class Campaign:
         dup = key.duplicated(keep=False)
         if dup.any():
             i = int(np.flatnonzero(dup)[0])
+            moved = ""
+            if snapped:  # a reading at -20.1 taken at -20 met one at -20: say why
+                n_old = len(combined) - len(new)
+                same = np.flatnonzero((key == key.iloc[i]).all(axis=1).to_numpy())
+                at = float(combined["gamma_deg"].iloc[i])
+                given = [float(raw["gamma_deg"].iloc[x - n_old]) for x in same if x >= n_old]
+                off = [g for g in given if round(g, 9) != round(at, 9)]
+                if off:
+                    moved = (f" (gamma {off[0]:g} is taken at {at:g}, an angle of incidence of "
+                             "the instrument: within the goniometer's jitter of it)")
             raise DataError(
                 f"reading ({combined['gamma_deg'].iloc[i]:g}, "
-                f"{combined['theta_deg'].iloc[i]:g}) is given twice: average the "
+                f"{combined['theta_deg'].iloc[i]:g}) is given twice{moved}: average the "
                 "repeated readings into one row, or remove one")
         frame = combined.copy()
         # the table's checks (signs, sigma)
@@ -1116,6 +1127,37 @@ def _farthest(settings, free, taken) -> int:
     return int(np.argmax(d))
 
 
+def _not_rows(rows) -> str:
+    """Why ``rows`` are not (gamma, theta, power[, sigma]) rows of numbers: the first row of
+    another length, or the first value that is not a number ("found list" said neither)."""
+    head = "readings must be a table or (gamma, theta, power[, sigma]) rows of numbers"
+    if isinstance(rows, dict):
+        return (f"{head}; found a dict: pass pandas.DataFrame(...) of it, with columns "
+                "gamma_deg, theta_deg, power[, sigma]")
+    try:
+        items = list(rows)
+    except TypeError:
+        return f"{head}; found {type(rows).__name__}"
+    lengths = set()
+    for i, row in enumerate(items, 1):
+        try:
+            values = list(row)
+        except TypeError:
+            return (f"{head}; found {row!r} as reading {i}, not a row: pass one tuple per "
+                    "reading, e.g. [(-20, 20, 0.1)]")
+        lengths.add(len(values))
+        for value in values:
+            try:
+                float(value)
+            except (TypeError, ValueError):
+                return (f"{head}; found {value!r} in reading {i}: give the number alone (power "
+                        "in any one unit, without the unit's name)")
+        if len(lengths) > 1:
+            return (f"{head}; found reading {i} with {len(values)} value(s) after rows of "
+                    f"{len(items[0])}: give every reading the same values")
+    return f"{head}; found {type(rows).__name__}"
+
+
 def _as_rows(rows) -> pd.DataFrame:
     """Readings as a DataFrame ``gamma_deg, theta_deg, power[, sigma]``."""
     if rows is None:
@@ -1130,10 +1172,13 @@ def _as_rows(rows) -> pd.DataFrame:
         try:
             arr = np.asarray(list(rows), float)
         except (TypeError, ValueError) as exc:
-            raise DataError(f"readings must be a table or (gamma, theta, power) rows; found "
-                            f"{type(rows).__name__}") from exc
+            raise DataError(_not_rows(rows)) from exc
         if arr.size == 0:
             return pd.DataFrame(columns=["gamma_deg", "theta_deg", "power"])
+        if arr.ndim == 1 and arr.size in (3, 4):
+            raise DataError(f"readings must be (gamma, theta, power[, sigma]) rows; found one "
+                            f"row of {arr.size} numbers, not in a list: pass "
+                            f"[{tuple(float(x) for x in arr)}]")
         if arr.ndim != 2 or arr.shape[1] not in (3, 4):
             raise DataError(f"readings must be (gamma, theta, power[, sigma]) rows; found "
                             f"shape {arr.shape}")

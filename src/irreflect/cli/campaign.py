@@ -117,6 +117,9 @@ def _next(args) -> int:
     readings = campaign.measurements  # Campaign.add warns of these notes (DataNotice)
     noted = [] if readings is None else tool.reading_notes(readings.gamma_deg,
                                                            readings.theta_deg)
+    short = _fewer_than_asked(args.n, len(proposals), tool)
+    if short:
+        noted.append(short)
     if args.json:
         doc = {"dataset": name, "n_measured": campaign.n_measured,
                "instrument": tool.describe(), "model": model.name, "seed": args.seed,
@@ -131,6 +134,8 @@ def _next(args) -> int:
         print(f"irreflect: note: instrument angles of incidence "
               f"{', '.join(f'{g:g}' for g in DEFAULT_GAMMAS)} deg (the default; give "
               "--gammas to change)", file=sys.stderr)
+    if short:
+        print(f"irreflect: note: {short}", file=sys.stderr)
     print(f"{name}: {campaign.n_measured} readings so far; instrument: {tool.describe()}")
     if len(proposals):
         print(f"next {len(proposals)} setting(s), in measurement order:")
@@ -149,6 +154,25 @@ def _next(args) -> int:
         print(f"wrote {args.save} (the campaign's fit of {campaign.n_measured} readings: a "
               "material file for 'irreflect room' scenes)")
     return 0
+
+
+def _fewer_than_asked(asked: int, proposed: int, tool) -> str:
+    """A note when ``next`` proposes fewer settings than ``--n`` asked for (``--n 100000``
+    printed "next 900 setting(s)" without a word on the rest), with the reason: every
+    free setting is proposed, and the campaign scores at most
+    :data:`~irreflect.campaign.instrument.MAX_SETTINGS` of the instrument's settings at
+    once. No proposal at all has its own line ("no setting left to propose")."""
+    from ..campaign.instrument import MAX_SETTINGS
+
+    if not 0 < proposed < asked:
+        return ""
+    total = len(tool.settings())
+    if total > MAX_SETTINGS:
+        return (f"--n {asked:,} asked for more settings than the campaign scores: proposing "
+                f"{proposed:,}, every free one of the {MAX_SETTINGS:,} (of the instrument's "
+                f"{total:,}) it scores at once")
+    return (f"--n {asked:,} asked for more settings than are free: proposing {proposed:,}, "
+            "every setting not yet measured")
 
 
 def _mirror_warnings(tool) -> list[str]:

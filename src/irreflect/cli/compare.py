@@ -42,7 +42,7 @@ def _cmd_compare(args) -> int:
         meas = load_data(args)
         comparison = compare_models(meas, args.models,
                                     phong_at_deg=None if at is None else abs(at),
-                                    seed=args.seed, progress=None, skip_failures=True,
+                                    seed=args.seed, progress=True, skip_failures=True,
                                     resolution=args.resolution)
         written = write_outputs(comparison, args.out) if args.out is not None else []
     for text in comparison.warnings:

@@ -14,13 +14,17 @@ from ..validation import check_int, check_number
 
 class OneLineParser(argparse.ArgumentParser):
     """An argument parser whose errors are one line (no usage block), exit code 2, and
-    that reads a comma-separated list of negative numbers (``--gammas -20,-40``) as a
-    value, as it reads one negative number, rather than as an unknown option."""
+    that reads whatever starts like a negative number as a value, as it reads ``-20``,
+    rather than as an unknown option: a comma-separated list (``--gammas -20,-40``, with
+    a stray comma ``-20,`` or ``-20,,-40``), an exponent (``-2e1``, ``-1e-12``), ``-inf``
+    and ``-nan``. argparse's own pattern took only ``-20`` and ``-2.5``: the others ended
+    in "expected at least one argument" (no option starts with a digit, so none is lost);
+    a malformed one (``-20x``) now reaches the option's type and its one-line error."""
 
     def __init__(self, *args, **kwargs):
         super().__init__(*args, **kwargs)
-        # argparse's own pattern (a negative number), extended to comma-separated lists
-        self._negative_number_matcher = re.compile(r"^-(\d+|\d*\.\d+)(,-?(\d+|\d*\.\d+))*$")
+        self._negative_number_matcher = re.compile(r"^-(\.?\d|(inf|infinity|nan)(,|$))",
+                                                   re.IGNORECASE)
 
     def error(self, message):
         self.exit(2, f"irreflect: error: {self.prog}: {message} (see '{self.prog} --help')\n")
