@@ -390,3 +390,34 @@ def test_a_clipped_detector_makes_the_fit_untrustworthy():
     assert 3 <= count <= total // 2 and total == 243
     assert clipped.problems()[0].startswith(f"a saturated detector? {count} of 243 readings")
     assert clipped.to_dict()["clipped_readings"] == count
+
+
+def test_a_verdict_on_many_angles_of_incidence_names_their_count_and_the_worst():
+    """A table of 26 angles of incidence fitted by a model that misses it: each problem
+    phrase gives the count, the span and the three worst angles, not 26 phrases (a 50-angle
+    table's verdict had been 6,000 characters on one line); a table of a few angles keeps
+    every angle."""
+    import warnings
+
+    from irreflect import fit
+    from irreflect.data import Measurements
+    from irreflect.synthetic import synthetic_material
+    from irreflect.verdict import MAX_LISTED, fit_verdict
+
+    gamma = np.repeat(-np.arange(2.0, 80.0, 3.0), 61)
+    theta = np.tile(np.linspace(-85.0, 85.0, 61), 26)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        base = fit(synthetic_material(5, "glossy").measurements, "two-lobe", seed=0)
+        power = base.predict(gamma, theta) * (1 + 0.3 * np.cos(np.radians(theta)))
+        table = Measurements(gamma_deg=gamma, theta_deg=theta, power=power, name="many")
+        verdict = fit_verdict(fit(table, "phong", seed=0))
+    listed = [p for p in verdict.problems() if "angles of incidence (|gamma|" in p]
+    assert listed and len(verdict.undersampled) > MAX_LISTED
+    under = next(p for p in listed if p.startswith("specular lobe under-sampled"))
+    assert under.startswith(f"specular lobe under-sampled at {len(verdict.undersampled)} "
+                            "angles of incidence (|gamma| 2-")
+    assert under.count(" deg (half width") == 3
+    gaps = sorted((a.lobe_receiver_gap_deg for a in verdict.undersampled), reverse=True)
+    assert f"receivers up to {gaps[0]:.2g} deg apart" in under
+    assert len(verdict.summary()) < 2000

@@ -182,17 +182,17 @@ class FitVerdict:
         if self.unresolved:
             parts = [f"{a.gamma_deg:g} deg ({a.lobe_points_1hw} point(s) within its half width "
                      f"of {a.lobe_half_width_deg:.2g} deg)" for a in self.unresolved]
-            out.append("specular lobe not resolved at |gamma| = " + ", ".join(parts)
+            out.append(_listed("specular lobe not resolved", parts, self.unresolved,
+                               [a.lobe_half_width_deg for a in self.unresolved])
                        + ": its width is not measured")
         if self.undersampled:
             out.append(_undersampled_text(self.undersampled))
         if self.misshapen:
-            out.append("shape not reproduced at |gamma| = "
-                       + ", ".join(f"{a.gamma_deg:g} deg (polar-area error "
-                                   f"{_pct(a.polar_error_at_points_pct)} % at the "
-                                   f"receivers, {_pct(a.polar_error_pct)} % of the whole "
-                                   "curve)"
-                                   for a in self.misshapen))
+            parts = [f"{a.gamma_deg:g} deg (polar-area error "
+                     f"{_pct(a.polar_error_at_points_pct)} % at the receivers, "
+                     f"{_pct(a.polar_error_pct)} % of the whole curve)" for a in self.misshapen]
+            out.append(_listed("shape not reproduced", parts, self.misshapen,
+                               [-_worst_error(a) for a in self.misshapen]))
         if self.at_bound:
             out.append("at a bound: " + ", ".join(self.at_bound))
         if self.ill_determined:
@@ -262,6 +262,31 @@ class FitVerdict:
                 "angles": [a.to_dict() for a in self.angles]}
 
 
+#: A verdict phrase lists at most this many angles of incidence one by one; beyond, it
+#: gives their count and span and the worst three (a 50-angle table's verdict had listed
+#: all 50, 6,000 characters on one line).
+MAX_LISTED = 8
+
+
+def _worst_error(a) -> float:
+    """An angle's larger polar-area error (at the receivers or of the whole curve), for
+    ordering; NaN counts as the smallest."""
+    vals = [v for v in (a.polar_error_at_points_pct, a.polar_error_pct) if np.isfinite(v)]
+    return max(vals, default=-np.inf)
+
+
+def _listed(what: str, parts: list[str], angles, order) -> str:
+    """``what`` at the angles of ``angles`` (one phrase of ``parts`` each), or, beyond
+    :data:`MAX_LISTED`, at their count and span, with the three first by ``order``
+    (ascending: the worst first)."""
+    if len(parts) <= MAX_LISTED:
+        return f"{what} at |gamma| = " + ", ".join(parts)
+    g = [a.gamma_deg for a in angles]
+    first = [parts[i] for i in np.argsort(np.asarray(order, float), kind="stable")[:3]]
+    return (f"{what} at {len(parts)} angles of incidence (|gamma| {min(g):g}-{max(g):g} "
+            "deg), the worst at |gamma| = " + ", ".join(first))
+
+
 def _undersampled_text(angles) -> str:
     """The problem phrase of the angles whose lobe is under-sampled."""
     parts = [f"{a.gamma_deg:g} deg (half width {a.lobe_half_width_deg:.2g} deg, receivers up "
@@ -270,7 +295,8 @@ def _undersampled_text(angles) -> str:
              f"{a.polar_error_pct:.3g} % of the whole curve)" for a in angles]
     step = min(a.step_needed_deg for a in angles)
     reach = max(2.0 * a.lobe_half_width_deg for a in angles)
-    return ("specular lobe under-sampled at |gamma| = " + ", ".join(parts)
+    return (_listed("specular lobe under-sampled", parts, angles,
+                    [-a.lobe_receiver_gap_deg for a in angles])
             + ": straight lines between the readings cannot follow it, so the polar-area "
             "error of the curve does not judge its shape there; a receiver step of at most "
             f"{step:g} deg within +-{reach:.2g} deg of the mirror would resolve it")
