@@ -14,7 +14,15 @@
    theta: a constant receiver offset shifts every gamma alike, an off-specular tilt grows
    toward grazing (``sin^2 gamma``), a background is flat in theta and gamma, an
    incidence-dependent reflectance scales each gamma's whole curve, retroreflection peaks
-   toward the source (``theta = gamma``), a halo widens the base of the lobe. Every
+   toward the source (``theta = gamma``), a halo widens the base of the lobe. Beside
+   them, on a table of at least 3 angles of incidence with 3 readings each, a gain drift
+   between angles of incidence (:data:`GAIN_DRIFT`: every reading at one gamma times its
+   own factor; a measurement artefact, built for the table by
+   :func:`irreflect.models.extensions.gain_drift`), dropped wherever an explanation
+   without it is as good (it nests every law that only scales each gamma's curve; every
+   explanation is judged against the best one without it too), and named only where its
+   factors depart from every smooth law of gamma (:func:`irreflect.diagnose.gain.
+   smooth_gains`; else the search runs again without it). Every
    explanation (a set of effects) is fitted on top of the base model, over all angles of
    incidence at once, started from the optimum of every smaller set it contains and from
    a scan of the coordinates it adds (:mod:`irreflect.diagnose.search`), and compared by
@@ -65,8 +73,17 @@ from ..fitting import FitResult, fit
 from ..fitting.shape_hint import peak_summary
 from ..metrics import format_polar_error
 from ..models import ReflectionModel, get_model
-from ..models.extensions import EXTENSIONS, applied_extensions, get_extension
+from ..models.extensions import EXTENSIONS, GAIN_DRIFT, applied_extensions, get_extension
 from ..validation import check_int, check_number, check_seed
+from .gain import (
+    GAIN_ADVICE,
+    GAIN_PARSIMONY,
+    artefact_note,
+    gain_candidate,
+    gain_params,
+    gain_starts,
+    smooth_gains,
+)
 from .noise import (
     NoiseEstimate,
     clipped_scale,
@@ -317,6 +334,14 @@ class Effect:
     rss_drop: float
     lr: float = float("nan")
     p_value: float = float("nan")
+    #: for an artefact of the measurement rather than a property of the material (the
+    #: gain drift): what to do about it; empty for a physical effect
+    advice: str = ""
+
+    @property
+    def artefact(self) -> bool:
+        """Whether the effect is an artefact of the measurement (see ``advice``)."""
+        return bool(self.advice)
 
 
 @dataclass(frozen=True)
@@ -398,7 +423,8 @@ class Diagnosis:
             "model": self.base_model,
             "effects": [{"name": e.name, "params": e.params, "stderr": e.stderr,
                          "delta_bic": e.delta_bic, "share_explained": e.share_explained,
-                         "lr": e.lr, "p_value": e.p_value}
+                         "lr": e.lr, "p_value": e.p_value,
+                         "measurement_artefact": e.artefact, "advice": e.advice}
                         for e in self.effects],
             "alternatives": [list(a) for a in self.alternatives],
             "alternative_fits": {k: metrics(a) | {"params": a.fit.params}
@@ -559,10 +585,10 @@ class _Search:
     """The fits of one diagnosis: every explanation tried, by set name, judged against the
     current noise estimate."""
 
-    def __init__(self, meas, work, base_model, names, noise, seed, say):
+    def __init__(self, meas, work, base_model, names, noise, seed, say, local=None):
         self.meas, self.work, self.names, self.noise = meas, work, names, noise
         self.seed, self.say = seed, say
-        self.sets = ModelSets(base_model)
+        self.sets = ModelSets(base_model, local)
         self.gamma = np.radians(meas.gamma_deg)
         self.theta = np.radians(meas.theta_deg)
         self.weights = 1.0 / noise.sigma
@@ -570,6 +596,8 @@ class _Search:
         self.z: dict[str, np.ndarray] = {}
         self.failed: dict[str, str] = {}
         self.stale: set[str] = set()
+        #: explanations with a gain drift dropped for one as good without it (_select)
+        self.parsimony: set[str] = set()
 
     def add(self, key: str, result: FitResult, effects) -> Assessment:
         a = assess(result, self.noise, effects, polar=False)
@@ -595,6 +623,11 @@ class _Search:
         self.say(f"trying {key or 'the base model'}")
         starts = starts_for(self.sets, effects, self.z, self.gamma, self.theta,
                             self.meas.power, self.weights)
+        if GAIN_DRIFT in effects:
+            curves = {k: a.fit.fitted for k, a in self.fits.items() if a is not None}
+            starts = np.vstack([gain_starts(self.sets, effects, self.z, curves,
+                                            self.meas.gamma_deg, self.meas.power,
+                                            self.weights), starts])
         if key in self.z:  # a fit with other weights: its optimum first
             starts = np.vstack([self.z[key][None], starts])
         self.stale.discard(key)
@@ -684,10 +717,29 @@ def _lr_p_value(lr: float, df: int, noise: NoiseEstimate) -> float:
     return float(special.chdtrc(df, lr))
 
 
+def _rivals(search: _Search, sets) -> list:
+    """What explanations are judged against: the best (lowest deviance) of ``sets``, and
+    the best of those without the gain drift when that is another. (The gain drift nests
+    the incidence reflectance: judged against it alone, on its many degrees of freedom,
+    what the best of the catalogue rejects would survive.)"""
+    best = min(sets, key=search.dev)
+    plain = [s for s in sets if GAIN_DRIFT not in s]
+    best_plain = min(plain, key=search.dev) if plain else best
+    return [best] if best_plain == best else [best, best_plain]
+
+
+def _needless_gain(search: _Search, u, bests, level: float) -> bool:
+    """Whether ``u`` holds the gain drift and does not reject the best explanation of
+    its size without it: it is not grown further (it would be dropped for that one)."""
+    plain = [b for b in bests if GAIN_DRIFT not in b]
+    return GAIN_DRIFT in u and bool(plain) and not _beaten(search, plain[0], u, level, 0.0)
+
+
 def _select(search: _Search, names, max_effects: int, alpha: float, min_share: float):
     """The search over explanations (see the module docstring): the rounds of candidates
     tried, by size, and the final explanations (one; several when ambiguous; the empty
     one when nothing is named), best first."""
+    search.parsimony = set()
     rounds: list[list[Candidate]] = []
     contenders: list[tuple[str, ...]] = [()]
     adequate: list[tuple[str, ...]] = []
@@ -735,13 +787,17 @@ def _select(search: _Search, names, max_effects: int, alpha: float, min_share: f
             rounds.append(row)
         grown = list(dict.fromkeys(grown))
         if grown:  # an explanation no single effect improves may still be beaten by one
-            best = min(grown, key=search.dev)  # grown from another
-            ok = [s for s in ok if not _beaten(search, s, best, level_all, min_share, alpha)]
+            bests = _rivals(search, grown)  # grown from another
+            ok = [s for s in ok if not any(_beaten(search, s, b, level_all, min_share, alpha)
+                                           for b in bests)]
         if ok or not grown:
             adequate = ok
             break
         # grow: drop what the best of the next size rejects, keep a few
-        keep = sorted((u for u in grown if not _beaten(search, u, best, level_all, 0.0)),
+        needless = {u for u in grown if _needless_gain(search, u, bests, level_all)}
+        search.parsimony |= {set_name(u) for u in needless}
+        keep = sorted((u for u in grown if u not in needless
+                       and not any(_beaten(search, u, b, level_all, 0.0) for b in bests)),
                       key=search.dev)
         contenders = keep[:MAX_CONTENDERS]
         inadequate_best = contenders[0]
@@ -749,11 +805,18 @@ def _select(search: _Search, names, max_effects: int, alpha: float, min_share: f
         adequate = [inadequate_best] if inadequate_best is not None else [()]
     # among the adequate ones, those the best rejects go; what is named must explain enough
     base = search.get(())
-    best = min(adequate, key=search.dev)
+    bests = _rivals(search, adequate)
     final = [s for s in adequate
-             if not _beaten(search, s, best, level_all, 0.0)
+             if not any(_beaten(search, s, b, level_all, 0.0) for b in bests)
              and (not s or _share(base, search.get(s)) >= min_share)]
     final.sort(key=search.dev)
+    # a gain drift nests every law that only scales each angle of incidence's curve (the
+    # incidence reflectance): beside an explanation without it that is as good (not
+    # rejected against the best), it is the larger model, and goes
+    plain = [s for s in final if GAIN_DRIFT not in s]
+    if plain:
+        search.parsimony |= {set_name(s) for s in final if GAIN_DRIFT in s}
+        final = plain
     return rounds, (final or [()])
 
 
@@ -872,7 +935,7 @@ def _chain(search, chosen) -> list:
     return chain
 
 
-def _ranked(rounds, chain, final, min_share) -> list:
+def _ranked(search, rounds, chain, final, min_share) -> list:
     """The candidates of every round, marked accepted (on the chain) with their reason,
     by deviance."""
     ranked = []
@@ -881,12 +944,37 @@ def _ranked(rounds, chain, final, min_share) -> list:
         for c in row:
             named = any(set_name(s) == c.name for s in chain)
             in_final = any(set_name(s) == c.name for s in final)
-            out.append(dataclasses.replace(c, accepted=named, reason=_reason(c, named,
-                                                                             in_final, min_share)))
+            reason = (GAIN_PARSIMONY if c.name in search.parsimony
+                      else _reason(c, named, in_final, min_share))
+            out.append(dataclasses.replace(c, accepted=named, reason=reason))
         ranked.append(tuple(sorted(out, key=lambda c: (c.assessment is None,
                                                        c.assessment.deviance if c.assessment
                                                        else 0.0))))
     return ranked
+
+
+def _choose(search, meas, names, max_effects, alpha, min_share, seed):
+    """The search over explanations (:func:`_select`), with the noise judged again from
+    the chosen explanation's residual: (rounds, final)."""
+    rounds, final = _select(search, names, max_effects, alpha, min_share)
+    for _ in range(MAX_NOISE_PASSES):
+        # the noise is judged again from the residual the chosen explanation leaves when
+        # that shows less than the base model's (a misfit leaks into a difference
+        # estimate), and the explanations with it (their fits are kept)
+        if search.noise.source != "estimated" or not final[0]:
+            break
+        chosen = search.get(final[0]).fit
+        refreshed = estimate_noise(meas, residuals=chosen.residuals, fitted=chosen.fitted,
+                                   seed=seed, alpha=alpha)
+        if not refreshed.value < search.noise.value:
+            break
+        search.reassess(dataclasses.replace(refreshed, method=refreshed.method.replace(
+            "base-model residuals", f"residuals of {chosen.model}")))
+        previous = final
+        rounds, final = _select(search, names, max_effects, alpha, min_share)
+        if final == previous:
+            break
+    return rounds, final
 
 
 def diagnose(measurements, model="two-lobe", *, extensions: Sequence[str] | None = None,
@@ -937,32 +1025,27 @@ def diagnose(measurements, model="two-lobe", *, extensions: Sequence[str] | None
     base_model = get_model(model)
     names = list(EXTENSIONS) if extensions is None else list(extensions)
     for name in names:
-        get_extension(name)  # validates the names before any work
+        if name != GAIN_DRIFT:
+            get_extension(name)  # validates the names before any work
     used = set(applied_extensions(base_model))
     names = [n for n in names if n not in used]
+    names, local = gain_candidate(names, extensions is None, used, meas)
     say = progress or (lambda message: None)
     say(f"fitting {base_model.name}")
     base_fit, noise, work, unweighted = _base_fit_and_noise(meas, base_model, seed, alpha)
-    search = _Search(meas, work, base_model, names, noise, seed, say)
+    search = _Search(meas, work, base_model, names, noise, seed, say, local)
     search.add("", base_fit, ())
-    rounds, final = _select(search, names, max_effects, alpha, min_share)
-    for _ in range(MAX_NOISE_PASSES):
-        # the noise is judged again from the residual the chosen explanation leaves when
-        # that shows less than the base model's (a misfit leaks into a difference
-        # estimate), and the explanations with it (their fits are kept)
-        if noise.source != "estimated" or not final[0]:
-            break
-        chosen = search.get(final[0]).fit
-        refreshed = estimate_noise(meas, residuals=chosen.residuals, fitted=chosen.fitted,
-                                   seed=seed, alpha=alpha)
-        if not refreshed.value < search.noise.value:
-            break
-        search.reassess(dataclasses.replace(refreshed, method=refreshed.method.replace(
-            "base-model residuals", f"residuals of {chosen.model}")))
-        previous = final
-        rounds, final = _select(search, names, max_effects, alpha, min_share)
-        if final == previous:
-            break
+    rounds, final = _choose(search, meas, names, max_effects, alpha, min_share, seed)
+    smooth_note = ""
+    if GAIN_DRIFT in final[0]:  # named only where no smooth law of gamma would do
+        smooth, smooth_note = smooth_gains(search.get(final[0]).fit,
+                                           local[GAIN_DRIFT].levels_deg, alpha / len(names))
+        if smooth:  # the search again without it, from the start (its noise passes
+            # judged the noise from the gain drift's residual)
+            plain = [n for n in names if n != GAIN_DRIFT]
+            search = _Search(meas, work, base_model, plain, noise, seed, say)
+            search.add("", base_fit, ())
+            rounds, final = _choose(search, meas, plain, max_effects, alpha, min_share, seed)
     noise = search.noise
     base = search.get(())
     common = tuple(n for n in final[0] if all(n in s for s in final))
@@ -982,12 +1065,12 @@ def diagnose(measurements, model="two-lobe", *, extensions: Sequence[str] | None
         added = next(n for n in cur if n not in prev)
         if added in common:
             effects.append(_effect(added, marks.get(set_name(cur)), final_fit, search.sets))
-    ranked = _ranked(rounds, chain, final, min_share)
+    ranked = _ranked(search, rounds, chain, final, min_share)
     target = _separation_target(alpha, len(names), noise)
     alt_fits, separating = _separation(search, final, alternatives, meas, target, separate)
     verdict, summary, where = _verdict(steps, effects, alternatives, common, separating,
                                        alpha, base, target, meas)
-    summary += _untested(rounds)
+    summary += _untested(rounds) + artefact_note(effects) + smooth_note
     if len(steps) > 1:  # the extended model is a result too: say what is doubtful about it
         for text in steps[-1].fit.warnings:
             warnings.warn(FitWarning(f"{meas.name}, {steps[-1].fit.model}: {text}"),
@@ -1049,15 +1132,24 @@ def _effect(name: str, c: Candidate | None, result: FitResult, sets: ModelSets) 
     model = result.model_object
     one = sets.model([name])
     new = one.params[len(sets.base.params):]
+    params = {p.name: result.params[p.name] for p in new}
+    stderr = {p.name: result.stderrs[p.name] for p in new}
+    units = {p.name: ("" if p.unit == "1" else p.unit) for p in new}
+    advice = ""
+    if name == GAIN_DRIFT:
+        params, stderr = gain_params(result, sets.local[GAIN_DRIFT].levels_deg)
+        units = {k: "" for k in params}
+        advice = GAIN_ADVICE
     return Effect(
         name=name,
-        params={p.name: result.params[p.name] for p in new},
-        stderr={p.name: result.stderrs[p.name] for p in new},
-        units={p.name: ("" if p.unit == "1" else p.unit) for p in new},
+        params=params,
+        stderr=stderr,
+        units=units,
         delta_bic=c.delta_bic if c else float("nan"),
         share_explained=c.share_explained if c else float("nan"),
         rss_drop=c.rss_drop if c else float("nan"),
         lr=c.lr if c else float("nan"), p_value=c.p_value if c else float("nan"),
+        advice=advice,
     ) if model is not None else None
 
 
