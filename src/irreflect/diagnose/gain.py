@@ -43,6 +43,9 @@ def gain_candidate(names, default: bool, used, meas):
 #: why an explanation with a gain drift is dropped for one without it (see _select)
 GAIN_PARSIMONY = ("not needed: an explanation without the gain drift, with fewer "
                    "parameters, explains the data as well")
+#: why an explanation with a gain drift whose factors follow a smooth law is not grown
+GAIN_SMOOTH = ("not named: its factors follow a smooth law of the angle of incidence "
+               "(see the summary)")
 #: what to do about a gain drift (the Effect's advice)
 GAIN_ADVICE = ("a measurement artefact, not a property of the material: the detector or "
                "source gain changed between the runs at different angles of incidence; "

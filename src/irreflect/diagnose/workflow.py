@@ -22,7 +22,7 @@
    without it is as good (it nests every law that only scales each gamma's curve; every
    explanation is judged against the best one without it too), and named only where its
    factors depart from every smooth law of gamma (:func:`irreflect.diagnose.gain.
-   smooth_gains`; else the search runs again without it). Every
+   smooth_gains`; else it is neither grown nor anyone's rival). Every
    explanation (a set of effects) is fitted on top of the base model, over all angles of
    incidence at once, started from the optimum of every smaller set it contains and from
    a scan of the coordinates it adds (:mod:`irreflect.diagnose.search`), and compared by
@@ -78,6 +78,7 @@ from ..validation import check_int, check_number, check_seed
 from .gain import (
     GAIN_ADVICE,
     GAIN_PARSIMONY,
+    GAIN_SMOOTH,
     artefact_note,
     gain_candidate,
     gain_params,
@@ -598,6 +599,10 @@ class _Search:
         self.stale: set[str] = set()
         #: explanations with a gain drift dropped for one as good without it (_select)
         self.parsimony: set[str] = set()
+        #: the level of the gain drift's smoothness test (:func:`smooth_gains`), and its
+        #: verdict per explanation holding it: (smooth, sentence)
+        self.gain_level = 0.01
+        self.smooth_of: dict[str, tuple[bool, str]] = {}
 
     def add(self, key: str, result: FitResult, effects) -> Assessment:
         a = assess(result, self.noise, effects, polar=False)
@@ -613,6 +618,17 @@ class _Search:
         self.work = dataclasses.replace(self.work, sigma=noise.sigma)
         self.weights = 1.0 / noise.sigma
         self.stale = set(self.fits)
+        self.smooth_of = {}
+
+    def smooth(self, effects) -> tuple[bool, str]:
+        """Whether the gain factors of the fit of ``effects`` (which holds the gain drift)
+        follow a smooth law of gamma (:func:`smooth_gains`), and the sentence that says so."""
+        key = set_name(effects)
+        if key not in self.smooth_of:
+            a = self.get(effects)
+            self.smooth_of[key] = (True, "") if a is None else smooth_gains(
+                a.fit, self.sets.local[GAIN_DRIFT].levels_deg, self.gain_level)
+        return self.smooth_of[key]
 
     def get(self, effects) -> Assessment | None:
         key = set_name(effects)
@@ -779,6 +795,11 @@ def _select(search: _Search, names, max_effects: int, alpha: float, min_share: f
                                      "", added=x, parent=set_name(s), lr=lr, df=df, p_value=p,
                                      level=level))
                 if p < level and (not s or share >= min_share):
+                    if GAIN_DRIFT in u and search.smooth(u)[0]:
+                        # factors a smooth law of gamma would give: no drift, and no
+                        # rival of the catalogue's explanations either
+                        search.parsimony.add(set_name(u))
+                        continue
                     counted_here = True
                     grown.append(u)
             if not counted_here:
@@ -944,13 +965,25 @@ def _ranked(search, rounds, chain, final, min_share) -> list:
         for c in row:
             named = any(set_name(s) == c.name for s in chain)
             in_final = any(set_name(s) == c.name for s in final)
-            reason = (GAIN_PARSIMONY if c.name in search.parsimony
-                      else _reason(c, named, in_final, min_share))
+            reason = _reason(c, named, in_final, min_share)
+            if c.name in search.parsimony:
+                reason = (GAIN_SMOOTH if search.smooth_of.get(c.name, (False, ""))[0]
+                          else GAIN_PARSIMONY)
             out.append(dataclasses.replace(c, accepted=named, reason=reason))
         ranked.append(tuple(sorted(out, key=lambda c: (c.assessment is None,
                                                        c.assessment.deviance if c.assessment
                                                        else 0.0))))
     return ranked
+
+
+def _smooth_note(search) -> str:
+    """The sentence of the best-fitting explanation with the gain drift that was not
+    grown because its factors follow a smooth law of gamma ("" when none)."""
+    dropped = [k for k, (smooth, _) in search.smooth_of.items() if smooth]
+    if not dropped:
+        return ""
+    best = min(dropped, key=lambda k: search.fits[k].deviance)
+    return search.smooth_of[best][1]
 
 
 def _choose(search, meas, names, max_effects, alpha, min_share, seed):
@@ -1034,12 +1067,15 @@ def diagnose(measurements, model="two-lobe", *, extensions: Sequence[str] | None
     say(f"fitting {base_model.name}")
     base_fit, noise, work, unweighted = _base_fit_and_noise(meas, base_model, seed, alpha)
     search = _Search(meas, work, base_model, names, noise, seed, say, local)
+    search.gain_level = alpha / len(names)
     search.add("", base_fit, ())
     rounds, final = _choose(search, meas, names, max_effects, alpha, min_share, seed)
-    smooth_note = ""
-    if GAIN_DRIFT in final[0]:  # named only where no smooth law of gamma would do
-        smooth, smooth_note = smooth_gains(search.get(final[0]).fit,
-                                           local[GAIN_DRIFT].levels_deg, alpha / len(names))
+    # the gain drift is named only where no smooth law of gamma would do: explanations
+    # whose factors follow one are not grown (_select); what the noise passes changed is
+    # checked here
+    smooth, smooth_note = (search.smooth(final[0]) if GAIN_DRIFT in final[0]
+                           else (False, _smooth_note(search)))
+    if GAIN_DRIFT in final[0]:
         if smooth:  # the search again without it, from the start (its noise passes
             # judged the noise from the gain drift's residual)
             plain = [n for n in names if n != GAIN_DRIFT]
