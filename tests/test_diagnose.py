@@ -638,6 +638,10 @@ def test_gain_drift_extension_scales_each_angle_of_incidence():
     np.testing.assert_allclose(model.predict(values, g, t), expected, rtol=1e-12)
     z, alpha = model.from_natural(values[None])
     np.testing.assert_allclose(model.to_natural(z, alpha)[0], values, rtol=1e-10)
+    import pickle  # not in the registry: pickles as the wrapped model and its angles
+
+    again = pickle.loads(pickle.dumps(model))
+    np.testing.assert_array_equal(again.predict(values, g, t), model.predict(values, g, t))
     geom = Geometry.of(g[None], t[None])
     z = np.repeat(z, 2, axis=0) + np.array([[0.0] * 5 + [0.0, 0.0], [0.01] * 5 + [-0.2, 0.3]])
     basis, dbasis = model.basis(geom, z, True)
