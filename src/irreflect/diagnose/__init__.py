@@ -11,7 +11,9 @@ Modules
 extensions
     The catalogue of model extensions (``incidence_reflectance``, ``offspecular_peak``,
     ``retroreflection``, ``angle_offset``, ``background``, ``specular_halo``), their
-    registry (:func:`register_extension`) and :func:`extend`.
+    registry (:func:`register_extension`) and :func:`extend`; beside them the gain drift
+    between angles of incidence of one table (:data:`GAIN_DRIFT`, a measurement
+    artefact), which the diagnosis builds per table.
 workflow
     Residual structure tests, the search over explanations, the verdict (:func:`diagnose`).
 noise
@@ -34,6 +36,7 @@ files: :mod:`irreflect.plots.diagnose`; the report section: :mod:`irreflect.repo
 from ..models.extensions import (
     CATALOGUE,
     EXTENSIONS,
+    GAIN_DRIFT,
     Extension,
     extension_names,
     get_extension,
@@ -52,7 +55,8 @@ from .workflow import (
 )
 
 __all__ = [
-    "AMBIGUOUS", "CATALOGUE", "EFFECTS_FOUND", "EXTENSIONS", "NO_MISSING_EFFECT", "UNEXPLAINED",
+    "AMBIGUOUS", "CATALOGUE", "EFFECTS_FOUND", "EXTENSIONS", "GAIN_DRIFT", "NO_MISSING_EFFECT",
+    "UNEXPLAINED",
     "Diagnosis", "Extension", "diagnose", "estimate_noise", "extend", "extension_names",
     "get_extension", "register_extension", "structure_tests",
 ]

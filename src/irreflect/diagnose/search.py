@@ -5,9 +5,10 @@ extensions wrap each other is physical, not the order they were found in. The sp
 lobe's tilt is innermost (it moves that lobe only), then the extra lobes (retroreflection,
 halo; about directions the tilt does not move), then the reflectance that depends on the
 angle of incidence (it scales every lobe), then an additive background (stray light is not
-scaled by the surface), and outermost the receiver arm's zero error (it moves everything
-the detector sees). Extensions registered by users come after the catalogue's, before the
-angle offset.
+scaled by the surface), then the receiver arm's zero error (it moves everything the
+detector sees), and outermost a gain drift between angles of incidence (it scales
+everything the detector reads; it commutes with the zero error, which moves theta only).
+Extensions registered by users come after the catalogue's, before the angle offset.
 
 Starts of a set ``U`` (:func:`starts_for`): the optimum of every fitted subset of ``U``
 one smaller, with the missing extension at its neutral value (the nested model's optimum
@@ -16,21 +17,23 @@ their whole range on a fine grid, the other coordinates held at that optimum and
 linear coefficients solved for, the best few local minima. A lobe a thousand times higher
 than the diffuse floor and one degree wide moves off its receiver for a shift of one
 degree: the cost along a shift is a comb of narrow dips, which a scan finds and a local
-search from a neutral start does not.
+search from a neutral start does not. A gain drift (one coordinate per angle of incidence,
+too many to scan) starts instead from the factors that rescale each angle's curve of the
+fitted subset onto its readings (:func:`irreflect.diagnose.gain.gain_starts`).
 """
 
 from __future__ import annotations
 
 import numpy as np
 
+from ..errors import IrreflectError
 from ..models.base import Geometry, ReflectionModel
-from ..models.extensions import Extension, get_extension
-from ..models.registry import extend
+from ..models.extensions import GAIN_DRIFT, Extension, get_extension
 
 #: the physical nesting of the catalogue (innermost first); see the module docstring
 CANONICAL = ("offspecular_peak", "retroreflection", "specular_halo", "incidence_reflectance",
              "background")
-OUTERMOST = ("angle_offset",)
+OUTERMOST = ("angle_offset", GAIN_DRIFT)
 #: scan points per coordinate (one coordinate; two coordinates: this many per axis)
 SCAN_1D = 241
 SCAN_2D = 25
@@ -51,23 +54,36 @@ def set_name(names) -> str:
 
 
 class ModelSets:
-    """The models of sets of extensions on one base, with their coordinate blocks."""
+    """The models of sets of extensions on one base, with their coordinate blocks;
+    ``local``: extensions of this table only (name -> extension, e.g. the gain drift of
+    :func:`irreflect.models.extensions.gain_drift`), found before the registry's."""
 
-    def __init__(self, base: ReflectionModel):
+    def __init__(self, base: ReflectionModel, local: dict | None = None):
         self.base = base
+        self.local = dict(local or {})
         self._models: dict[tuple[str, ...], ReflectionModel] = {(): base}
         self._blocks: dict[str, tuple[int, np.ndarray]] = {}
+
+    def extension(self, name: str):
+        """The extension of that name: this table's own, else the registry's."""
+        return self.local[name] if name in self.local else get_extension(name)
 
     def model(self, names) -> ReflectionModel:
         key = canonical_order(names)
         if key not in self._models:
-            self._models[key] = extend(self.base, list(key))
+            model = self.base
+            for name in key:
+                model = self.extension(name)(model)
+                if not isinstance(model, ReflectionModel):
+                    raise IrreflectError(f"extension '{name}' returned "
+                                         f"{type(model).__name__}, expected a ReflectionModel")
+            self._models[key] = model
         return self._models[key]
 
     def block(self, name: str, gamma=None, theta=None, power=None) -> tuple[int, np.ndarray]:
         """Size of an extension's nonlinear block and its neutral value."""
         if name not in self._blocks:
-            ext = get_extension(name)
+            ext = self.extension(name)
             if isinstance(ext, Extension):
                 size = len(ext.nonlinear_names)
                 neutral = (np.asarray(ext.z_starts[0], float) if size and ext.z_starts
@@ -204,3 +220,4 @@ def starts_for(sets: ModelSets, names, fitted: dict, gamma, theta, power, weight
     out = np.concatenate(rows, axis=0)
     out = np.clip(out, model.z_lower, model.z_upper)
     return np.unique(out, axis=0)
+

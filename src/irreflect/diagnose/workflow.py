@@ -14,7 +14,15 @@
    theta: a constant receiver offset shifts every gamma alike, an off-specular tilt grows
    toward grazing (``sin^2 gamma``), a background is flat in theta and gamma, an
    incidence-dependent reflectance scales each gamma's whole curve, retroreflection peaks
-   toward the source (``theta = gamma``), a halo widens the base of the lobe. Every
+   toward the source (``theta = gamma``), a halo widens the base of the lobe. Beside
+   them, on a table of at least 3 angles of incidence with 3 readings each, a gain drift
+   between angles of incidence (:data:`GAIN_DRIFT`: every reading at one gamma times its
+   own factor; a measurement artefact, built for the table by
+   :func:`irreflect.models.extensions.gain_drift`), dropped wherever an explanation
+   without it is as good (it nests every law that only scales each gamma's curve; every
+   explanation is judged against the best one without it too), and named only where its
+   factors depart from every smooth law of gamma (:func:`irreflect.diagnose.gain.
+   smooth_gains`; else it is neither grown nor anyone's rival). Every
    explanation (a set of effects) is fitted on top of the base model, over all angles of
    incidence at once, started from the optimum of every smaller set it contains and from
    a scan of the coordinates it adds (:mod:`irreflect.diagnose.search`), and compared by
@@ -65,8 +73,18 @@ from ..fitting import FitResult, fit
 from ..fitting.shape_hint import peak_summary
 from ..metrics import format_polar_error
 from ..models import ReflectionModel, get_model
-from ..models.extensions import EXTENSIONS, applied_extensions, get_extension
+from ..models.extensions import EXTENSIONS, GAIN_DRIFT, applied_extensions, get_extension
 from ..validation import check_int, check_number, check_seed
+from .gain import (
+    GAIN_ADVICE,
+    GAIN_PARSIMONY,
+    GAIN_SMOOTH,
+    artefact_note,
+    gain_candidate,
+    gain_params,
+    gain_starts,
+    smooth_gains,
+)
 from .noise import (
     NoiseEstimate,
     clipped_scale,
@@ -76,6 +94,14 @@ from .noise import (
 )
 from .search import ModelSets, canonical_order, set_name, starts_for
 from .separate import separating_settings
+from .structure import (
+    LackOfFit,
+    StructureTest,
+    _deg,
+    lack_of_fit,
+    per_gamma_chi2,
+    structure_tests,
+)
 
 #: verdict codes (the ``verdict`` key of the JSON output)
 NO_MISSING_EFFECT = "no missing effect"
@@ -101,148 +127,6 @@ __all__ = [
     "assess", "clipped_scale", "diagnose", "diagnose_many", "difference_weights",
     "estimate_noise", "lack_of_fit", "per_gamma_chi2", "structure_tests",
 ]
-
-
-# ----------------------------------------------------------------------------- statistics
-@dataclass(frozen=True)
-class LackOfFit:
-    """Lack-of-fit of a model against the noise: ``chi2 = sum (r / sigma)^2`` on ``dof``
-    degrees of freedom, ``ratio = chi2 / dof`` (1 when only noise is left) and the p-value of
-    a ratio at least that large (chi-square test with a given sigma, F test with an
-    estimated one)."""
-
-    chi2: float
-    dof: int
-    ratio: float
-    p_value: float
-    test: str
-
-
-def lack_of_fit(normalized_residuals, n_params: int, noise: NoiseEstimate) -> LackOfFit:
-    z = np.asarray(normalized_residuals, float)
-    chi2 = float(np.sum(z * z))
-    dof = max(z.size - int(n_params), 1)
-    ratio = chi2 / dof
-    if np.isinf(noise.dof):
-        p, test = float(special.chdtrc(dof, chi2)), "chi-square"
-    else:
-        p, test = float(special.fdtrc(dof, noise.dof, ratio)), "F"
-    return LackOfFit(chi2=chi2, dof=dof, ratio=ratio, p_value=p, test=test)
-
-
-@dataclass(frozen=True)
-class StructureTest:
-    """One test for non-random residuals: statistic, degrees of freedom, p-value and where
-    the strongest deviation lies (``where``, ``z_worst`` its z-score)."""
-
-    name: str
-    statistic: float
-    dof: float
-    p_value: float
-    where: str
-    z_worst: float
-
-
-def _deg(x) -> str:
-    """An angle for a sentence: degrees to 0.1, no trailing zeros."""
-    return f"{round(float(x), 1):g}"
-
-
-def _runs_test(gamma_deg, theta_deg, z) -> StructureTest:
-    """Wald-Wolfowitz runs of residual signs along theta within each gamma (too few runs
-    = neighbouring residuals share their sign = structure)."""
-    runs = expected = variance = 0.0
-    longest = (0, None, None, None, 0)
-    for g in np.unique(gamma_deg):
-        sel = np.nonzero(gamma_deg == g)[0]
-        sel = sel[np.argsort(theta_deg[sel], kind="stable")]
-        signs = np.sign(z[sel])
-        keep = signs != 0
-        s, th = signs[keep], theta_deg[sel][keep]
-        n1, n2 = int(np.sum(s > 0)), int(np.sum(s < 0))
-        n = n1 + n2
-        if n < 2:
-            continue
-        change = np.nonzero(s[1:] != s[:-1])[0]
-        runs += change.size + 1
-        expected += 1.0 + 2.0 * n1 * n2 / n
-        variance += 2.0 * n1 * n2 * (2.0 * n1 * n2 - n) / (n * n * (n - 1.0))
-        bounds = np.concatenate([[0], change + 1, [n]])
-        lengths = np.diff(bounds)
-        i = int(np.argmax(lengths))
-        if lengths[i] > longest[0]:
-            longest = (int(lengths[i]), g, th[bounds[i]], th[bounds[i + 1] - 1], s[bounds[i]])
-    zscore = (runs - expected) / np.sqrt(variance) if variance > 0 else 0.0
-    p = float(special.ndtr(zscore))
-    length, g, t0, t1, sign = longest
-    where = (f"{length} residuals in a row {'above' if sign > 0 else 'below'} the model at "
-             f"gamma {_deg(g)} deg, theta {_deg(t0)}..{_deg(t1)} deg") if length else "no residuals"
-    return StructureTest("runs of signs along theta", float(runs), float(expected), p, where,
-                         float(zscore))
-
-
-def _group_test(name, z, labels, describe, noise_dof=np.inf) -> StructureTest:
-    """Mean normalised residual per group: ``sum n_b mean_b^2 ~ chi2(groups)`` for noise
-    of a known sigma; ``(that / groups) ~ F(groups, noise_dof)`` for an estimated one."""
-    keys, inverse, counts = np.unique(labels, return_inverse=True, return_counts=True)
-    sums = np.bincount(inverse, weights=z, minlength=keys.size)
-    means = sums / counts
-    zb = means * np.sqrt(counts)
-    stat = float(np.sum(zb * zb))
-    dof = int(keys.size)
-    if np.isfinite(noise_dof):
-        p = float(special.fdtrc(dof, noise_dof, stat / dof))
-    else:
-        p = float(special.chdtrc(dof, stat))
-    i = int(np.argmax(np.abs(zb)))
-    where = (f"{describe(keys[i])}: mean residual {means[i]:+.2f} sigma over {counts[i]} "
-             f"points (z = {zb[i]:+.1f})")
-    return StructureTest(name, stat, float(dof), p, where, float(zb[i]))
-
-
-_OFFSET_EDGES = np.array([-30.0, -12.0, -4.0, 4.0, 12.0, 30.0])
-_OFFSET_NAMES = (">30", "12-30", "4-12", "within 4", "4-12", "12-30", ">30")
-
-
-def _offset_label(direction: str, negative: str, positive: str):
-    def describe(k):
-        k = int(k)
-        if k == 3:
-            return f"within 4 deg of the {direction} direction"
-        side = negative if k < 3 else positive
-        return f"{_OFFSET_NAMES[k]} deg from the {direction} direction toward {side}"
-    return describe
-
-
-def structure_tests(gamma_deg, theta_deg, normalized_residuals,
-                    noise_dof: float = np.inf) -> list[StructureTest]:
-    """The five structure tests of the workflow (angles in degrees, residuals / sigma;
-    ``noise_dof``: degrees of freedom of an estimated sigma, ``inf`` when it is known)."""
-    g = np.asarray(gamma_deg, float)
-    t = np.asarray(theta_deg, float)
-    z = np.asarray(normalized_residuals, float)
-    mirror = t + g  # > 0: beyond the mirror direction, toward grazing
-    source = t - g  # > 0: from the source toward the normal
-    return [
-        _runs_test(g, t, z),
-        _group_test("mean by angle of incidence", z, g, lambda k: f"gamma {_deg(k)} deg",
-                    noise_dof),
-        _group_test("mean by receiver angle", z, np.round(t / 10.0) * 10.0,
-                    lambda k: f"theta {_deg(k - 5)}..{_deg(k + 5)} deg", noise_dof),
-        _group_test("mean by distance from the mirror direction", z,
-                    np.searchsorted(_OFFSET_EDGES, mirror),
-                    _offset_label("mirror", "the normal", "grazing"), noise_dof),
-        _group_test("mean by distance from the source direction", z,
-                    np.searchsorted(_OFFSET_EDGES, source),
-                    _offset_label("source", "grazing", "the normal"), noise_dof),
-    ]
-
-
-def per_gamma_chi2(gamma_deg, normalized_residuals) -> dict[float, float]:
-    """``chi2 / points`` of the normalised residuals per angle of incidence (1 = noise)."""
-    g = np.asarray(gamma_deg, float)
-    z = np.asarray(normalized_residuals, float)
-    return {float(k): float(np.mean(z[g == k] ** 2)) for k in np.unique(g)}
 
 
 # ----------------------------------------------------------------------------- steps
@@ -317,6 +201,14 @@ class Effect:
     rss_drop: float
     lr: float = float("nan")
     p_value: float = float("nan")
+    #: for an artefact of the measurement rather than a property of the material (the
+    #: gain drift): what to do about it; empty for a physical effect
+    advice: str = ""
+
+    @property
+    def artefact(self) -> bool:
+        """Whether the effect is an artefact of the measurement (see ``advice``)."""
+        return bool(self.advice)
 
 
 @dataclass(frozen=True)
@@ -398,7 +290,8 @@ class Diagnosis:
             "model": self.base_model,
             "effects": [{"name": e.name, "params": e.params, "stderr": e.stderr,
                          "delta_bic": e.delta_bic, "share_explained": e.share_explained,
-                         "lr": e.lr, "p_value": e.p_value}
+                         "lr": e.lr, "p_value": e.p_value,
+                         "measurement_artefact": e.artefact, "advice": e.advice}
                         for e in self.effects],
             "alternatives": [list(a) for a in self.alternatives],
             "alternative_fits": {k: metrics(a) | {"params": a.fit.params}
@@ -559,10 +452,10 @@ class _Search:
     """The fits of one diagnosis: every explanation tried, by set name, judged against the
     current noise estimate."""
 
-    def __init__(self, meas, work, base_model, names, noise, seed, say):
+    def __init__(self, meas, work, base_model, names, noise, seed, say, local=None):
         self.meas, self.work, self.names, self.noise = meas, work, names, noise
         self.seed, self.say = seed, say
-        self.sets = ModelSets(base_model)
+        self.sets = ModelSets(base_model, local)
         self.gamma = np.radians(meas.gamma_deg)
         self.theta = np.radians(meas.theta_deg)
         self.weights = 1.0 / noise.sigma
@@ -570,6 +463,12 @@ class _Search:
         self.z: dict[str, np.ndarray] = {}
         self.failed: dict[str, str] = {}
         self.stale: set[str] = set()
+        #: explanations with a gain drift dropped for one as good without it (_select)
+        self.parsimony: set[str] = set()
+        #: the level of the gain drift's smoothness test (:func:`smooth_gains`), and its
+        #: verdict per explanation holding it: (smooth, sentence)
+        self.gain_level = 0.01
+        self.smooth_of: dict[str, tuple[bool, str]] = {}
 
     def add(self, key: str, result: FitResult, effects) -> Assessment:
         a = assess(result, self.noise, effects, polar=False)
@@ -585,6 +484,17 @@ class _Search:
         self.work = dataclasses.replace(self.work, sigma=noise.sigma)
         self.weights = 1.0 / noise.sigma
         self.stale = set(self.fits)
+        self.smooth_of = {}
+
+    def smooth(self, effects) -> tuple[bool, str]:
+        """Whether the gain factors of the fit of ``effects`` (which holds the gain drift)
+        follow a smooth law of gamma (:func:`smooth_gains`), and the sentence that says so."""
+        key = set_name(effects)
+        if key not in self.smooth_of:
+            a = self.get(effects)
+            self.smooth_of[key] = (True, "") if a is None else smooth_gains(
+                a.fit, self.sets.local[GAIN_DRIFT].levels_deg, self.gain_level)
+        return self.smooth_of[key]
 
     def get(self, effects) -> Assessment | None:
         key = set_name(effects)
@@ -595,6 +505,11 @@ class _Search:
         self.say(f"trying {key or 'the base model'}")
         starts = starts_for(self.sets, effects, self.z, self.gamma, self.theta,
                             self.meas.power, self.weights)
+        if GAIN_DRIFT in effects:
+            curves = {k: a.fit.fitted for k, a in self.fits.items() if a is not None}
+            starts = np.vstack([gain_starts(self.sets, effects, self.z, curves,
+                                            self.meas.gamma_deg, self.meas.power,
+                                            self.weights), starts])
         if key in self.z:  # a fit with other weights: its optimum first
             starts = np.vstack([self.z[key][None], starts])
         self.stale.discard(key)
@@ -684,10 +599,29 @@ def _lr_p_value(lr: float, df: int, noise: NoiseEstimate) -> float:
     return float(special.chdtrc(df, lr))
 
 
+def _rivals(search: _Search, sets) -> list:
+    """What explanations are judged against: the best (lowest deviance) of ``sets``, and
+    the best of those without the gain drift when that is another. (The gain drift nests
+    the incidence reflectance: judged against it alone, on its many degrees of freedom,
+    what the best of the catalogue rejects would survive.)"""
+    best = min(sets, key=search.dev)
+    plain = [s for s in sets if GAIN_DRIFT not in s]
+    best_plain = min(plain, key=search.dev) if plain else best
+    return [best] if best_plain == best else [best, best_plain]
+
+
+def _needless_gain(search: _Search, u, bests, level: float) -> bool:
+    """Whether ``u`` holds the gain drift and does not reject the best explanation of
+    its size without it: it is not grown further (it would be dropped for that one)."""
+    plain = [b for b in bests if GAIN_DRIFT not in b]
+    return GAIN_DRIFT in u and bool(plain) and not _beaten(search, plain[0], u, level, 0.0)
+
+
 def _select(search: _Search, names, max_effects: int, alpha: float, min_share: float):
     """The search over explanations (see the module docstring): the rounds of candidates
     tried, by size, and the final explanations (one; several when ambiguous; the empty
     one when nothing is named), best first."""
+    search.parsimony = set()
     rounds: list[list[Candidate]] = []
     contenders: list[tuple[str, ...]] = [()]
     adequate: list[tuple[str, ...]] = []
@@ -727,6 +661,11 @@ def _select(search: _Search, names, max_effects: int, alpha: float, min_share: f
                                      "", added=x, parent=set_name(s), lr=lr, df=df, p_value=p,
                                      level=level))
                 if p < level and (not s or share >= min_share):
+                    if GAIN_DRIFT in u and search.smooth(u)[0]:
+                        # factors a smooth law of gamma would give: no drift, and no
+                        # rival of the catalogue's explanations either
+                        search.parsimony.add(set_name(u))
+                        continue
                     counted_here = True
                     grown.append(u)
             if not counted_here:
@@ -735,13 +674,17 @@ def _select(search: _Search, names, max_effects: int, alpha: float, min_share: f
             rounds.append(row)
         grown = list(dict.fromkeys(grown))
         if grown:  # an explanation no single effect improves may still be beaten by one
-            best = min(grown, key=search.dev)  # grown from another
-            ok = [s for s in ok if not _beaten(search, s, best, level_all, min_share, alpha)]
+            bests = _rivals(search, grown)  # grown from another
+            ok = [s for s in ok if not any(_beaten(search, s, b, level_all, min_share, alpha)
+                                           for b in bests)]
         if ok or not grown:
             adequate = ok
             break
         # grow: drop what the best of the next size rejects, keep a few
-        keep = sorted((u for u in grown if not _beaten(search, u, best, level_all, 0.0)),
+        needless = {u for u in grown if _needless_gain(search, u, bests, level_all)}
+        search.parsimony |= {set_name(u) for u in needless}
+        keep = sorted((u for u in grown if u not in needless
+                       and not any(_beaten(search, u, b, level_all, 0.0) for b in bests)),
                       key=search.dev)
         contenders = keep[:MAX_CONTENDERS]
         inadequate_best = contenders[0]
@@ -749,11 +692,18 @@ def _select(search: _Search, names, max_effects: int, alpha: float, min_share: f
         adequate = [inadequate_best] if inadequate_best is not None else [()]
     # among the adequate ones, those the best rejects go; what is named must explain enough
     base = search.get(())
-    best = min(adequate, key=search.dev)
+    bests = _rivals(search, adequate)
     final = [s for s in adequate
-             if not _beaten(search, s, best, level_all, 0.0)
+             if not any(_beaten(search, s, b, level_all, 0.0) for b in bests)
              and (not s or _share(base, search.get(s)) >= min_share)]
     final.sort(key=search.dev)
+    # a gain drift nests every law that only scales each angle of incidence's curve (the
+    # incidence reflectance): beside an explanation without it that is as good (not
+    # rejected against the best), it is the larger model, and goes
+    plain = [s for s in final if GAIN_DRIFT not in s]
+    if plain:
+        search.parsimony |= {set_name(s) for s in final if GAIN_DRIFT in s}
+        final = plain
     return rounds, (final or [()])
 
 
@@ -872,7 +822,7 @@ def _chain(search, chosen) -> list:
     return chain
 
 
-def _ranked(rounds, chain, final, min_share) -> list:
+def _ranked(search, rounds, chain, final, min_share) -> list:
     """The candidates of every round, marked accepted (on the chain) with their reason,
     by deviance."""
     ranked = []
@@ -881,12 +831,49 @@ def _ranked(rounds, chain, final, min_share) -> list:
         for c in row:
             named = any(set_name(s) == c.name for s in chain)
             in_final = any(set_name(s) == c.name for s in final)
-            out.append(dataclasses.replace(c, accepted=named, reason=_reason(c, named,
-                                                                             in_final, min_share)))
+            reason = _reason(c, named, in_final, min_share)
+            if c.name in search.parsimony:
+                reason = (GAIN_SMOOTH if search.smooth_of.get(c.name, (False, ""))[0]
+                          else GAIN_PARSIMONY)
+            out.append(dataclasses.replace(c, accepted=named, reason=reason))
         ranked.append(tuple(sorted(out, key=lambda c: (c.assessment is None,
                                                        c.assessment.deviance if c.assessment
                                                        else 0.0))))
     return ranked
+
+
+def _smooth_note(search) -> str:
+    """The sentence of the best-fitting explanation with the gain drift that was not
+    grown because its factors follow a smooth law of gamma ("" when none)."""
+    dropped = [k for k, (smooth, _) in search.smooth_of.items() if smooth]
+    if not dropped:
+        return ""
+    best = min(dropped, key=lambda k: search.fits[k].deviance)
+    return search.smooth_of[best][1]
+
+
+def _choose(search, meas, names, max_effects, alpha, min_share, seed):
+    """The search over explanations (:func:`_select`), with the noise judged again from
+    the chosen explanation's residual: (rounds, final)."""
+    rounds, final = _select(search, names, max_effects, alpha, min_share)
+    for _ in range(MAX_NOISE_PASSES):
+        # the noise is judged again from the residual the chosen explanation leaves when
+        # that shows less than the base model's (a misfit leaks into a difference
+        # estimate), and the explanations with it (their fits are kept)
+        if search.noise.source != "estimated" or not final[0]:
+            break
+        chosen = search.get(final[0]).fit
+        refreshed = estimate_noise(meas, residuals=chosen.residuals, fitted=chosen.fitted,
+                                   seed=seed, alpha=alpha)
+        if not refreshed.value < search.noise.value:
+            break
+        search.reassess(dataclasses.replace(refreshed, method=refreshed.method.replace(
+            "base-model residuals", f"residuals of {chosen.model}")))
+        previous = final
+        rounds, final = _select(search, names, max_effects, alpha, min_share)
+        if final == previous:
+            break
+    return rounds, final
 
 
 def diagnose(measurements, model="two-lobe", *, extensions: Sequence[str] | None = None,
@@ -937,32 +924,30 @@ def diagnose(measurements, model="two-lobe", *, extensions: Sequence[str] | None
     base_model = get_model(model)
     names = list(EXTENSIONS) if extensions is None else list(extensions)
     for name in names:
-        get_extension(name)  # validates the names before any work
+        if name != GAIN_DRIFT:
+            get_extension(name)  # validates the names before any work
     used = set(applied_extensions(base_model))
     names = [n for n in names if n not in used]
+    names, local = gain_candidate(names, extensions is None, used, meas)
     say = progress or (lambda message: None)
     say(f"fitting {base_model.name}")
     base_fit, noise, work, unweighted = _base_fit_and_noise(meas, base_model, seed, alpha)
-    search = _Search(meas, work, base_model, names, noise, seed, say)
+    search = _Search(meas, work, base_model, names, noise, seed, say, local)
+    search.gain_level = alpha / len(names)
     search.add("", base_fit, ())
-    rounds, final = _select(search, names, max_effects, alpha, min_share)
-    for _ in range(MAX_NOISE_PASSES):
-        # the noise is judged again from the residual the chosen explanation leaves when
-        # that shows less than the base model's (a misfit leaks into a difference
-        # estimate), and the explanations with it (their fits are kept)
-        if noise.source != "estimated" or not final[0]:
-            break
-        chosen = search.get(final[0]).fit
-        refreshed = estimate_noise(meas, residuals=chosen.residuals, fitted=chosen.fitted,
-                                   seed=seed, alpha=alpha)
-        if not refreshed.value < search.noise.value:
-            break
-        search.reassess(dataclasses.replace(refreshed, method=refreshed.method.replace(
-            "base-model residuals", f"residuals of {chosen.model}")))
-        previous = final
-        rounds, final = _select(search, names, max_effects, alpha, min_share)
-        if final == previous:
-            break
+    rounds, final = _choose(search, meas, names, max_effects, alpha, min_share, seed)
+    # the gain drift is named only where no smooth law of gamma would do: explanations
+    # whose factors follow one are not grown (_select); what the noise passes changed is
+    # checked here
+    smooth, smooth_note = (search.smooth(final[0]) if GAIN_DRIFT in final[0]
+                           else (False, _smooth_note(search)))
+    if GAIN_DRIFT in final[0]:
+        if smooth:  # the search again without it, from the start (its noise passes
+            # judged the noise from the gain drift's residual)
+            plain = [n for n in names if n != GAIN_DRIFT]
+            search = _Search(meas, work, base_model, plain, noise, seed, say)
+            search.add("", base_fit, ())
+            rounds, final = _choose(search, meas, plain, max_effects, alpha, min_share, seed)
     noise = search.noise
     base = search.get(())
     common = tuple(n for n in final[0] if all(n in s for s in final))
@@ -982,12 +967,12 @@ def diagnose(measurements, model="two-lobe", *, extensions: Sequence[str] | None
         added = next(n for n in cur if n not in prev)
         if added in common:
             effects.append(_effect(added, marks.get(set_name(cur)), final_fit, search.sets))
-    ranked = _ranked(rounds, chain, final, min_share)
+    ranked = _ranked(search, rounds, chain, final, min_share)
     target = _separation_target(alpha, len(names), noise)
     alt_fits, separating = _separation(search, final, alternatives, meas, target, separate)
     verdict, summary, where = _verdict(steps, effects, alternatives, common, separating,
                                        alpha, base, target, meas)
-    summary += _untested(rounds)
+    summary += _untested(rounds) + artefact_note(effects) + smooth_note
     if len(steps) > 1:  # the extended model is a result too: say what is doubtful about it
         for text in steps[-1].fit.warnings:
             warnings.warn(FitWarning(f"{meas.name}, {steps[-1].fit.model}: {text}"),
@@ -1049,15 +1034,24 @@ def _effect(name: str, c: Candidate | None, result: FitResult, sets: ModelSets) 
     model = result.model_object
     one = sets.model([name])
     new = one.params[len(sets.base.params):]
+    params = {p.name: result.params[p.name] for p in new}
+    stderr = {p.name: result.stderrs[p.name] for p in new}
+    units = {p.name: ("" if p.unit == "1" else p.unit) for p in new}
+    advice = ""
+    if name == GAIN_DRIFT:
+        params, stderr = gain_params(result, sets.local[GAIN_DRIFT].levels_deg)
+        units = {k: "" for k in params}
+        advice = GAIN_ADVICE
     return Effect(
         name=name,
-        params={p.name: result.params[p.name] for p in new},
-        stderr={p.name: result.stderrs[p.name] for p in new},
-        units={p.name: ("" if p.unit == "1" else p.unit) for p in new},
+        params=params,
+        stderr=stderr,
+        units=units,
         delta_bic=c.delta_bic if c else float("nan"),
         share_explained=c.share_explained if c else float("nan"),
         rss_drop=c.rss_drop if c else float("nan"),
         lr=c.lr if c else float("nan"), p_value=c.p_value if c else float("nan"),
+        advice=advice,
     ) if model is not None else None
 
 

@@ -42,6 +42,11 @@ a *geometric* shift (``angle_offset``, ``offspecular_peak``) is a central differ
 basis along the shift (step 1e-7 rad): a wrapped model only gives derivatives with respect
 to its own parameters, and this keeps every extension usable on every model.
 
+Beyond the catalogue, :func:`gain_drift` builds the gain drift between the angles of
+incidence of one table (``gain_drift``: every reading at one angle of incidence times its
+own factor, the factors' geometric mean 1): not registered, its parameters are that
+table's angles of incidence; the diagnosis builds it per table.
+
 Registry: :data:`EXTENSIONS` (name -> callable ``extend(base) -> ReflectionModel``),
 :func:`register_extension`, :func:`get_extension`, :func:`extension_names`,
 :func:`extend`. A user extension is any such callable; :class:`Extension` is a helper that
@@ -447,6 +452,98 @@ SPECULAR_HALO = Extension(
 )
 
 
+# ----------------------------------------------------------------------------- per table
+#: the name of the gain drift between angles of incidence (:func:`gain_drift`); not in
+#: :data:`EXTENSIONS`: its parameters are the table's own angles of incidence
+GAIN_DRIFT = "gain_drift"
+#: the largest change of gain the extension allows at one angle of incidence: a factor 2
+GAIN_BOUND = float(np.log(2.0))
+#: readings an angle of incidence needs for its own gain factor (fewer: factor 1)
+GAIN_MIN_READINGS = 3
+#: angles of incidence (deg) within this of a level share its factor
+_GAIN_TOL_DEG = 1e-6
+
+
+@dataclass(frozen=True)
+class GainDrift(Extension):
+    """The :func:`gain_drift` extension of one table; ``levels_deg``: the angles of
+    incidence that carry a factor (the last one's is implied)."""
+
+    levels_deg: tuple[float, ...] = ()
+
+
+def gain_levels(gamma_deg, min_readings: int = GAIN_MIN_READINGS) -> np.ndarray:
+    """The angles of incidence of a table (degrees, sorted) with at least ``min_readings``
+    readings each: those a gain drift gives a factor of its own."""
+    levels, counts = np.unique(np.round(np.asarray(gamma_deg, float), 6), return_counts=True)
+    return levels[counts >= int(min_readings)]
+
+
+def _gain_contrast(geom, levels_rad) -> np.ndarray:
+    """``(rows, n, G - 1)``: +1 where a point is at level k, -1 at the last level (whose
+    log-factor is minus the sum of the others), 0 elsewhere (factor 1)."""
+    tol = np.radians(_GAIN_TOL_DEG)
+    onehot = (np.abs(geom.gamma[..., None] - levels_rad) < tol).astype(float)
+    return onehot[..., :-1] - onehot[..., -1:]
+
+
+def _gain_evaluate(levels_rad):
+    def evaluate(base, geom, zb, ze, derivatives):
+        contrast = _gain_contrast(geom, levels_rad)
+        factor = np.exp(np.sum(contrast * ze[:, None, :], axis=-1))  # (M, n)
+        bb, dbb = base.basis(geom, zb, derivatives)
+        basis = bb * factor[..., None]
+        if not derivatives:
+            return basis, None
+        dgain = basis[..., None] * contrast[:, :, None, :]
+        dbasis = np.concatenate([dbb * factor[..., None, None],
+                                 np.broadcast_to(dgain, basis.shape + (ze.shape[1],))],
+                                axis=-1)
+        return basis, dbasis
+    return evaluate
+
+
+def gain_drift(levels_deg) -> GainDrift:
+    """A gain drift between the angles of incidence ``levels_deg`` (degrees, at least 2):
+    every reading at the angle of incidence ``gamma_k`` times its own factor ``g_k``
+    (the detector's or the source's gain changed between the runs), the factors'
+    geometric mean 1 (the model's ``K`` keeps the mean scale, so the extension nests
+    the wrapped model at ``g = 1`` and every smooth law that only scales each angle's
+    curve, such as ``incidence_reflectance``). Readings at other angles: factor 1.
+    New parameters ``gain_<gamma>``, the factors of every level but the last by
+    ``|gamma|`` (that one is ``1 / prod`` of the others); internal coordinates their logarithms, within +-ln 2.
+
+    Not a registered extension: its parameters are one table's angles of incidence, so
+    the diagnosis builds it for the table it diagnoses
+    (:func:`irreflect.diagnose.diagnose`); a model built with it does not round-trip
+    through :func:`~irreflect.models.get_model` by name."""
+    levels = np.unique(np.round(np.asarray(levels_deg, float), 6))
+    levels = levels[np.lexsort((levels, np.abs(levels)))]  # by |gamma|
+    if levels.size < 2:
+        raise IrreflectError(f"gain_drift needs at least 2 angles of incidence, found "
+                             f"{levels.size}")
+    k = levels.size - 1
+    return GainDrift(
+        name=GAIN_DRIFT,
+        summary="a gain drift between angles of incidence: every reading at one angle of "
+                "incidence times its own factor (a measurement artefact)",
+        params=tuple(Parameter(f"gain_{g:g}", "1", 0.5, 2.0,
+                               f"gain factor of the readings at gamma = {g:g} deg (the "
+                               "factors' geometric mean is 1)") for g in levels[:-1]),
+        nonlinear_names=tuple(f"ln_gain_{g:g}" for g in levels[:-1]),
+        z_lower=(-GAIN_BOUND,) * k, z_upper=(GAIN_BOUND,) * k,
+        z_starts=((0.0,) * k,),
+        n_linear=0, alpha_nonneg=(),
+        evaluate=_gain_evaluate(np.radians(levels)),
+        natural=lambda ze, ae, nat, kk: np.exp(ze[:, :k]),
+        internal=lambda p, nat, kk: (np.log(np.clip(p[:, :k], 1e-300, None)),
+                                     np.zeros((p.shape[0], 0))),
+        formula="every term at gamma_k times g_k, prod g_k = 1",
+        reference="a detector or source gain that changed between the runs",
+        levels_deg=tuple(float(g) for g in levels),
+    )
+
+
 # ----------------------------------------------------------------------------- registry
 #: name -> callable ``extend(base: ReflectionModel) -> ReflectionModel``
 EXTENSIONS: dict[str, Callable[[ReflectionModel], ReflectionModel]] = {
@@ -512,7 +609,8 @@ def warm_starts(model: ReflectionModel, base_z, gamma=None, theta=None, power=No
 
 
 __all__ = [
-    "CATALOGUE", "EXTENSIONS", "Extension", "applied_extensions", "apply_extension", "base_of",
-    "extension_names", "get_extension", "register_extension",
+    "CATALOGUE", "EXTENSIONS", "Extension", "GAIN_DRIFT", "GainDrift", "applied_extensions",
+    "apply_extension", "base_of", "extension_names", "gain_drift", "gain_levels",
+    "get_extension", "register_extension",
     "warm_starts",
 ]

@@ -30,7 +30,7 @@ from dataclasses import dataclass
 from ..errors import IrreflectError, unknown_name
 from . import literature, paper
 from .base import ReflectionModel
-from .extensions import get_extension
+from .extensions import GainDrift, gain_drift, get_extension
 
 #: name -> factory; the factory takes the ``:N`` size when the model has one.
 MODELS: dict[str, Callable[..., ReflectionModel]] = {
@@ -200,8 +200,17 @@ def model_names() -> list[str]:
 
 def _reduce_model(model: ReflectionModel):
     """A model pickles as its registry specification (closures and bound data do not):
-    loading it rebuilds the same model from the registry (:func:`get_model`)."""
+    loading it rebuilds the same model from the registry (:func:`get_model`). A gain
+    drift (:func:`~irreflect.models.extensions.gain_drift`, built per table, outermost)
+    is not in the registry: it pickles as the model it wraps and its angles of
+    incidence."""
+    if isinstance(model.extension, GainDrift) and model.wrapped is not None:
+        return (_with_gain_drift, (model.wrapped, model.extension.levels_deg))
     return (get_model, (model.name,))
+
+
+def _with_gain_drift(wrapped: ReflectionModel, levels_deg) -> ReflectionModel:
+    return gain_drift(levels_deg)(wrapped)
 
 
 copyreg.pickle(ReflectionModel, _reduce_model)
