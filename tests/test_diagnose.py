@@ -713,3 +713,17 @@ def test_a_gain_drift_on_three_angles_of_incidence_is_not_told_from_a_smooth_law
     assert "gain_drift" in d.settings["extensions"]  # tried, but
     assert "gain_drift" not in _names(d)
     assert "on 3 angles of incidence its factors cannot be told from a smooth law" in d.summary
+
+
+def test_gain_factors_in_one_valley_or_one_peak_are_told_from_a_drift():
+    """The departure from the closest one-valley or one-peak sequence: zero for the held-out
+    Cook-Torrance table's factors (1.07 ... 0.89 ... 1.35 from 5 to 79 deg, no drift in
+    it, named a drift before), large for a drift that jumps up and down."""
+    from irreflect.diagnose.gain import _unimodal_departure
+
+    w = np.full(9, 1.0 / 0.004 ** 2)
+    valley = np.log([1.07, 1.05, 0.995, 0.97, 0.90, 0.894, 0.905, 0.93, 1.35])
+    assert _unimodal_departure(valley, w) == 0.0
+    assert _unimodal_departure(-valley, w) == 0.0  # a peak
+    zigzag = np.log([1.03, 0.88, 0.91, 1.11, 0.92, 1.09, 1.04, 1.06, 0.95])
+    assert _unimodal_departure(zigzag, w) > 1e3
