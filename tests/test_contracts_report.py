@@ -176,7 +176,11 @@ def test_report_diagnose_section(made):
     assert set(table["verdict"]) == {NO_MISSING_EFFECT}
     assert table["chi2/dof before"].between(0.6, 1.5).all()
     assert Path(section.figures["diagnose_residuals"]).stat().st_size > 10_000
-    assert len(section.tables["diagnose_candidates"]) == 2 * len(CATALOGUE)
+    # each catalogue effect and the gain drift (both sets have 3 or more angles of
+    # incidence with 3 or more readings each) tried once on each of the two sets
+    assert len(section.tables["diagnose_candidates"]) == 2 * (len(CATALOGUE) + 1)
+    assert (section.tables["diagnose_candidates"].iloc[:, :3].astype(str)
+            .apply(lambda r: r.str.contains("gain_drift")).any(axis=1).sum() == 2)
 
 
 def test_report_room_section(made):

@@ -626,7 +626,6 @@ def _select(search: _Search, names, max_effects: int, alpha: float, min_share: f
     contenders: list[tuple[str, ...]] = [()]
     adequate: list[tuple[str, ...]] = []
     inadequate_best = None
-    noise = search.noise
     level_all = alpha / max(len(names), 1)
     for size in range(max(int(max_effects), 0) + 1):
         row, grown, ok = [], [], []
@@ -644,23 +643,11 @@ def _select(search: _Search, names, max_effects: int, alpha: float, min_share: f
             parent = search.settle(s, [u for u in children if search.get(u) is not None])
             for x in tried:
                 u = canonical_order(s + (x,))
-                a = search.get(u)
-                if a is None:
-                    row.append(Candidate(set_name(u), None, float("inf"), 0.0, 0.0, False,
-                                         f"fit failed: {search.failed[set_name(u)]}",
-                                         added=x, parent=set_name(s)))
+                c = _candidate(search, s, x, parent, alpha, level)
+                row.append(c)
+                if c.assessment is None:
                     continue
-                df = a.fit.n_params - parent.fit.n_params
-                lr = max(parent.deviance - a.deviance, 0.0)
-                p = _lr_p_value(lr, df, noise)
-                share = _share(parent, a, alpha if s else None)
-                rss_b = float(np.sum(parent.fit.residuals ** 2))
-                rss_a = float(np.sum(a.fit.residuals ** 2))
-                row.append(Candidate(set_name(u), a, a.bic - parent.bic, share,
-                                     float(1.0 - rss_a / rss_b) if rss_b > 0 else 0.0, False,
-                                     "", added=x, parent=set_name(s), lr=lr, df=df, p_value=p,
-                                     level=level))
-                if p < level and (not s or share >= min_share):
+                if c.p_value < level and (not s or c.share_explained >= min_share):
                     if GAIN_DRIFT in u and search.smooth(u)[0]:
                         # factors a smooth law of gamma would give: no drift, and no
                         # rival of the catalogue's explanations either
@@ -705,6 +692,27 @@ def _select(search: _Search, names, max_effects: int, alpha: float, min_share: f
         search.parsimony |= {set_name(s) for s in final if GAIN_DRIFT in s}
         final = plain
     return rounds, (final or [()])
+
+
+def _candidate(search: _Search, s: tuple, x: str, parent, alpha: float,
+               level: float) -> Candidate:
+    """The candidate line of explanation ``s`` grown by effect ``x`` (its likelihood ratio
+    against ``parent``, the share of the excess residual it explains), or the failed fit's."""
+    u = canonical_order(s + (x,))
+    a = search.get(u)
+    if a is None:
+        return Candidate(set_name(u), None, float("inf"), 0.0, 0.0, False,
+                         f"fit failed: {search.failed[set_name(u)]}", added=x,
+                         parent=set_name(s))
+    df = a.fit.n_params - parent.fit.n_params
+    lr = max(parent.deviance - a.deviance, 0.0)
+    p = _lr_p_value(lr, df, search.noise)
+    share = _share(parent, a, alpha if s else None)
+    rss_b = float(np.sum(parent.fit.residuals ** 2))
+    rss_a = float(np.sum(a.fit.residuals ** 2))
+    return Candidate(set_name(u), a, a.bic - parent.bic, share,
+                     float(1.0 - rss_a / rss_b) if rss_b > 0 else 0.0, False, "", added=x,
+                     parent=set_name(s), lr=lr, df=df, p_value=p, level=level)
 
 
 def _check_settings(extensions, max_effects, seed, min_share, alpha) -> None:
