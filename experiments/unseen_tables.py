@@ -295,10 +295,10 @@ def write_cornell(out: Path, count: int, first_seed: int, grid_table: Path) -> N
     incidence, receivers about 8 deg apart, a gap round the source), random draws of the
     models above, peaks of 1e-4 to 1 and 0.5-2 % relative noise, seeded ``first_seed +
     i`` (``--cornell``: the held-out set of stop 47, 20 tables from seed 7000)."""
-    import pandas as pd
+    from irreflect.data import read_measurements
 
-    table = pd.read_csv(grid_table)
-    G, T = table["gamma_deg"].to_numpy(float), table["theta_deg"].to_numpy(float)
+    table = read_measurements(grid_table)  # a table irreflect refuses is refused in one line
+    G, T = table.gamma_deg, table.theta_deg
     for i in range(count):
         rng = np.random.default_rng(first_seed + i)
         kind = _CORNELL_KINDS[i % len(_CORNELL_KINDS)]
