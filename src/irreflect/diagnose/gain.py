@@ -64,16 +64,22 @@ def artefact_note(effects) -> str:
 def gain_params(result: FitResult, levels) -> tuple[dict, dict]:
     """Every angle of incidence's gain factor of a fit with the gain drift (the last one
     implied: ``1 / prod`` of the others), with standard errors (delta method)."""
-    names = [f"gain_{g:g}" for g in levels]
-    idx = [result.param_names.index(n) for n in names[:-1]]
-    v = np.asarray(result.values, float)[idx]
-    cov = np.asarray(result.covariance, float)[np.ix_(idx, idx)]
+    names, v, cov = _free_gains(result, levels)
     last = float(np.exp(-np.sum(np.log(v))))
     var = float(np.sum(cov / np.outer(v, v)))
     params = dict(zip(names, [*map(float, v), last], strict=True))
     stderr = dict(zip(names, [*(float(result.stderrs[n]) for n in names[:-1]),
                               last * float(np.sqrt(max(var, 0.0)))], strict=True))
     return params, stderr
+
+
+def _free_gains(result: FitResult, levels) -> tuple[list, np.ndarray, np.ndarray]:
+    """Every level's parameter name, and the values and covariance of the free factors
+    (all but the last, which the others imply)."""
+    names = [f"gain_{g:g}" for g in levels]
+    idx = [result.param_names.index(n) for n in names[:-1]]
+    v = np.asarray(result.values, float)[idx]
+    return names, v, np.asarray(result.covariance, float)[np.ix_(idx, idx)]
 
 
 def gain_factors(levels_deg, gamma_deg, power, fitted, weights) -> np.ndarray:
@@ -138,9 +144,8 @@ def smooth_gains(result: FitResult, levels, level: float) -> tuple[bool, str]:
     summary)."""
     from scipy import special
 
-    params, _ = gain_params(result, levels)
-    names = [f"gain_{g:g}" for g in levels]
-    log = np.log(np.array([params[n] for n in names]))
+    _, v, cov = _free_gains(result, levels)
+    log = np.log(np.append(v, np.exp(-np.sum(np.log(v)))))  # the last factor implied
     g = len(levels)
     df = g - SMOOTH_TERMS
     head = ("a gain drift between angles of incidence (a factor per angle) fits the data "
@@ -150,9 +155,7 @@ def smooth_gains(result: FitResult, levels, level: float) -> tuple[bool, str]:
     if df < 1:
         return True, (f"; {head}on {g} angles of incidence its factors cannot be told from a "
                       f"smooth law of the angle of incidence: it is not named{tell}")
-    idx = [result.param_names.index(n) for n in names[:-1]]
-    v = np.asarray(result.values, float)[idx]
-    cov_log = np.asarray(result.covariance, float)[np.ix_(idx, idx)] / np.outer(v, v)
+    cov_log = cov / np.outer(v, v)
     a = np.vstack([np.eye(g - 1), -np.ones((1, g - 1))])  # the last log-factor is implied
     precision = np.linalg.pinv(a @ cov_log @ a.T)
     s = np.sin(np.radians(np.asarray(levels, float))) ** 2
