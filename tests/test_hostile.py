@@ -1116,3 +1116,47 @@ def test_a_reading_taken_at_the_instruments_angle_says_so_when_it_meets_another(
     measured.write_text("gamma_deg,theta_deg,power\n-20,20,0.1\n-20.1,20,0.12\n-40,30,0.1\n")
     line = _one_error(["next", measured, "--gammas", "-20", "-40"])
     assert "is given twice (gamma -20.1 is taken at -20" in line
+
+
+def test_readings_closer_than_the_instruments_separation_are_noted(tmp_path):
+    """Two readings 0.5 deg apart on an instrument whose readings stand at least 1 deg apart
+    were fitted without a word (stop 47's fuzz); they are kept, and the note names them."""
+    from irreflect.campaign import Campaign, Instrument
+    from irreflect.data import DataNotice
+
+    tool = Instrument(gammas_deg=(-30, -60), theta_min=-80, theta_max=80, theta_step=2.0)
+    with pytest.warns(DataNotice, match=r"1 pair\(s\) of readings closer than the "
+                                        r"instrument's min_separation .* 1 deg: at gamma -30, "
+                                        r"theta 30 and 30\.5"):
+        campaign = Campaign(tool).add([(-30, 30, 1.0), (-30, 30.5, 1.1), (-60, 10, 0.2)])
+    assert campaign.n_measured == 3
+    measured = tmp_path / "m.csv"
+    measured.write_text("gamma_deg,theta_deg,power\n-30,30,1.0\n-30,34,1.1\n-60,10,0.2\n")
+    code, out, err = _run(["next", measured, "--gammas", "-30", "-60", "--theta-step", "2",
+                           "--min-separation", "5"])
+    assert code == 0 and "theta 30 and 34" in err and "3 readings so far" in out
+    code, out, err = _run(["next", measured, "--gammas", "-30", "-60", "--theta-step", "2"])
+    assert code == 0 and "closer than" not in err
+
+
+def test_an_angle_of_incidence_given_twice_is_refused():
+    """``next --gammas -20 -20 -40`` quietly became two angles where ``protocol`` refuses
+    the same list: a repeated angle is likely a typo for another one."""
+    from irreflect.campaign import Instrument
+
+    with pytest.raises(IrreflectError, match=r"list -20 deg 2 times; found -20, -20, -40: "
+                                             r"give each angle once"):
+        Instrument(gammas_deg=(-20, -20, -40))
+    with pytest.raises(IrreflectError, match=r"list -20 deg 2 times"):
+        Instrument(gammas_deg=(20, 20.0000000001, 40))
+    assert Instrument(gammas_deg=(20, 40)).gammas_deg == (-20.0, -40.0)
+    line = _one_error(["next", "-", "--gammas", "-20", "-20", "-40"])
+    assert "list -20 deg 2 times" in line
+
+
+def test_one_reading_is_one_reading(tmp_path):
+    """'1 readings so far' read wrongly."""
+    measured = tmp_path / "m.csv"
+    measured.write_text("gamma_deg,theta_deg,power\n-30,30,1.0\n")
+    code, out, _ = _run(["next", measured, "--gammas", "-30", "-60"])
+    assert code == 0 and "m: 1 reading so far" in out and "verdict: continue: 1 reading;" in out

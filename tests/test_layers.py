@@ -22,7 +22,7 @@ PACKAGE = Path(irreflect.__file__).parent
 #: layer -> module prefixes, lowest first
 LAYERS = [
     ("data and models", ["errors", "validation", "schema", "_atomic", "_inputs", "_progress",
-                         "_jsonio", "paper",
+                         "_text", "_jsonio", "paper",
                          "data", "metrics", "models"]),
     ("fitting", ["fitting", "_compiled", "synthetic", "verdict"]),
     ("capabilities", ["diagnose", "protocol", "compare", "selection", "campaign", "room"]),

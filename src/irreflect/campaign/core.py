@@ -29,6 +29,7 @@ import numpy as np
 import pandas as pd
 
 from .. import metrics
+from .._text import count
 from ..data import DataNotice, Measurements, as_measurements, read_measurements, validate_table
 from ..errors import DataError, FitError, FitWarning, IrreflectError
 from ..fitting import AVERAGED_OPTIONS, FitOptions, FitResult, fit, fit_averaged, judge
@@ -123,7 +124,7 @@ class Verdict:
     def text(self) -> str:
         """One line: ``stop: ...`` or ``continue: ...``."""
         head = "stop" if self.stop else "continue"
-        parts = [f"{self.n_measured} readings"]
+        parts = [count(self.n_measured, "reading")]
         if np.isfinite(self.r2_band[0]):
             parts.append(f"predicted R^2 on the whole range between {self.r2_band[0]:.4f} and "
                          f"{self.r2_band[1]:.4f}")

@@ -103,7 +103,15 @@ class Instrument:
             raise IrreflectError(
                 "the angles of incidence mix signs, which is ambiguous: give them all <= 0 "
                 "(the paper's convention) or all as magnitudes >= 0")
-        gammas = np.unique(np.round(-np.abs(gammas), 9) + 0.0)
+        rounded = np.round(-np.abs(gammas), 9) + 0.0
+        values, counts = np.unique(rounded, return_counts=True)
+        if np.any(counts > 1):
+            twice = values[counts > 1][0]
+            raise IrreflectError(
+                f"the angles of incidence (gammas_deg, --gammas) list {twice:g} deg "
+                f"{int(counts[counts > 1][0])} times; found "
+                f"{', '.join(f'{g:g}' for g in gammas)}: give each angle once")
+        gammas = values
         gammas = gammas[np.argsort(np.abs(gammas), kind="stable")]
         object.__setattr__(self, "gammas_deg", tuple(float(g) for g in gammas))
         lo = check_number(self.theta_min, "theta_min", low=-90.0, high=90.0, low_open=True,
@@ -253,6 +261,15 @@ class Instrument:
                        f"{self.theta_min:g}..{self.theta_max:g} deg: they are fitted, but the "
                        "verdict's predicted R^2 covers only the range (theta_min/theta_max, "
                        "--theta-min/--theta-max)")
+        close = _close_pairs(g, t, self.min_separation)
+        if close:
+            ga, ta, tb = close[0]
+            more = f" (and {len(close) - 1} more)" if len(close) > 1 else ""
+            out.append(f"{len(close)} pair(s) of readings closer than the instrument's "
+                       f"min_separation (--min-separation) {self.min_separation:g} deg: at "
+                       f"gamma {ga:g}, theta {ta:g} and {tb:g}{more}; they are fitted, but "
+                       "the instrument would not have proposed them so close; average them "
+                       "into one row if they repeat one setting")
         used = len({round(float(x), 6) for x in g})
         limit = self.max_gamma_settings
         if limit and used > limit:
@@ -395,3 +412,17 @@ def _checked_settings(settings_deg) -> np.ndarray:
             "them all <= 0 (the paper's convention) or all as magnitudes >= 0")
     s[:, 0] = -np.abs(s[:, 0]) + 0.0  # magnitudes, as gammas_deg (theta kept)
     return s
+
+
+def _close_pairs(gamma_deg: np.ndarray, theta_deg: np.ndarray, separation: float) -> list:
+    """Neighbouring readings of one angle of incidence closer than ``separation`` along
+    theta (distinct settings; a repeated one is refused before this): ``(gamma, theta,
+    theta)`` each, in the order of gamma then theta."""
+    out = []
+    for x in np.unique(np.round(gamma_deg, 6)):
+        ts = np.sort(theta_deg[np.round(gamma_deg, 6) == x])
+        gaps = np.diff(ts)
+        for i in np.flatnonzero(gaps < separation - 1e-9):
+            out.append((float(x), float(ts[i]), float(ts[i + 1])))
+    return out
+

@@ -13,6 +13,7 @@ import os
 import sys
 from pathlib import Path
 
+from .._text import count
 from ..errors import IrreflectError
 from .options import (
     ANGLE,
@@ -95,11 +96,11 @@ def _next(args) -> int:
             need = model.n_params + 1
             if campaign.n_measured < need:
                 raise IrreflectError(
-                    f"--save: no fit of the readings to save yet ({campaign.n_measured} "
-                    f"readings; the first fit needs {need}): measure the proposed settings "
+                    f"--save: no fit of the readings to save yet "
+                    f"({count(campaign.n_measured, 'reading')}; the first fit needs {need}): measure the proposed settings "
                     "first")
             raise IrreflectError(
-                f"--save: no fit of the {campaign.n_measured} readings to save: "
+                f"--save: no fit of the {count(campaign.n_measured, 'reading')} to save: "
                 f"{verdict.reasons[0] if verdict.reasons else 'no usable fit'}")
         from ..room.materials import save_material
 
@@ -136,7 +137,7 @@ def _next(args) -> int:
               "--gammas to change)", file=sys.stderr)
     if short:
         print(f"irreflect: note: {short}", file=sys.stderr)
-    print(f"{name}: {campaign.n_measured} readings so far; instrument: {tool.describe()}")
+    print(f"{name}: {count(campaign.n_measured, 'reading')} so far; instrument: {tool.describe()}")
     if len(proposals):
         print(f"next {len(proposals)} setting(s), in measurement order:")
         for r in proposals.itertuples():
@@ -151,7 +152,7 @@ def _next(args) -> int:
         print(f"wrote {args.out} ({len(proposals)} {what}: fill in power and add the rows "
               f"to {Path(args.measured).name})")
     if args.save is not None:
-        print(f"wrote {args.save} (the campaign's fit of {campaign.n_measured} readings: a "
+        print(f"wrote {args.save} (the campaign's fit of {count(campaign.n_measured, 'reading')}: a "
               "material file for 'irreflect room' scenes)")
     return 0
 
