@@ -162,7 +162,7 @@ def test_two_runs_through_a_link_and_its_target_are_locked_out_of_each_other(tmp
     (["campaign", "{data}", "--strategies", "adaptive,"], "--strategies 'adaptive,' has an "
                                                          "empty name"),
     (["evaluate-protocol", "{data}", "{data}", "--monte-carlo", "5", "--angle-error", "20"],
-     "--angle-error (deg) must be a finite number >= 0 and <= 10; found 20.0"),
+     "--angle-error (deg) must be a finite number >= 0 and <= 10; found 20"),
 ])
 def test_empty_or_orphan_options_are_refused_not_ignored(data, tmp_path, argv, words):
     line = _one_error([a.format(data=data) for a in argv])
