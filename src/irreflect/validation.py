@@ -87,7 +87,7 @@ def check_number(value, name: str, *, low=None, high=None, low_open=False,
             parts.append(f"{'<' if high_open else '<='} {high:g}")
         want = "a finite number" + (" " + " and ".join(parts) if parts else "")
         # a number as the user wrote it (100, not 100.0 or np.float64(100.0))
-        shown = (f"{x:g}" if isinstance(value, (int, float, np.number))
+        shown = (f"{x:.15g}" if isinstance(value, (int, float, np.number))
                  and not isinstance(value, (bool, np.bool_)) else repr(value))
         raise IrreflectError(f"{name} must be {want}{unit}; found {shown}")
     return x
