@@ -1160,3 +1160,19 @@ def test_one_reading_is_one_reading(tmp_path):
     measured.write_text("gamma_deg,theta_deg,power\n-30,30,1.0\n")
     code, out, _ = _run(["next", measured, "--gammas", "-30", "-60"])
     assert code == 0 and "m: 1 reading so far" in out and "verdict: continue: 1 reading;" in out
+
+
+def test_plot_fit_says_when_the_sigma_column_decides_and_takes_ignore_sigma(tmp_path):
+    """``plot --fit`` on a table with a sigma column that grows with the power drew the
+    weighted fit (title R^2 0.51, where the unweighted fit reaches 0.99) without a word,
+    and had no ``--ignore-sigma`` to draw the curve of power: ``fit`` warns of the same
+    fit and offers the option."""
+    from tests.test_fitting import _lorentzian_lobe_table
+
+    path = tmp_path / "lorentz.csv"
+    _lorentzian_lobe_table(sigma_rel=0.02).to_frame().to_csv(path, index=False)
+    code, out, err = _run(["plot", path, "--fit", "--out", tmp_path / "w.png"])
+    assert code == 0 and "the points of smallest sigma decide it" in err
+    assert "irreflect plot --fit --ignore-sigma" in err
+    code, out, err = _run(["plot", path, "--fit", "--ignore-sigma", "--out", tmp_path / "u.png"])
+    assert code == 0 and "smallest sigma" not in err and (tmp_path / "u.png").exists()
