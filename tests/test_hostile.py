@@ -1176,3 +1176,17 @@ def test_plot_fit_says_when_the_sigma_column_decides_and_takes_ignore_sigma(tmp_
     assert "irreflect plot --fit --ignore-sigma" in err
     code, out, err = _run(["plot", path, "--fit", "--ignore-sigma", "--out", tmp_path / "u.png"])
     assert code == 0 and "smallest sigma" not in err and (tmp_path / "u.png").exists()
+
+
+def test_evaluate_protocol_names_points_beyond_the_measured_theta_range(tmp_path):
+    """A protocol point at theta 73 on a table measured to 70 deg took the power read at 70
+    and was listed among the angles 'interpolated along theta': it was not interpolated
+    but carried over from another receiver angle. It is now said so."""
+    protocol = tmp_path / "p.csv"
+    code, _, _ = _run(["protocol", "--gammas", "-20", "-40", "-60", "--theta-min", "-73",
+                       "--theta-max", "73", "--out", protocol])
+    assert code == 0 and "-20,73," in protocol.read_text()
+    code, out, err = _run(["evaluate-protocol", protocol, TERRAZZO])
+    assert code == 0, err
+    assert "beyond the measured theta range" in out
+    assert "(-20, 73) gap 3.00: the reading at theta 70 carried over" in out
