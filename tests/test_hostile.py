@@ -1160,3 +1160,33 @@ def test_one_reading_is_one_reading(tmp_path):
     measured.write_text("gamma_deg,theta_deg,power\n-30,30,1.0\n")
     code, out, _ = _run(["next", measured, "--gammas", "-30", "-60"])
     assert code == 0 and "m: 1 reading so far" in out and "verdict: continue: 1 reading;" in out
+
+
+def test_plot_fit_says_when_the_sigma_column_decides_and_takes_ignore_sigma(tmp_path):
+    """``plot --fit`` on a table with a sigma column that grows with the power drew the
+    weighted fit (title R^2 0.51, where the unweighted fit reaches 0.99) without a word,
+    and had no ``--ignore-sigma`` to draw the curve of power: ``fit`` warns of the same
+    fit and offers the option."""
+    from tests.test_fitting import _lorentzian_lobe_table
+
+    path = tmp_path / "lorentz.csv"
+    _lorentzian_lobe_table(sigma_rel=0.02).to_frame().to_csv(path, index=False)
+    code, out, err = _run(["plot", path, "--fit", "--out", tmp_path / "w.png"])
+    assert code == 0 and "the points of smallest sigma decide it" in err
+    assert "irreflect plot --fit --ignore-sigma" in err
+    code, out, err = _run(["plot", path, "--fit", "--ignore-sigma", "--out", tmp_path / "u.png"])
+    assert code == 0 and "smallest sigma" not in err and (tmp_path / "u.png").exists()
+
+
+def test_evaluate_protocol_names_points_beyond_the_measured_theta_range(tmp_path):
+    """A protocol point at theta 73 on a table measured to 70 deg took the power read at 70
+    and was listed among the angles 'interpolated along theta': it was not interpolated
+    but carried over from another receiver angle. It is now said so."""
+    protocol = tmp_path / "p.csv"
+    code, _, _ = _run(["protocol", "--gammas", "-20", "-40", "-60", "--theta-min", "-73",
+                       "--theta-max", "73", "--out", protocol])
+    assert code == 0 and "-20,73," in protocol.read_text()
+    code, out, err = _run(["evaluate-protocol", protocol, TERRAZZO])
+    assert code == 0, err
+    assert "beyond the measured theta range" in out
+    assert "(-20, 73) gap 3.00: the reading at theta 70 carried over" in out

@@ -120,7 +120,8 @@ def _cmd_plot(args) -> int:
     model = args.model or "two-lobe"
     _check_model_and_resolution(model, args.resolution)
     unused = [o for o, v in (("--model", args.model), ("--seed", args.seed),
-                             ("--resolution", args.resolution or None)) if v is not None]
+                             ("--resolution", args.resolution or None),
+                             ("--ignore-sigma", args.ignore_sigma or None)) if v is not None]
     if unused and not args.fit:
         print(f"irreflect: warning: {' and '.join(unused)} {'has' if len(unused) == 1 else 'have'}"
               " no effect without --fit (the figure then draws the readings only)",
@@ -132,6 +133,7 @@ def _cmd_plot(args) -> int:
             # with a resolution, the curve drawn is what the receiver reads
             result = fit_averaged(meas, model, args.resolution, seed=args.seed or 0,
                                   engine=_engine(meas.n_points))
+            _warn_if_sigma_decides(meas, result, model, args)
             predict = result.predict
             title = f"{meas.name}: {result.model} fit, R^2 = {result.r2:.4f}"
             if args.resolution:
@@ -140,6 +142,18 @@ def _cmd_plot(args) -> int:
         save_figure(ax.figure, args.out)
     print(f"wrote {args.out}")
     return 0
+
+
+def _warn_if_sigma_decides(meas, result, model: str, args) -> None:
+    """The weighted fit drawn by ``plot --fit`` is warned of as ``fit`` warns of it."""
+    if meas.sigma is None:
+        return
+    from ..fitting import weights_check
+
+    text, _ = weights_check(meas, result, model, args.resolution, args.seed or 0)
+    if text:
+        text = text.replace("irreflect fit --ignore-sigma", "irreflect plot --fit --ignore-sigma")
+        print(f"irreflect: warning: {meas.name}, {result.model}: {text}", file=sys.stderr)
 
 
 def _cmd_models(args) -> int:
@@ -182,6 +196,7 @@ def register(sub) -> None:
     add_model_argument(p, what="reflection model, with --fit")
     p.set_defaults(model=None)  # two-lobe; None tells an unused --model from the default
     p.add_argument("--fit", action="store_true", help="draw the fitted model over the markers")
+    add_ignore_sigma_argument(p)
     p.add_argument("--radius", choices=("auto", "linear", "log"), default="auto",
                    help="radius scale of the power (default auto: logarithmic when the "
                         "largest power is more than 100 times the 10th percentile, as on "

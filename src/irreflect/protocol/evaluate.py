@@ -95,6 +95,8 @@ class ProtocolEvaluation:
         if self.n_interpolated:
             moved = self.points[self.points["source"] != "measured"]
             verb = "interpolated along theta" if self.method == "interpolate" else "snapped"
+            if (moved["source"] == "nearest").any():
+                verb += " or, beyond the measured theta range, given the reading at its end"
             lines.append(
                 f"  {self.n_interpolated} of {self.n_protocol_points} protocol angles not in the "
                 f"dataset, {verb} (largest gap {moved['gap_deg'].max():.2f} deg, tolerance "
@@ -212,6 +214,37 @@ def sample_protocol(protocol, dense, *, tolerance_deg: float = 5.0,
     return meas, frame
 
 
+def _moved_notes(frame: pd.DataFrame, dense, method: str) -> list[str]:
+    """The notes on the protocol points not in the dataset: interpolated (or snapped), and
+    those beyond the measured theta range, which carry over the reading at its end."""
+    def listed(rows, end=False):
+        return ", ".join(
+            f"({g:g}, {t:g}) gap {d:.2f}"
+            + (f": the reading at theta {_nearest_theta(dense, g, t):g} carried over" if end
+               else "")
+            for g, t, d in zip(rows["gamma_deg"], rows["theta_deg"], rows["gap_deg"],
+                               strict=True))
+
+    notes = []
+    moved = frame[frame["source"].isin(("interpolated", "snapped"))]
+    if len(moved):
+        notes.append(f"{len(moved)} protocol angle(s) not in the dataset were "
+                     f"{'interpolated along theta' if method == 'interpolate' else 'snapped'}: "
+                     + listed(moved))
+    beyond = frame[frame["source"] == "nearest"]
+    if len(beyond):
+        notes.append(f"{len(beyond)} protocol angle(s) beyond the measured theta range of "
+                     "their angle of incidence were not interpolated but given the power "
+                     "read at the range's end: " + listed(beyond, end=True))
+    return notes
+
+
+def _nearest_theta(dense, gamma: float, theta: float) -> float:
+    """The measured receiver angle of ``gamma`` nearest ``theta``."""
+    th = dense.theta_deg[np.abs(dense.gamma_deg - gamma) <= 1e-6]
+    return float(th[np.argmin(np.abs(th - theta))])
+
+
 def evaluate_protocol(protocol, dense, model="two-lobe", *, tolerance_deg: float = 5.0,
                       method: str = "interpolate", seed: int = 0,
                       reference: FitResult | None = None,
@@ -259,17 +292,8 @@ def evaluate_protocol(protocol, dense, model="two-lobe", *, tolerance_deg: float
     predicted = result.predict(dense.gamma_deg, dense.theta_deg)
     polar = metrics.polar_area_errors(dense.gamma_deg, dense.theta_deg, dense.power,
                                       result.predict)
-    notes = []
+    notes = _moved_notes(frame, dense, method)
     n_moved = int((frame["source"] != "measured").sum())
-    if n_moved:
-        moved = frame[frame["source"] != "measured"]
-        notes.append(
-            f"{n_moved} protocol angle(s) not in the dataset were "
-            f"{'interpolated along theta' if method == 'interpolate' else 'snapped'}: "
-            + ", ".join(f"({g:g}, {t:g}) gap {d:.2f}"
-                        for g, t, d in zip(moved["gamma_deg"], moved["theta_deg"],
-                                           moved["gap_deg"], strict=True))
-        )
     dup = frame.duplicated(["gamma_deg", "theta_deg"])
     if dup.any():
         notes.append(f"{int(dup.sum())} protocol point(s) snapped onto the same measured angle "
