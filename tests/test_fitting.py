@@ -519,3 +519,25 @@ def test_the_numpy_local_search_in_pieces_gives_the_same_fit(monkeypatch, model)
     pieces = fit(table, model, seed=0)
     np.testing.assert_array_equal(pieces.values, whole.values)
     assert pieces.r2 == whole.r2 and pieces.nfev == whole.nfev
+
+
+@pytest.mark.parametrize("engine", ["compiled", "numpy"])
+def test_standard_errors_do_not_depend_on_the_power_unit(engine):
+    """The same 12 readings in W and in nW gave the same coefficients but u_as's standard
+    error 1.56e-3 and 1.93e-4 (stop 48's new-user audit): the chain rule's difference step
+    was floored at 1e-3 power units, as large as a nW table's linear coefficients, so a
+    coefficient was called ill-determined in one unit and not in the other."""
+    from irreflect.data import read_measurements, bundled_dir
+
+    m = read_measurements(bundled_dir() / "terrazzo.csv")
+    pick = np.random.default_rng(0).choice(m.n_points, 12, replace=False)
+    rel, values = {}, {}
+    for scale in (1.0, 1e-9, 1e6):
+        sub = Measurements(m.gamma_deg[pick], m.theta_deg[pick], m.power[pick] * scale)
+        with pytest.warns(FitWarning):  # 12 readings leave v_ns ill-determined
+            r = fit(sub, engine=engine, seed=0)
+        rel[scale] = r.stderr / np.abs(r.values)
+        values[scale] = r.values / np.r_[np.ones(6), scale]  # K carries the unit
+    for scale in (1e-9, 1e6):
+        np.testing.assert_allclose(values[scale], values[1.0], rtol=1e-5)
+        np.testing.assert_allclose(rel[scale], rel[1.0], rtol=1e-4)

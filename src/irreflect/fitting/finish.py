@@ -76,6 +76,15 @@ def _saturation_level(alpha, strict: bool = False) -> float:
     return u * (1.0 - 1e-9) if strict else u
 
 
+def _block_scales(z, alpha):
+    """Per internal coordinate (``z`` then ``alpha``), the scale its difference step is
+    floored against: 1 for the unitless shape coordinates, the largest linear coefficient
+    (in power units; 1 when all are zero) for the linear ones."""
+    top = float(np.max(np.abs(alpha))) if np.size(alpha) else 0.0
+    return np.concatenate([np.ones(np.size(z)),
+                           np.full(np.size(alpha), top if top > 0 else 1.0)])
+
+
 def _covariance(model, z, alpha, jfull, absolute_sigma, cost, n_points):
     """Covariance of the natural parameters from the Jacobian ``jfull`` in (z, alpha), and
     which natural parameters lie in a near-singular direction of the information matrix."""
@@ -95,7 +104,11 @@ def _covariance(model, z, alpha, jfull, absolute_sigma, cost, n_points):
     # chain rule to natural parameters, by central differences of the smooth map (one batch)
     x0 = np.concatenate([z, alpha])
     p_dim = z.size
-    steps = 1e-6 * np.maximum(np.abs(x0), 1e-3)
+    # steps relative to each coordinate, floored at 1e-3 of its block's scale: the shape
+    # coordinates are unitless, the linear coefficients carry the power's unit (a floor of
+    # 1e-3 power units made the step of a table in nW as large as its coefficients, and
+    # its standard errors depend on the unit)
+    steps = 1e-6 * np.maximum(np.abs(x0), 1e-3 * _block_scales(z, alpha))
     pert = np.concatenate([x0 + np.diag(steps), x0 - np.diag(steps)])
     nat = model.to_natural(pert[:, :p_dim], pert[:, p_dim:])
     grad = ((nat[: x0.size] - nat[x0.size:]) / (2 * steps[:, None])).T

@@ -142,8 +142,13 @@ def tl_finish(z, alpha, geo, glcg, weights, power, absolute_sigma, cost, n_param
     plus = np.empty(k)
     minus = np.empty(k)
     xp = np.empty(k)
+    top = 0.0  # the linear coefficients' scale (power units): finish._block_scales
+    for i in range(p, k):
+        top = max(top, abs(x0[i]))
+    if not top > 0.0:
+        top = 1.0
     for i in range(k):
-        step = 1e-6 * max(abs(x0[i]), 1e-3)
+        step = 1e-6 * max(abs(x0[i]), 1e-3 * (1.0 if i < p else top))
         xp[:] = x0
         xp[i] = x0[i] + step
         tl_natural(xp[:p], xp[p:], plus)
