@@ -527,7 +527,7 @@ def test_standard_errors_do_not_depend_on_the_power_unit(engine):
     error 1.56e-3 and 1.93e-4 (stop 48's new-user audit): the chain rule's difference step
     was floored at 1e-3 power units, as large as a nW table's linear coefficients, so a
     coefficient was called ill-determined in one unit and not in the other."""
-    from irreflect.data import read_measurements, bundled_dir
+    from irreflect.data import bundled_dir, read_measurements
 
     m = read_measurements(bundled_dir() / "terrazzo.csv")
     pick = np.random.default_rng(0).choice(m.n_points, 12, replace=False)

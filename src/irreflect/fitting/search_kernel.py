@@ -28,10 +28,6 @@ from .fast_kernel import (
     tl_points,
     tl_work,
 )
-# numba keys this module's on-disk cache on this file alone, and fit_plain's cached code
-# holds tl_finish: after a change to finish_kernel.py, change this file too (a checkout's
-# cache is otherwise stale; a new install builds afresh). Last: the difference steps of
-# the linear coefficients floored relative to their scale (stop 48).
 from .finish_kernel import tl_finish
 from .kernel_math import DEG, STOP_MAXITER, STOP_NONFINITE, STOP_STUCK, pairwise_sum
 from .kernel_types import Finish, KModel, KTable, Solution, Work
@@ -185,6 +181,10 @@ def _plain_work(kt, power, weights):
     return work
 
 
+# numba keys this module's on-disk cache on this file alone, and fit_plain's cached code
+# holds tl_finish: after a change to finish_kernel.py, change this file too (a checkout's
+# cache is otherwise stale; a new install builds afresh). Last: the difference steps of
+# the linear coefficients floored relative to their scale (stop 48).
 @njit(cache=True)
 def fit_plain(model, table, draws, config):
     """A fit of the plain two-lobe model in one call from the table as it is stored, as
