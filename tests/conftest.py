@@ -33,8 +33,9 @@ def pytest_sessionstart(session):
     on stderr, and in the first test that fits, those two lines broke a test of a command's
     one-line error (test_hostile). A warm cache costs a look at numba's index."""
     from irreflect._compiled import ensure_compiled
+    from irreflect.fitting import warm
 
-    ensure_compiled()
+    ensure_compiled(warm)
 
 
 def blurred_glossy(width: float = 4.0) -> Measurements:

@@ -16,6 +16,7 @@ says how long that took, instead of a first run that is silently two minutes slo
 
 from __future__ import annotations
 
+import contextlib
 import sys
 import time
 from pathlib import Path
@@ -46,20 +47,42 @@ def kernel_cache() -> tuple[Path | None, bool | None]:
     return folder, cold
 
 
-def ensure_compiled(stream=None) -> float | None:
-    """Build the kernel now when its on-disk cache is cold, with a line before and after
-    on ``stream`` (stderr); returns the seconds it took, or None when nothing was built."""
+#: Whether this process has looked at the cache for :func:`build_notice` (once is enough:
+#: a build, announced or not, leaves it warm for the rest of the process).
+_LOOKED = [False]
+
+
+@contextlib.contextmanager
+def build_notice(stream=None):
+    """Around work that may compile the kernel: when its on-disk cache is cold (looked at
+    once per process), a line on ``stream`` (stderr) before the work and one after it with
+    the seconds it took; the work itself builds what it uses. Yields the folder of the
+    cache when a build is announced, else None."""
+    if _LOOKED[0]:
+        yield None
+        return
+    _LOOKED[0] = True
     folder, cold = kernel_cache()
     if not cold:
-        return None
+        yield None
+        return
     stream = sys.stderr if stream is None else stream
     print(f"irreflect: first use of this install: compiling the fitting kernel (once, about "
           f"1-3 min; cached in {folder}) ...", file=stream, flush=True)
     t0 = time.perf_counter()
-    from .fitting import warm
+    yield folder
+    print(f"irreflect: fitting kernel compiled in {time.perf_counter() - t0:.0f} s; later "
+          "runs load it from the cache", file=stream, flush=True)
 
-    warm()
-    seconds = time.perf_counter() - t0
-    print(f"irreflect: fitting kernel compiled in {seconds:.0f} s; later runs load it from "
-          "the cache", file=stream, flush=True)
-    return seconds
+
+def ensure_compiled(build, stream=None) -> float | None:
+    """Build the kernel now (``build``: :func:`irreflect.fitting.warm`, passed in so that
+    this module does not import the fitter that imports it) when its on-disk cache is cold,
+    with a line before and after on ``stream`` (stderr); returns the seconds it took, or
+    None when nothing was built."""
+    _LOOKED[0] = False  # look again: the caller asks now
+    t0 = time.perf_counter()
+    with build_notice(stream) as building:
+        if building is not None:
+            build()
+    return None if building is None else time.perf_counter() - t0

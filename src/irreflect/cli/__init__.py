@@ -41,9 +41,11 @@ COMMANDS = {
 }
 
 #: Commands that fit with the compiled kernel: a cold on-disk cache is built (and announced)
-#: before they start. ``fit`` and ``plot`` fit one small table with numpy and do not wait.
+#: before they start. ``fit``, ``plot`` and ``next`` may fit with numpy only (a small
+#: table, or nothing to fit yet) and do not wait: their first compiled fit announces the
+#: build (:func:`irreflect._compiled.build_notice`).
 COMPILED_COMMANDS = frozenset({"select", "protocol", "evaluate-protocol", "compare",
-                               "diagnose", "reproduce"})
+                               "diagnose", "reproduce", "campaign"})
 
 __all__ = ["COMMANDS", "COMPILED_COMMANDS", "build_parser", "main"]
 
@@ -93,8 +95,9 @@ def _run(args, parser) -> int:
         try:
             if args.command in COMPILED_COMMANDS:
                 from .._compiled import ensure_compiled
+                from ..fitting import warm
 
-                ensure_compiled()  # a cold cache: built now, announced, not silently
+                ensure_compiled(warm)  # a cold cache: built now, announced, not silently
             code = args.handler(args)
             sys.stdout.flush()
         except BrokenPipeError:  # `irreflect ... | head`: the reader left; no error to report

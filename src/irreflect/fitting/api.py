@@ -5,6 +5,7 @@ local optimum).
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import time
 import warnings
@@ -13,6 +14,7 @@ from warnings import warn
 import numpy as np
 
 from .. import metrics
+from .._compiled import build_notice
 from ..data import as_measurements
 from ..errors import FitError, FitWarning, IrreflectError
 from ..models import (
@@ -407,13 +409,16 @@ def _fit_search(meas, model, t0, opts: FitOptions) -> FitResult:
         _check_sigma(sigma, source)
     codes = _kernel_codes(model_obj, opts.engine)
     table = kgeo = None
-    if codes is not None and codes.size == 0:  # the plain two-lobe model: one compiled call
-        out, fin, exact = fit_plain_table(model_obj, meas, sigma, opts)
-    else:
-        gamma, theta, weights = _radians_and_weights(meas, sigma)
-        kgeo = _kernel_geometry(gamma, theta) if codes is not None else None
-        table = (gamma, theta, meas.power, weights)
-        out, fin, exact = search_and_finish(model_obj, table, opts, kgeo)
+    # a cold kernel cache: the first compiled fit of a process builds it, announced (a
+    # first `irreflect fit` whose second search ran compiled sat 1-3 min with no word)
+    with build_notice() if codes is not None else contextlib.nullcontext():
+        if codes is not None and codes.size == 0:  # the plain two-lobe model: one call
+            out, fin, exact = fit_plain_table(model_obj, meas, sigma, opts)
+        else:
+            gamma, theta, weights = _radians_and_weights(meas, sigma)
+            kgeo = _kernel_geometry(gamma, theta) if codes is not None else None
+            table = (gamma, theta, meas.power, weights)
+            out, fin, exact = search_and_finish(model_obj, table, opts, kgeo)
     if out is None:
         raise FitError(
             f"fit of '{model_obj.name}' to {source} failed: no start reached a finite cost; "
