@@ -447,6 +447,22 @@ def test_ill_determined_protocol_is_flagged(terrazzo_fit):
     assert "ILL-DETERMINED" in bad.summary()
 
 
+def test_correlations_of_a_few_trials_are_not_judged(terrazzo_fit):
+    """``evaluate-protocol --monte-carlo 5`` flagged every pair of u_as, v_as, u_ns, v_ns at
+    correlation +-1.000 (stop 48's audit): rank correlations of 5 samples. Below 20
+    successful trials they are not judged, and the summary says so; the spreads still are."""
+    from irreflect.protocol.robustness import MIN_CORRELATION_TRIALS
+
+    proto = paper_protocol([-20, -40, -60])
+    few = protocol_robustness(proto, terrazzo_fit, n_trials=5, seed=1)
+    assert not any("correlation" in r for r in few.reasons)
+    assert np.nanmax(np.abs(few.correlation - np.eye(len(few.correlation)))) > 0.9
+    assert f"correlations not judged: 5 successful trial(s), fewer than the " \
+           f"{MIN_CORRELATION_TRIALS}" in few.summary()
+    many = protocol_robustness(proto, terrazzo_fit, n_trials=MIN_CORRELATION_TRIALS, seed=1)
+    assert "correlations not judged" not in many.summary()
+
+
 # ----------------------------------------------------------------------------- designed protocols
 def test_choose_gamma_settings_picks_the_best_combination():
     dense = load_bundled("plasterboard")

@@ -50,6 +50,11 @@ def _robust_sd(x, axis=0):
     return (q75 - q25) / 1.349
 
 
+#: Fewer successful trials than this: the coefficients' rank correlations are not judged
+#: (with 5 trials, evaluate-protocol flagged every pair of four coefficients at +-1.000).
+MIN_CORRELATION_TRIALS = 20
+
+
 def _rank_correlation(samples: np.ndarray) -> np.ndarray:
     """Spearman correlation of the columns of ``samples`` (NaN for constant columns)."""
     ranks = pd.DataFrame(samples).rank(axis=0).to_numpy()  # average ranks of ties
@@ -147,6 +152,12 @@ class RobustnessResult:
                 f"{row.spread:>11.3g}{row.relative_spread * 100:>7.0f}%{row.p5:>11.4g}"
                 f"{row.p95:>11.4g}" + ("  ILL-DETERMINED" if row.ill_determined else "")
             )
+        n_ok = int((~self.failed).sum())
+        if n_ok < MIN_CORRELATION_TRIALS:
+            lines.append(f"  correlations not judged: {n_ok} successful trial(s), fewer than "
+                         f"the {MIN_CORRELATION_TRIALS} a rank correlation needs (of 5 "
+                         "samples, one of +-1 is common by chance): pass --monte-carlo "
+                         f"{MIN_CORRELATION_TRIALS} or more")
         if self.reasons:
             lines.append("  flagged: " + "; ".join(self.reasons))
         else:
@@ -327,7 +338,9 @@ def protocol_robustness(protocol, reference, *, model=None, dense=None, n_trials
     scale = coefficient_scale(model_obj, centre)
     corr = _rank_correlation(ok)
     spread = _robust_sd(ok)
-    reasons = ill_determined(model_obj, centre, spread, corr, relative_limit=relative_limit,
+    # too few trials for a rank correlation to mean much: not judged (summary says so)
+    judged = corr if ok.shape[0] >= MIN_CORRELATION_TRIALS else np.full_like(corr, np.nan)
+    reasons = ill_determined(model_obj, centre, spread, judged, relative_limit=relative_limit,
                              correlation_limit=correlation_limit)
     reasons += _structural_reasons(model_obj, g0, t0, nominal_power[0], seed, reasons)
     reasons += _bound_reasons(model_obj, ok, reasons)
