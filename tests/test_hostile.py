@@ -1190,3 +1190,18 @@ def test_evaluate_protocol_names_points_beyond_the_measured_theta_range(tmp_path
     assert code == 0, err
     assert "beyond the measured theta range" in out
     assert "(-20, 73) gap 3.00: the reading at theta 70 carried over" in out
+
+
+def test_the_mirror_peak_hint_names_the_model_that_failed():
+    """A single-lobe fit of a glossy table that cannot beat a constant was told "try the
+    model with '+background', e.g. --model two-lobe+background" (stop 48's audit): the
+    example names the model that failed, and the hint names a lacking lobe too."""
+    from irreflect.fitting.shape_hint import GENERIC_ADVICE, explained
+
+    glossy = synthetic()  # terrazzo's coefficients: peaks at the mirror
+    for model in ("single-lobe", "phong+background", "two-lobe"):
+        exc = FitError(f"fit of '{model}' to t cannot beat a constant (R^2 = -0.1 <= 0): "
+                       f"{GENERIC_ADVICE}")
+        text = str(explained(exc, glossy))
+        base = model.split("+")[0]
+        assert f"e.g. --model {base}+background; or a lobe it lacks" in text, text

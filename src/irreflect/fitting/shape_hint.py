@@ -9,6 +9,8 @@ to check its angles. :func:`peak_hint` says where the readings peak instead, and
 
 from __future__ import annotations
 
+import re
+
 import numpy as np
 
 from ..errors import FitError
@@ -44,16 +46,18 @@ def _kind(gamma: float, theta: float) -> str:
     return "grazing" if abs(theta) >= _GRAZING_DEG else "elsewhere"
 
 
-def peak_hint(meas) -> str | None:
-    """Where the table's readings peak, and what that says, when most angles of incidence
-    agree; None when they do not (the generic advice stands)."""
-    found = peak_summary(meas)
+def peak_hint(meas, model: str = "two-lobe") -> str | None:
+    """Where the table's readings peak, and what that says of a fit of ``model`` (its
+    registry name), when most angles of incidence agree; None when they do not (the
+    generic advice stands)."""
+    found = peak_summary(meas, model)
     return None if found is None else found[1]
 
 
-def peak_summary(meas) -> tuple[str, str] | None:
+def peak_summary(meas, model: str = "two-lobe") -> tuple[str, str] | None:
     """``(kind, hint)``: where most angles of incidence peak (``"mirror"``, ``"source"``
-    or ``"grazing"``) and what that says; None when they do not agree."""
+    or ``"grazing"``) and what that says of a fit of ``model``; None when they do not
+    agree."""
     peaks = _peaks(meas)
     if not peaks:
         return None
@@ -69,8 +73,9 @@ def peak_summary(meas) -> tuple[str, str] | None:
     if top == "mirror":
         return top, (f"its readings peak at the mirror direction theta = -gamma {where}, so the "
                 "angles follow the convention: the power is dominated by what the model "
-                "has no term for (an offset, stray light: try the model with '+background', e.g. --model two-lobe+background; "
-                "'irreflect compare' tries the other models)")
+                "has no term for (an offset, stray light: try the model with '+background', "
+                f"e.g. --model {model}+background; or a lobe it lacks: 'irreflect compare' "
+                "tries the other models)")
     if top == "source":
         return top, (f"its readings peak at the source direction theta = gamma {where}, not at "
                 "the mirror theta = -gamma: if theta was counted positive on the source "
@@ -89,5 +94,6 @@ def explained(exc: FitError, meas) -> FitError:
     text = str(exc)
     if GENERIC_ADVICE not in text:
         return exc
-    hint = peak_hint(meas)
+    named = re.match(r"fit of '([^'+@]+)", text)  # the model, without its extensions
+    hint = peak_hint(meas, named.group(1) if named else "two-lobe")
     return exc if hint is None else FitError(text.replace(GENERIC_ADVICE, hint))
