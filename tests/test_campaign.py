@@ -1958,3 +1958,25 @@ def test_a_hindsight_curve_below_the_papers_12_points_is_called_no_bound():
     close = curves(0.961, 0.9701)
     _below_paper(close)
     assert NO_BOUND not in close["hindsight"].note
+
+
+def test_the_reason_of_a_proposal_does_not_depend_on_the_power_unit(real_dir):
+    """Seen (metamorphic audit): irreflect next on 16 Cornell Cayman readings in W proposed
+    (-10, -1) 'shrinks the standard error of u_nd (ill-determined) by 92%', the same
+    readings in nW 'shrinks the standard error of K by 4%': the coefficients' scales in
+    coefficient_gain were
+    floored at 1e-3, in power units for K, far above a K of 5e-11 W. (A factor of 2**-30,
+    about 1e-9, scales every power exactly: the leave-one-out refits, which a rounding
+    can send to another optimum, stay the same.)"""
+    table = pd.read_csv(real_dir / "cornell" / "cornell_cayman.csv")
+    rows = table.sample(16, random_state=3).sort_values(["gamma_deg", "theta_deg"])
+    tool = Instrument(gammas_deg=(-10, -20, -30, -40, -50, -60, -70))
+    whys = []
+    for factor in (1.0, 2.0 ** -30):
+        scaled = rows.assign(power=rows["power"] * factor)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            whys.append(Campaign(tool, scaled, seed=0).propose(2))
+    assert whys[0][["gamma_deg", "theta_deg"]].equals(whys[1][["gamma_deg", "theta_deg"]])
+    assert list(whys[0]["why"]) == list(whys[1]["why"])
+    assert "u_nd" in whys[0]["why"][0]

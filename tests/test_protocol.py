@@ -39,6 +39,7 @@ from irreflect.protocol import (
     to_markdown,
     write_protocol,
 )
+from irreflect.protocol.core import glossy_protocol
 from irreflect.report import ReportContext
 from irreflect.report.protocol import section as protocol_section
 from irreflect.selection import choose_gamma_settings, design_protocol
@@ -737,3 +738,18 @@ def test_report_does_not_score_the_protocol_at_other_settings(tmp_path):
                             "lobe not resolved at |gamma| 10, 20, 40, 60 deg; specular lobe "
                             "under-sampled at |gamma| 30, 50 deg (details in the fit "
                             "checks") for t in care), care
+
+
+def test_a_pilot_in_another_row_order_places_the_same_glossy_points():
+    """Seen (metamorphic audit): 'protocol --lobe-from' on the NIST sintered PTFE scan put
+    the mirror point of gamma 0 at theta -5.739 and, with the scan's rows shuffled, at
+    +5.739 (both 5.739 deg from the designed 0, the first in the file won), and the
+    design's R^2 on its pilot read 0.9549 or 0.9536."""
+    thetas = np.array([-64.158, -53.13, -11.537, -5.739, 5.739, 11.537, 53.13, 64.158])
+    placed = []
+    for order in (thetas, thetas[::-1]):
+        available = {g: order - g for g in (0.0, -15.0, -60.0)}
+        proto = glossy_protocol((0, 15, 60), -80, 80, specular_index=50.0,
+                                layout="balanced", available=available)
+        placed.append(sorted(zip(proto.gamma_deg, proto.theta_deg, strict=True)))
+    assert placed[0] == placed[1]

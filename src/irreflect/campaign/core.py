@@ -714,6 +714,7 @@ class Campaign:
         post = posterior(prior, len(s), np.maximum(noise_m, 1e-300), self.rule)
         total = float(np.sum(np.clip(np.diag(post.cov), 0, None)))
         names = self.model.param_names
+        in_power = [p.unit == "power" for p in self.model.params]
         jn_meas = natural_jacobian(self.model, res.values, meas.gamma_deg, meas.theta_deg)
         noise_meas = np.maximum(noise_m, 1e-300)
         measured_g = {round(g, 6) for g in meas.gamma_deg}
@@ -740,7 +741,8 @@ class Campaign:
             row = natural_jacobian(self.model, res.values, np.array([g]), np.array([t]))[0]
             jm = np.vstack([jn_meas, *extra_rows]) if extra_rows else jn_meas
             nm = np.concatenate([noise_meas, extra_noise]) if extra_noise else noise_meas
-            coef, drop = coefficient_gain(jm, row, names, res.values, nm, post.noise[j])
+            coef, drop = coefficient_gain(jm, row, names, res.values, nm, post.noise[j],
+                                          power=in_power)
             why = region(g, t, float(width[j]), measured_g)
             if because:
                 why += "; " + because

@@ -667,11 +667,21 @@ def region(gamma: float, theta: float, width: float, measured_gammas=()) -> str:
 
 
 def coefficient_gain(measured_rows: np.ndarray, row: np.ndarray, names, values,
-                     noise_var: np.ndarray, noise_row: float) -> tuple[str, float]:
+                     noise_var: np.ndarray, noise_row: float,
+                     power=None) -> tuple[str, float]:
     """The coefficient whose (linearised) standard error a reading with Jacobian ``row``
     (natural coefficients) shrinks most, and by what fraction, given the readings' Jacobian
-    ``measured_rows`` and noise variances."""
+    ``measured_rows`` and noise variances. ``power``: which coefficients are in power units
+    (``K``, ``b``): scaled by their own size, so that the answer does not depend on the
+    power's unit (floored at 1e-3 power units, a K of 5e-11 W outweighed every shape
+    coefficient and a table in nW was told every reading shrinks K)."""
+    values = np.asarray(values, float)
     scale = np.maximum(np.abs(values), 1e-3)
+    if power is not None and np.any(power):
+        power = np.asarray(power, bool)
+        top = float(np.max(np.abs(values[power])))
+        top = top if top > 0 else 1.0
+        scale[power] = np.maximum(np.abs(values[power]), 1e-3 * top)
     a = measured_rows * scale / np.sqrt(noise_var)[:, None]
     b = row * scale / np.sqrt(noise_row)
     info = a.T @ a

@@ -872,7 +872,9 @@ def _diffuse_angles(gamma: float, width: float, lo: float, hi: float,
 
 def _nearest_free(available: dict, gamma: float, wanted: float, taken: list[float], lo: float,
                   hi: float) -> tuple[float, bool]:
-    """The measured theta of ``gamma`` nearest to ``wanted`` that is not taken yet."""
+    """The measured theta of ``gamma`` nearest to ``wanted`` that is not taken yet; of two
+    as near, the lower (not the first in the pilot's rows: a shuffled pilot moved the mirror
+    point of gamma 0 from theta -5.7 to +5.7)."""
     thetas = None
     for key, values in available.items():
         if abs(float(key) - gamma) <= 1e-6:
@@ -883,7 +885,7 @@ def _nearest_free(available: dict, gamma: float, wanted: float, taken: list[floa
             f"the pilot scan has no measurement at gamma {gamma:g}: choose gammas it measured"
         )
     thetas = thetas[(thetas >= lo - _EPS) & (thetas <= hi + _EPS)]
-    free = np.array([t for t in thetas if all(abs(t - p) > _EPS for p in taken)])
+    free = np.sort([t for t in thetas if all(abs(t - p) > _EPS for p in taken)])
     if not free.size:
         raise IrreflectError(
             f"the pilot scan has too few angles at gamma {gamma:g} for a 12-point protocol"
