@@ -4,7 +4,7 @@ inner loop). The compiled side: :mod:`.subsets_kernel`.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from warnings import warn
 
 import numpy as np
@@ -98,15 +98,47 @@ def fit_subsets(gamma_deg, theta_deg, power, masks, model="two-lobe", *, sigma=N
     if gamma_deg.size and gamma_deg.max() > 0:  # once per call, as FitResult.predict says it
         warn(mirrored_gamma_warning("fit_subsets", "fit them at a table's settings"),
              stacklevel=2)
-    gamma = np.radians(gamma_deg)
-    theta = np.radians(theta_deg)
-    b, n = masks.shape
-    p_dim = model_obj.n_nonlinear
-    weights_all = np.ones(n) if sigma is None else 1.0 / np.asarray(sigma, float) ** 2
+    n = masks.shape[1]
     if n and power.max() == power.min():  # as fit: R^2 on all points means nothing
         raise DataError(
             f"fit_subsets: power is constant ({power[0]:g} at all {n} points): a reflection "
             "model needs the power measured at varying angles; check the power column")
+    # the power in units near 1, by a power of two (exact): a table in nW underflowed the
+    # data-driven starts of a narrow lobe (1e-300 x 1e-9), and 6 of 12 subsets of the same
+    # readings in W and in nW ended at other coefficients (stop 48's metamorphic audit)
+    unit = _unit_scale(power)
+    out = _fit_subsets(model_obj, np.radians(gamma_deg), np.radians(theta_deg), power / unit,
+                       masks, None if sigma is None else np.asarray(sigma, float) / unit,
+                       dict(max_iter=max_iter, ftol=ftol, n_screen=n_screen, n_keep=n_keep,
+                            data_starts=data_starts, n_data_starts=n_data_starts, scan=scan,
+                            exhaustive=exhaustive, seed=seed, engine=engine,
+                            shared_starts=shared_starts))
+    in_power = np.array([q.unit == "power" for q in model_obj.params])
+    return replace(
+        out, params=out.params * np.where(in_power, unit, 1.0),
+        cost=out.cost * (unit * unit if sigma is None else 1.0))
+
+
+def _unit_scale(power: np.ndarray) -> float:
+    """The power of two nearest the root mean square of the finite ``power`` (1 when there
+    is none): dividing by it is exact, so a table in any power-of-two multiple of a unit
+    is fitted bit for bit alike."""
+    finite = power[np.isfinite(power)]
+    rms = float(np.sqrt(np.mean(finite * finite))) if finite.size else 0.0
+    if not (np.isfinite(rms) and rms > 0):
+        return 1.0
+    return float(2.0 ** np.round(np.log2(rms)))
+
+
+def _fit_subsets(model_obj, gamma, theta, power, masks, sigma, cfg) -> SubsetFits:
+    """:func:`fit_subsets` on the checked table in radians and power near 1."""
+    max_iter, ftol, seed, engine = cfg["max_iter"], cfg["ftol"], cfg["seed"], cfg["engine"]
+    n_screen, n_keep, n_data_starts = cfg["n_screen"], cfg["n_keep"], cfg["n_data_starts"]
+    data_starts, scan, shared_starts = cfg["data_starts"], cfg["scan"], cfg["shared_starts"]
+    exhaustive = cfg["exhaustive"]
+    n = masks.shape[1]
+    p_dim = model_obj.n_nonlinear
+    weights_all = np.ones(n) if sigma is None else 1.0 / sigma ** 2
     counts = masks.sum(axis=1)
     ok = counts > model_obj.n_params  # a degree of freedom left, as fit requires
     if exhaustive:
