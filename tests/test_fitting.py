@@ -566,3 +566,27 @@ def test_subset_fits_do_not_depend_on_the_power_unit(engine, real_dir):
                                    rtol=1e-6)
         np.testing.assert_allclose(other.r2_all, base.r2_all, rtol=0, atol=1e-7)
         np.testing.assert_allclose(other.cost, base.cost * scale ** 2, rtol=1e-6)
+
+
+def test_a_sigma_far_below_the_scatter_is_said_to_understate_the_errors():
+    """A table whose sigma is 10 times below its noise was fitted with standard errors
+    taken from that sigma and no word (stop 48's metamorphic audit: a Cornell table with
+    sigma 1 % of its median power, chi^2/dof 2.9e5, errors 500 times below the unweighted
+    fit's). The fit now warns, and names what scaled errors would leave ill-determined;
+    with the true sigma it does not."""
+    noisy = synthetic(noise=0.01, seed=3, sigma_column=True)
+    right = fit(noisy, seed=0)
+    assert not any("depart from the fit by chi^2/dof" in w for w in right.warnings)
+    small = Measurements(noisy.gamma_deg, noisy.theta_deg, noisy.power, sigma=noisy.sigma / 10)
+    res = fit(small, seed=0)
+    assert res.chi2_reduced == pytest.approx(100 * right.chi2_reduced, rel=0.05)
+    note = [w for w in res.warnings if "depart from the fit by chi^2/dof" in w]
+    assert len(note) == 1 and "the standard errors, which take sigma as given" in note[0]
+    scaled = res.stderr * np.sqrt(res.chi2_reduced)
+    from irreflect.fitting.results import uncertain_mask
+
+    would = [n for n, bad in zip(res.param_names, uncertain_mask(res.model, res.values,
+                                                                  scaled), strict=True)
+             if bad and n not in res.ill_determined]
+    assert ("would be ill-determined" in note[0]) == bool(would)
+    assert all(n in note[0] for n in would)

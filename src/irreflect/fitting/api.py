@@ -30,7 +30,14 @@ from .options import (
     SMALL_TABLE_POINTS,
     FitOptions,
 )
-from .results import FitResult, _check_sigma, _radians_and_weights, check_fit_data, judge
+from .results import (
+    FitResult,
+    _check_sigma,
+    _radians_and_weights,
+    check_fit_data,
+    judge,
+    sigma_note,
+)
 from .search import fit_plain_table, search_and_finish
 from .shape_hint import explained
 
@@ -438,6 +445,9 @@ def _fit_search(meas, model, t0, opts: FitOptions) -> FitResult:
     at_bound, ill, warnings = judge(model_obj, fin.values, fin.stderr, fin.singular, angles,
                                     converged, message)
     dof = meas.n_points - model_obj.n_params
+    if sigma is not None:
+        warnings += sigma_note(model_obj, fin.values, fin.stderr, ill, 2 * cb / max(dof, 1),
+                               dof)
     return FitResult(
         model=model_obj.name, param_names=model_obj.param_names, values=fin.values,
         stderr=fin.stderr, covariance=fin.covariance, r2=fin.r2, rmse=fin.rmse, mse=fin.mse,
