@@ -387,7 +387,9 @@ def register(sub) -> None:
                     "negative on the source side.")
     p.add_argument("measured", metavar="MEASURED.csv",
                    help="readings so far: gamma_deg, theta_deg, power[, sigma] (CSV or "
-                        "Parquet; a header alone: nothing measured yet)")
+                        "Parquet; a header alone: nothing measured yet), in the order they "
+                        "were taken: append new rows at the end (the campaign replays them "
+                        "in that order, and its fits and verdict follow it)")
     p.add_argument("--n", type=POSITIVE_INT, default=1, metavar="K",
                    help="how many settings to propose (default 1)")
     p.add_argument("--out", metavar="NEXT.csv",
