@@ -753,3 +753,19 @@ def test_a_pilot_in_another_row_order_places_the_same_glossy_points():
                                 layout="balanced", available=available)
         placed.append(sorted(zip(proto.gamma_deg, proto.theta_deg, strict=True)))
     assert placed[0] == placed[1]
+
+
+def test_a_point_between_two_measured_ones_snaps_alike_in_any_row_order():
+    """snap_points took the first in the table's rows of two measured points as near to a
+    requested one (stop 48's metamorphic audit), so the same scan with its rows in another
+    order put a protocol point elsewhere; the tie now goes to the lower (gamma, theta)."""
+    from irreflect.protocol import snap_points
+
+    g = np.array([-30.0, -30.0, -30.0, -40.0])
+    t = np.array([32.0, 28.0, 0.0, 40.0])
+    meas = Measurements(g, t, np.array([1.0, 2.0, 3.0, 4.0]))
+    flipped = Measurements(g[::-1], t[::-1], np.array([4.0, 3.0, 2.0, 1.0]))
+    for table in (meas, flipped):
+        snapped = snap_points(table, [(-30.0, 30.0), (-30.0, 30.0)])
+        assert snapped["theta_deg"].tolist() == [28.0, 32.0]
+        assert snapped["distance_deg"].tolist() == [2.0, 2.0]

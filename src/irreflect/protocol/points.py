@@ -58,7 +58,10 @@ def snap_points(meas: Measurements, points) -> pd.DataFrame:
     for g, t in pts:
         dist = np.hypot(meas.gamma_deg - g, meas.theta_deg - t)
         dist = np.where(taken, np.inf, dist)
-        i = int(np.argmin(dist))
+        # of measured points as near, the one of lowest (gamma, theta): not the first in
+        # the table's rows, so that the same scan in another row order snaps alike
+        near = np.flatnonzero(dist == dist.min())
+        i = int(near[np.lexsort((meas.theta_deg[near], meas.gamma_deg[near]))[0]])
         taken[i] = True
         rows.append({"gamma_requested": g, "theta_requested": t,
                      "gamma_deg": meas.gamma_deg[i], "theta_deg": meas.theta_deg[i],
