@@ -4,6 +4,7 @@ of hidden effects, CLI, report section and the real data."""
 from __future__ import annotations
 
 import json
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -727,3 +728,24 @@ def test_gain_factors_in_one_valley_or_one_peak_are_told_from_a_drift():
     assert _unimodal_departure(-valley, w) == 0.0  # a peak
     zigzag = np.log([1.03, 0.88, 0.91, 1.11, 0.92, 1.09, 1.04, 1.06, 0.95])
     assert _unimodal_departure(zigzag, w) > 1e3
+
+
+def test_diagnose_leaves_out_the_fits_own_word_on_sigma():
+    """A fit whose readings depart far beyond their sigma warns "(irreflect diagnose names
+    it)" since stop 48; diagnose printed that of its own base fit, and of its extended fit
+    on a table without sigma, where the sigma is the one it estimated (the diagnose audit).
+    The diagnosis tests the lack of fit itself: the warning is left out there, and kept by
+    fit."""
+    from conftest import synthetic
+
+    from irreflect.fitting.results import SIGMA_NOTE_HEAD
+
+    noisy = synthetic(noise=0.01, seed=3, sigma_column=True)
+    small = Measurements(noisy.gamma_deg, noisy.theta_deg, noisy.power, sigma=noisy.sigma / 10,
+                         name="small-sigma")
+    with pytest.warns(FitWarning, match=r"depart from the fit by chi\^2/dof"):
+        fit(small, seed=0)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        diagnose(small, extensions=["background", "angle_offset"], max_effects=1, seed=0)
+    assert not [w for w in caught if SIGMA_NOTE_HEAD in str(w.message)]

@@ -330,6 +330,9 @@ def judge(model, values, stderr, singular, gamma_rad, converged, message,
 #: below :data:`SIGMA_LACK_OF_FIT_P` under the sigma, says its standard errors understate.
 SIGMA_CHI2 = 2.0
 SIGMA_LACK_OF_FIT_P = 1e-3
+#: How :func:`sigma_note`'s warning begins (diagnose, which tests the lack of fit itself
+#: against the noise it estimates, leaves it out).
+SIGMA_NOTE_HEAD = "the readings depart from the fit by chi^2/dof"
 
 
 def sigma_note(model, values, stderr, ill, chi2_reduced: float, dof: int) -> tuple[str, ...]:
@@ -348,7 +351,7 @@ def sigma_note(model, values, stderr, ill, chi2_reduced: float, dof: int) -> tup
     scaled = uncertain_mask(model, values, np.asarray(stderr, float) * math.sqrt(chi2_reduced))
     more = [q.name for q, bad in zip(model.params, scaled, strict=True)
             if bad and q.name not in ill]
-    return (f"the readings depart from the fit by chi^2/dof {chi2_reduced:.3g} against "
+    return (f"{SIGMA_NOTE_HEAD} {chi2_reduced:.3g} against "
             f"their sigma (p = {p:.2g}): the model lacks an effect of the material "
             "(irreflect diagnose names it) or sigma understates the noise, and the standard "
             "errors, which take sigma as given, understate the uncertainty"
