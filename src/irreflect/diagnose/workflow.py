@@ -205,6 +205,15 @@ class Effect:
     #: for an artefact of the measurement rather than a property of the material (the
     #: gain drift): what to do about it; empty for a physical effect
     advice: str = ""
+    #: the parameters the final fit left at a bound of their range (no standard error
+    #: holds there; the effect's form is then not what the data follow), each with its
+    #: bound (``{"n_r": "lower bound 1"}``)
+    bounds: dict = field(default_factory=dict)
+
+    @property
+    def at_bound(self) -> tuple[str, ...]:
+        """The effect's parameters at a bound of their range."""
+        return tuple(self.bounds)
 
     @property
     def artefact(self) -> bool:
@@ -292,7 +301,8 @@ class Diagnosis:
             "effects": [{"name": e.name, "params": e.params, "stderr": e.stderr,
                          "delta_bic": e.delta_bic, "share_explained": e.share_explained,
                          "lr": e.lr, "p_value": e.p_value,
-                         "measurement_artefact": e.artefact, "advice": e.advice}
+                         "measurement_artefact": e.artefact, "advice": e.advice,
+                         "at_bound": list(e.at_bound)}
                         for e in self.effects],
             "alternatives": [list(a) for a in self.alternatives],
             "alternative_fits": {k: metrics(a) | {"params": a.fit.params}
@@ -1052,6 +1062,9 @@ def _effect(name: str, c: Candidate | None, result: FitResult, sets: ModelSets) 
     params = {p.name: result.params[p.name] for p in new}
     stderr = {p.name: result.stderrs[p.name] for p in new}
     units = {p.name: ("" if p.unit == "1" else p.unit) for p in new}
+    bounds = {p.name: (f"lower bound {p.lower:g}" if abs(params[p.name] - p.lower)
+                       <= abs(params[p.name] - p.upper) else f"upper bound {p.upper:g}")
+              for p in new if p.name in result.at_bound}
     advice = ""
     if name == GAIN_DRIFT:
         params, stderr = gain_params(result, sets.local[GAIN_DRIFT].levels_deg)
@@ -1066,7 +1079,7 @@ def _effect(name: str, c: Candidate | None, result: FitResult, sets: ModelSets) 
         share_explained=c.share_explained if c else float("nan"),
         rss_drop=c.rss_drop if c else float("nan"),
         lr=c.lr if c else float("nan"), p_value=c.p_value if c else float("nan"),
-        advice=advice,
+        advice=advice, bounds=bounds,
     ) if model is not None else None
 
 
@@ -1127,8 +1140,15 @@ def _verdict(steps, effects, alternatives, common, separating, alpha, base, targ
 
 
 def _param_text(e: Effect) -> str:
-    return ", ".join(f"{k} = {v:.3g} +- {e.stderr[k]:.2g}{(' ' + e.units[k]) if e.units[k] else ''}"
-                     for k, v in e.params.items())
+    """``delta = 1.5 +- 0.005 deg``; a parameter at a bound of its range has no standard
+    error: ``n_r = 1 (at its lower bound 1: not determined)``."""
+    def one(k, v):
+        unit = f" {e.units[k]}" if e.units[k] else ""
+        if k in e.bounds:
+            return f"{k} = {v:.3g}{unit} (at its {e.bounds[k]}: not determined)"
+        return f"{k} = {v:.3g} +- {e.stderr[k]:.2g}{unit}"
+
+    return ", ".join(one(k, v) for k, v in e.params.items())
 
 
 def diagnose_many(datasets: dict[str, Measurements], **kwargs) -> dict[str, Diagnosis]:
