@@ -690,3 +690,36 @@ def test_load_scene_takes_a_bundled_name_as_the_command_line_does(tmp_path, monk
     assert len(by_name.receivers) == len(by_path.receivers) > 0
     with pytest.raises(SceneError, match="offic"):
         load_scene("offic")  # a typo is still a missing file, with its hint
+
+
+def test_a_negligible_order_does_not_raise_the_error_note(tmp_path, capsys):
+    """Seen (metamorphic audit): a narrow beam (Lambertian order 200) that reaches no
+    surface the receivers see gives a first reflection of 1e-34 W against 5e-7 W of the
+    second; its relative estimate (2e7 %) was printed as the worst link's error of order 1
+    with a note to use a smaller --cell. An order carrying under a millionth of a link's
+    power is left out of the worst estimate and the note; bounces.* still carry it."""
+    from irreflect.cli import main
+
+    scene = scene_from_dict({
+        "room": {"size_m": [4.0, 5.0, 3.0], "materials": {"walls": "lambertian(0.6)",
+                                                         "floor": "lambertian(0.6)",
+                                                         "ceiling": "lambertian(0.6)"}},
+        "emitter": [{"position_m": [2.0, 2.5, 3.0], "direction": [0.3, 0.2, -1.0],
+                     "lambertian_order": 200}],
+        "receiver": [{"name": "r", "position_m": [1.0, 4.0, 1.5], "direction": [0.3, -0.5, 1.0],
+                      "fov_deg": 60}]})
+    res = simulate(scene, method="recursive", bounces=2, cell_m=0.25)
+    lk, err = res.link(), res.error_estimate[(0, 0)]
+    assert lk.power_w[1] < 1e-20 * lk.power_w[2] and err[1] > 1.0  # the order is negligible
+    assert err[2] < 0.01 and not any("estimated error" in n for n in res.notes)
+    toml = tmp_path / "narrow.toml"
+    toml.write_text('[room]\nsize_m = [4.0, 5.0, 3.0]\n[room.materials]\nwalls = "lambertian(0.6)"\n'
+                    'floor = "lambertian(0.6)"\nceiling = "lambertian(0.6)"\n[[emitter]]\n'
+                    'position_m = [2.0, 2.5, 3.0]\ndirection = [0.3, 0.2, -1]\n'
+                    'lambertian_order = 200\n[[receiver]]\nposition_m = [1.0, 4.0, 1.5]\n'
+                    'direction = [0.3, -0.5, 1]\nfov_deg = 60\n')
+    assert main(["room", str(toml), "--out", str(tmp_path / "o"), "--method", "recursive",
+                 "--bounces", "2", "--cell", "0.25", "--quiet"]) == 0
+    text = capsys.readouterr().out
+    line = next(x for x in text.splitlines() if "estimated error per order" in x)
+    assert "1 0.00 %" in line and "note:" not in text

@@ -114,6 +114,8 @@ def _warn_wrapped(summary) -> None:
 def _report(result, summary) -> str:
     import numpy as np
 
+    from ..room.engine import worst_error_estimate
+
     scene = result.scene
     lines = [f"{scene.name}: {len(scene.emitters)} emitter(s), {len(scene.receivers)} receiver(s), "
              f"method {result.method}, {result.bounces} bounce(s)"
@@ -126,7 +128,7 @@ def _report(result, summary) -> str:
         lines.append(f"  material {name}: {mat.describe()}")
     est = np.array(list((result.error_estimate or {}).values()), float)
     if est.size and np.isfinite(est).any():
-        worst = np.max(np.where(np.isfinite(est), est, 0.0), axis=0)
+        worst = worst_error_estimate(result)
         lines.append("  recursive method, estimated error per order (worst link; the error that "
                      "shrinks with the cells, from a run at twice the cell size): " + ", ".join(
                          f"{k} {100 * worst[k]:.2f} %" for k in range(1, len(worst))))

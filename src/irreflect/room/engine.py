@@ -48,6 +48,10 @@ TASK_RECEIVERS = 8
 ESTIMATE_COARSEN = 2.0
 #: a recursive order whose estimated error exceeds this gets a printed note
 ERROR_NOTE = 0.01
+#: an order carrying less than this share of a link's power is left out of the worst
+#: estimated error: its relative error says nothing about the link (a narrow beam's first
+#: reflection of 1e-34 W against 5e-7 W read 2e7 % and asked for smaller cells)
+NEGLIGIBLE_SHARE = 1e-6
 
 
 @dataclass
@@ -244,9 +248,8 @@ def simulate(scene: Scene, *, method=None, bounces=None, cell_m=None, rays=None,
     result.links = {(lk.emitter, lk.receiver): lk for lk in links}
     if s["method"] == "recursive" and K_ >= 1 and estimate_error:
         result.error_estimate = _error_estimate(scene, s, result, ctx.threads)
-        worst = {k: max(v[k] for v in result.error_estimate.values())
-                 for k in range(1, K_ + 1)}
-        high = {k: v for k, v in worst.items() if v > ERROR_NOTE}
+        worst = worst_error_estimate(result)
+        high = {k: v for k, v in enumerate(worst) if k >= 1 and v > ERROR_NOTE}
         if high:
             result.notes.append(
                 "recursive method: estimated error above 1 % at order(s) "
@@ -278,6 +281,20 @@ def _error_estimate(scene, s, fine: RoomResult, threads) -> dict:
         err[0] = 0.0
         out[key] = err
     return out
+
+
+def worst_error_estimate(result: RoomResult) -> np.ndarray | None:
+    """Per order (index 0: the line of sight, 0), the largest estimated relative error over
+    the links, leaving out a link's order that carries less than :data:`NEGLIGIBLE_SHARE`
+    of the link's power, and estimates that could not be made (NaN); None without one."""
+    if not result.error_estimate:
+        return None
+    worst = np.zeros(result.bounces + 1)
+    for key, err in result.error_estimate.items():
+        power = result.links[key].power_w
+        counted = np.isfinite(err) & (power >= NEGLIGIBLE_SHARE * power.sum())
+        worst = np.maximum(worst, np.where(counted, err, 0.0))
+    return worst
 
 
 # ----------------------------------------------------------------------------- execution
@@ -468,4 +485,4 @@ def _recursive_link(ctx: _Context, e: int, r: int) -> LinkResult:
                       reflected, tau_los)
 
 
-__all__ = ["simulate", "RoomResult", "LinkResult", "link_seed", "DEFAULTS"]
+__all__ = ["simulate", "RoomResult", "LinkResult", "link_seed", "worst_error_estimate", "DEFAULTS"]
