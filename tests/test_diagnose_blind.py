@@ -25,7 +25,10 @@ from irreflect.models import Parameter
 # ----------------------------------------------------------------------------- blind diagnosis
 @pytest.mark.parametrize("effect", CATALOGUE)
 def test_hidden_catalogue_effect_is_named_and_then_the_residual_is_noise(effect):
-    for seed in (0, 1):
+    # one seed per effect, seeds 0 and 1 in turn along the catalogue (both seeds for every
+    # effect until stop 49: 2 of the suite's 8 min on a 2-core Xeon); the rates over
+    # hundreds of seeds are experiments/diagnose_rates.py's
+    for seed in (CATALOGUE.index(effect) % 2,):
         case = hidden_case(effect, seed)
         assert case.truth["excess_chi2"] >= 50
         d = diagnose(case.measurements, seed=seed)
