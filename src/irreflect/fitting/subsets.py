@@ -10,6 +10,7 @@ from warnings import warn
 import numpy as np
 
 from .. import metrics
+from .._compiled import build_notice
 from ..errors import DataError
 from ..models import (
     Geometry,
@@ -146,10 +147,11 @@ def _fit_subsets(model_obj, gamma, theta, power, masks, sigma, cfg) -> SubsetFit
                                        seed, engine)
     codes = _kernel_codes(model_obj, engine)
     if codes is not None and data_starts and not scan and p_dim:
-        return _fit_subsets_compiled(model_obj, codes, gamma, theta, power, masks, weights_all,
-                                     ok, n_screen=n_screen, n_keep=n_keep,
-                                     n_data_starts=n_data_starts, max_iter=max_iter,
-                                     ftol=ftol, seed=seed, shared_starts=shared_starts)
+        with build_notice():  # a cold cache is built by this call: announced, as fit's is
+            return _fit_subsets_compiled(model_obj, codes, gamma, theta, power, masks, weights_all,
+                                         ok, n_screen=n_screen, n_keep=n_keep,
+                                         n_data_starts=n_data_starts, max_iter=max_iter,
+                                         ftol=ftol, seed=seed, shared_starts=shared_starts)
     return _fit_subsets_numpy(model_obj, (gamma, theta, power, weights_all), masks, ok,
                               dict(n_screen=n_screen, n_keep=n_keep, data_starts=data_starts,
                                    n_data_starts=n_data_starts, scan=scan, seed=seed,
