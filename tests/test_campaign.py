@@ -1980,3 +1980,42 @@ def test_the_reason_of_a_proposal_does_not_depend_on_the_power_unit(real_dir):
     assert whys[0][["gamma_deg", "theta_deg"]].equals(whys[1][["gamma_deg", "theta_deg"]])
     assert list(whys[0]["why"]) == list(whys[1]["why"])
     assert "u_nd" in whys[0]["why"][0]
+
+
+def test_leverage_gain_counts_only_the_picture_a_fit_of_the_model_follows():
+    """DesignRule.leverage: a reading's gain projected on the fit's tangent space. A
+    covariance orthogonal to the Jacobian's columns (a misfit no fit follows) gains nothing
+    projected, while the plain integrated variance counts it; the tangent part is kept."""
+    from irreflect.campaign.design import Posterior
+
+    n = 6
+    x = np.linspace(-1.0, 1.0, n)
+    jac = np.column_stack([np.ones(n), x])  # the fit follows a level and a slope
+    w = np.ones(n)
+    m = np.linalg.pinv(jac.T @ jac)
+    along = 1.0 + 0.5 * x  # in the tangent space
+    across = x ** 2 - np.mean(x ** 2)  # orthogonal to both columns
+    across = 3.0 * (across - jac @ (m @ (jac.T @ across)))
+    assert np.max(np.abs(jac.T @ across)) < 1e-12
+    noise = np.full(n, 1e-3)
+    post = Posterior(cov=np.outer(across, across), noise=noise)
+    plain = post.gains()
+    assert plain[0] > 0.1  # the plain criterion counts the misfit
+    assert np.max(np.abs(post.gains((jac, m, w), 1.0))) < 1e-12
+    both = Posterior(cov=np.outer(across, across) + np.outer(along, along), noise=noise)
+    lever = both.gains((jac, m, w), 1.0)
+    alone = Posterior(cov=np.outer(along, along), noise=noise).gains()
+    # projected, the gain is the tangent part's reduction, seen through each reading's
+    # whole variance: the plain criterion reads the end where the misfit is largest
+    # (x = -1: 8.43 against 6.81 at x = 0.6), the projected one where the misfit is small
+    # and the slope bright (x = 0.6: 6.31 against 0.60 at x = -1)
+    var = np.diag(both.cov)
+    np.testing.assert_allclose(lever, alone * (along ** 2 + 1e-3) / (var + 1e-3), rtol=1e-9)
+    assert int(np.argmax(both.gains())) == 0 and int(np.argmax(lever)) == 4
+    assert lever[0] < 0.1 * lever[4]
+    half = both.gains((jac, m, w), 0.5)
+    np.testing.assert_allclose(half, 0.5 * both.gains() + 0.5 * lever, rtol=1e-12)
+    from irreflect.campaign.design import DEFAULT_RULE
+
+    with pytest.raises(IrreflectError):
+        dataclasses.replace(DEFAULT_RULE, leverage=1.5)

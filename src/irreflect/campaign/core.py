@@ -40,6 +40,7 @@ from ..validation import check_int, check_number, check_seed, short_list
 from .design import (
     DEFAULT_RULE,
     DesignRule,
+    _jacobian,
     build_prior,
     coefficient_gain,
     leave_one_out,
@@ -724,13 +725,14 @@ class Campaign:
         with np.errstate(all="ignore"):
             rival_preds = [np.nan_to_num(self.model.predict_deg(q, s[:, 0], s[:, 1]))
                            for q in state.extra.get("rivals", ())]
+        projector = self._projector(res) if self.rule.leverage else None
         rows = []
         extra_rows, extra_noise = [], []
         for _ in range(k):
             free = self._free_mask(taken)
             if not free.any():
                 break
-            gains = post.gains()
+            gains = post.gains(projector, self.rule.leverage)
             j, because = self._first_setting(state, free, gains) if not rows else (None, "")
             if j is None:
                 new = ~np.isin(np.round(s[:, 0], 6), list(measured_g))
@@ -773,6 +775,17 @@ class Campaign:
             taken = taken + [(g, t)]
             measured_g.add(round(g, 6))
         return rows
+
+    def _projector(self, res):
+        """``(J, (J^T W J)^+, w)`` on the design's settings: the fit's Jacobian there and
+        the share of the range each setting stands for (the quadrature estimate's weights)."""
+        s = self._settings
+        _, jac = _jacobian(self.model, res.values, s[:, 0], s[:, 1])
+        if self._setting_count is None:
+            near, size = range_cells(self._range, s[:, 0], s[:, 1])
+            self._setting_count = np.bincount(near, minlength=size).astype(float)
+        w = self._setting_count / max(float(self._setting_count.mean()), 1e-300)
+        return jac, np.linalg.pinv(jac.T @ (w[:, None] * jac), rcond=1e-10), w
 
     # ------------------------------------------------------------------ verdict
     def unresolved_lobe(self) -> str:
