@@ -139,12 +139,12 @@ class DesignRule:
         is the model's misfit, which the all-points fit keeps too. The plain integrated
         variance counts both, and prefers readings that inform many settings of a misfit the
         fit cannot follow to readings of high leverage (bright, at the range's ends) that
-        set the fit's compromise. 0: off. Tried at stop 48 and not kept: 1 took the held-out
+        set the fit's compromise. 0: off. Tried at stop 49 and not kept: 1 took the held-out
         Cornell Beckmann + Oren-Nayar tables closer at 12 readings (0.829 -> 0.868, 0.789 ->
         0.821) and their verdicts from 0.022-0.072 below to within 0.02, but the real sets
         from 11 / 11 / 10 / 11 (within 0.01 by 15 / beats the paper / hindsight / verdict)
         to 9 / 10 / 6 / 9, and 0.5 to 10 / 11 / 7 / 10: projected at a fit that is still
-        wrong, it discounts the lobe's nonlinear alternatives (docs/campaign.md, stop 48)
+        wrong, it discounts the lobe's nonlinear alternatives (docs/campaign.md, stop 49)
     """
 
     coefficient_prior: float = 1.0
