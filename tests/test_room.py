@@ -750,3 +750,28 @@ def test_a_mirror_symmetric_room_gives_mirror_symmetric_results():
     P = np.array([res.link(0, i).power_w for i in range(len(pts))])
     assert np.all(P[:, 1:] > 0)
     assert np.max(np.abs(P[1:] / P[0] - 1)) < 1e-6, P[1:] / P[0] - 1
+
+
+def test_monte_carlo_order_without_hits_is_not_zero_plus_minus_zero():
+    """A narrow field of view (5 deg) 0.1 m from a wall, facing it: no hit point of 2000
+    rays lies in its view. The order's power reads 0 but its standard error is NaN and a
+    note names the link and the orders (it was 0 +- 0, claiming certainty, with no word);
+    a receiver that rays do reach keeps finite standard errors."""
+    from irreflect.room.scene import Emitter, Receiver, Scene
+
+    em = Emitter("e", np.array([2.0, 2.5, 3.0]), np.array([0.0, 0.0, -1.0]), 1.0, 1.0)
+    rxs = (Receiver("wall", np.array([0.1, 2.5, 1.0]), np.array([-1.0, 0.0, 0.0]), 1e-4, 5.0),
+           Receiver("open", np.array([2.0, 2.5, 0.8]), np.array([0.0, 0.0, 1.0]), 1e-4, 85.0))
+    scene = Scene("nohit", np.array([4.0, 5.0, 3.0]), ("w",) * 6, {"w": lambertian(0.6, "w")},
+                  (em,), rxs)
+    res = simulate(scene, method="montecarlo", bounces=2, rays=2000, seed=1, threads=1)
+    wall, open_ = res.link(0, "wall"), res.link(0, "open")
+    assert np.all(wall.power_w[1:] == 0)
+    assert np.all(np.isnan(wall.stderr_w[1:]))
+    assert np.all(open_.power_w[1:] > 0) and np.all(np.isfinite(open_.stderr_w))
+    assert np.all(open_.stderr_w[1:] < 0.1 * open_.power_w[1:])
+    notes = [n for n in res.notes if "no ray reached" in n]
+    assert len(notes) == 1 and "e -> wall order(s) 1, 2" in notes[0] and "open" not in notes[0]
+    table = res.summary().set_index("receiver")
+    assert np.isnan(table.loc["wall", "dc_gain_b1_stderr"])
+    assert table.loc["open", "dc_gain_b1_stderr"] > 0

@@ -62,7 +62,8 @@ class LinkResult:
     power_w : (K+1,) received power per order (W)
     m1, m2 : (K+1,) sums of power x delay (W s) and power x delay^2 (W s^2)
     phasor : (K+1,) complex, sum of power x exp(-j 2 pi f tau) at the emitter's modulation
-    stderr_w : (K+1,) standard error of ``power_w`` (Monte Carlo; 0 when exact)
+    stderr_w : (K+1,) standard error of ``power_w`` (Monte Carlo; 0 when exact; NaN for an
+        order that no ray reached, whose power 0 is then not resolved, see ``RoomResult.notes``)
     hist : (K+1, T) received power per delay bin (W); bin ``b`` covers delays
         ``[b dt, (b + 1) dt)`` (its start is ``b dt``)
     reflected_w : (K,) power left after k reflections, all surfaces together (W)
@@ -256,6 +257,10 @@ def simulate(scene: Scene, *, method=None, bounces=None, cell_m=None, rays=None,
                 + ", ".join(f"{k} ({100 * v:.1f} %)" for k, v in high.items())
                 + f" at {s['cell_m']:g} m cells (worst receiver; from a run at "
                 f"{ESTIMATE_COARSEN * s['cell_m']:g} m): use a smaller --cell or Monte Carlo")
+    if s["method"] == "montecarlo" and K_ >= 1:
+        note = no_hit_note(result)
+        if note:
+            result.notes.append(note)
     result.seconds = time.perf_counter() - t0
     if s["method"] == "montecarlo" and K_ >= 1:
         busy = sum(lk.kernel_seconds for lk in links)
@@ -295,6 +300,26 @@ def worst_error_estimate(result: RoomResult) -> np.ndarray | None:
         counted = np.isfinite(err) & (power >= NEGLIGIBLE_SHARE * power.sum())
         worst = np.maximum(worst, np.where(counted, err, 0.0))
     return worst
+
+
+def no_hit_note(result: RoomResult) -> str | None:
+    """The Monte Carlo links and orders that no ray reached (power 0, standard error NaN:
+    zero hits say the power is below what ``rays`` rays can resolve, not that it is 0),
+    as one printed note; None when every order of every link got a hit."""
+    missed = {}
+    for (e, r), lk in sorted(result.links.items()):
+        ks = [k for k in range(1, len(lk.power_w)) if np.isnan(lk.stderr_w[k])]
+        if ks:
+            missed[f"{result.scene.emitters[e].name} -> {result.scene.receivers[r].name}"] = ks
+    if not missed:
+        return None
+    shown = "; ".join(f"{name} order(s) {', '.join(map(str, ks))}"
+                      for name, ks in list(missed.items())[:5])
+    more = f" and {len(missed) - 5} more link(s)" if len(missed) > 5 else ""
+    return (f"Monte Carlo: no ray reached {shown}{more} ({result.rays} rays per link): their "
+            "power reads 0 with standard error NaN (unknown, not exactly 0; a narrow field of "
+            "view or a receiver close to a wall sees few hit points): use more --rays or the "
+            "recursive method")
 
 
 # ----------------------------------------------------------------------------- execution
@@ -446,6 +471,8 @@ def _montecarlo_link(ctx: _Context, e: int, r: int) -> LinkResult:
         power[1:], m1[1:], m2[1:] = out.mom[:, 0], out.mom[:, 1], out.mom[:, 2]
         phasor[1:] = out.ph[:, 0] + 1j * out.ph[:, 1]
         stderr[1:] = np.sqrt(np.maximum(out.sumsq - out.mom[:, 0] ** 2 / ctx.rays, 0.0))
+        # no ray reached the receiver at an order: 0 +- 0 would claim certainty
+        stderr[1:][out.mom[:, 0] <= 0.0] = np.nan
     link = LinkResult(e, r, power, m1, m2, phasor, stderr, hist.astype(np.float32), reflected,
                       tau_los)
     link.kernel_seconds = kernel_s
