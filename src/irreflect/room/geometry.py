@@ -132,18 +132,32 @@ def discretize(scene: Scene, cell_m: float) -> Cells:
                  np.concatenate(half), np.concatenate(axes), tuple(grids), faces)
 
 
+def _groups(n: int) -> list[int]:
+    """Sizes of the blocks that one quadtree level merges along a side of ``n``: pairs, with
+    one block of 1 (or 3) in the middle when ``n`` is odd, so that the blocks are the same
+    seen from either end (a mirror-symmetric room gets a mirror-symmetric tree; pairs from
+    one end left an odd cell at the far end and broke the symmetry by 1e-3 per cell)."""
+    if n % 2 == 0:
+        return [2] * (n // 2)
+    side = (n - 1) // 2
+    if side % 2 == 0:
+        return [2] * (side // 2) + [1] + [2] * (side // 2)
+    return [2] * ((side - 1) // 2) + [3] + [2] * ((side - 1) // 2)
+
+
 def build_tree(cells: Cells) -> tuple[Tree, np.ndarray]:
-    """A quadtree per surface over its cell grid (cells are the leaves, nodes 0..N-1; inner
-    nodes merge 2 x 2 blocks level by level up to one root per surface; a block with one
-    cell is that cell). Returns the tree and the inner nodes in an order with children
-    before parents."""
+    """A tree per surface over its cell grid (cells are the leaves, nodes 0..N-1; inner
+    nodes merge blocks of 2 x 2 (up to 3 x 3 in the middle of an odd side, :func:`_groups`)
+    level by level up to one root per surface; a block with one cell is that cell). Returns
+    the tree and the inner nodes in an order with children before parents."""
     N = cells.n
+    width = 9
     cap = 2 * N + 8 * len(cells.grids) + 8
     lo = np.zeros((cap, 3))
     hi = np.zeros((cap, 3))
     lo[:N] = cells.pos - _extent(cells)
     hi[:N] = cells.pos + _extent(cells)
-    child = np.full((cap, 4), -1, np.int64)
+    child = np.full((cap, width), -1, np.int64)
     surf = np.zeros(cap, np.int64)
     surf[:N] = cells.surface
     leaf = np.zeros(cap, np.int64)
@@ -153,12 +167,15 @@ def build_tree(cells: Cells) -> tuple[Tree, np.ndarray]:
     for s, grid in enumerate(cells.grids):
         level = grid
         while level.shape[0] > 1 or level.shape[1] > 1:
-            nu, nv = (level.shape[0] + 1) // 2, (level.shape[1] + 1) // 2
-            pad = np.full((2 * nu, 2 * nv), -1, np.int64)
-            pad[:level.shape[0], :level.shape[1]] = level
-            kids = pad.reshape(nu, 2, nv, 2).transpose(0, 2, 1, 3).reshape(nu * nv, 4)
-            # valid children first, in their order
-            kids = np.take_along_axis(kids, np.argsort(kids < 0, axis=1, kind="stable"), axis=1)
+            gu = np.cumsum([0] + _groups(level.shape[0]))
+            gv = np.cumsum([0] + _groups(level.shape[1]))
+            nu, nv = len(gu) - 1, len(gv) - 1
+            kids = np.full((nu * nv, width), -1, np.int64)
+            for a in range(nu):
+                for b in range(nv):
+                    block = level[gu[a]:gu[a + 1], gv[b]:gv[b + 1]].ravel()
+                    block = block[block >= 0]  # valid children first, in their order
+                    kids[a * nv + b, :block.size] = block
             n_kids = (kids >= 0).sum(axis=1)
             up = np.where(n_kids == 1, kids[:, 0], -1)
             many = np.nonzero(n_kids >= 2)[0]

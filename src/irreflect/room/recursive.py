@@ -292,8 +292,11 @@ class EmitterState:
 
 
 def emitter_state(geo: Geometry, emitter, bounces: int, dt: float, n_bins: int,
-                  threads: int = 1, theta_open: float | None = None) -> EmitterState:
-    """Carry the emitter's light over the cells for ``bounces`` reflections."""
+                  threads: int = 1, theta_open: float | None = None,
+                  lobe_rays: int | None = None) -> EmitterState:
+    """Carry the emitter's light over the cells for ``bounces`` reflections (``lobe_rays``:
+    rays per lobed cell for its once-reflected emitter light, default :data:`LOBE_RAYS`)."""
+    lobe_rays = int(lobe_rays or LOBE_RAYS)
     omega = 2 * math.pi * emitter.modulation_hz
     N = geo.n
     lobed = geo.lobed_cells.size > 0
@@ -327,7 +330,7 @@ def emitter_state(geo: Geometry, emitter, bounces: int, dt: float, n_bins: int,
             a, b, geo.pack, geo.tree, geo.mats, geo.ext, s, ar, kn, np.empty(4096, np.int64)))
         if first and rays:
             _rays(N, threads, arr, lambda a, b, ar, s=src, kn=knobs: T.lobe_rays(
-                a, b, geo.pack, geo.cells.faces, geo.mats, geo.ext, s, ar, kn, LOBE_RAYS))
+                a, b, geo.pack, geo.cells.faces, geo.mats, geo.ext, s, ar, kn, lobe_rays))
         if not first and knobs.rays:
             _rays(N, threads, arr, lambda a, b, ar, s=src, kn=knobs: T.map_rays(
                 a, b, geo.pack, geo.cells.faces, geo.mats, geo.ext, s, ar, kn))
