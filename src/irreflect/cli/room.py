@@ -129,8 +129,9 @@ def _report(result, summary) -> str:
     est = np.array(list((result.error_estimate or {}).values()), float)
     if est.size and np.isfinite(est).any():
         worst = worst_error_estimate(result)
-        lines.append("  recursive method, estimated error per order (worst link; the error that "
-                     "shrinks with the cells, from a run at twice the cell size): " + ", ".join(
+        lines.append("  recursive method, estimated error per order (worst link; from a run at "
+                     "twice the cell size, and with glossy materials that run with a quarter of "
+                     "the lobe rays): " + ", ".join(
                          f"{k} {100 * worst[k]:.2f} %" for k in range(1, len(worst))))
     for note in result.notes:
         lines.append(f"  note: {note}")

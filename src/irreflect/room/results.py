@@ -163,7 +163,8 @@ FILES = {
     "bounces": "one row per pair and order (0 = line of sight): DC gain, standard error (Monte "
                "Carlo), mean delay (ns), power left after that many reflections per watt "
                "emitted, and the recursive method's estimated relative error of the order "
-               "(from a run at twice the cell size, and with glossy materials that run with a quarter of the lobe rays; NaN for Monte Carlo)",
+               "(from a run at twice the cell size, and with glossy materials that run with a "
+               "quarter of the lobe rays; NaN for Monte Carlo)",
     "impulse_response": "h(t), non-zero bins only: t_ns is the START of each delay bin; the "
                         "bin holds the power (W) arriving in [t_ns, t_ns + dt) with dt = "
                         "time_resolution_ns of run.json",
