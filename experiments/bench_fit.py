@@ -10,7 +10,9 @@ In one run, on the same tables:
   reaches (a fast fit that stops in a local optimum is no bargain);
 * generated glossy materials (``irreflect.synthetic``, seeds 0-39): median and worst fit
   time per engine, and how often each reaches the generating curve's R^2;
-* every real set in ``../shared/datasets/real``: median and worst per engine.
+* every real set in ``../shared/datasets/real``: median and worst per engine;
+* the diagnosis catalogue's extended models (``--extended``, alone with
+  ``--extended-only``): both engines' times, their ratio and the time per evaluation.
 
 Run: ``.venv/bin/python experiments/bench_fit.py [--repeats 200]`` on a quiet machine (it
 measures wall time; the README quotes its output). Peak memory (max RSS) is printed last.
@@ -79,11 +81,43 @@ def time_fit(meas, engine, repeats=1, model="two-lobe", seed=0):
     return statistics.median(times) * 1e3, result
 
 
+def extended(repeats: int) -> None:
+    """The diagnosis catalogue's models ("two-lobe+<effect>", the generic compiled path)
+    on the 85-point ``hidden_case("angle_offset", 0)``: each engine's median time
+    (interleaved), its ratio, and the time per model evaluation (the fit's ``nfev``)."""
+    from irreflect.diagnose import CATALOGUE
+    from irreflect.diagnose.hidden import hidden_case
+
+    meas = hidden_case("angle_offset", 0).measurements
+    print(f"extended models on hidden_case('angle_offset', 0), {meas.n_points} points, "
+          f"{repeats} repeats (interleaved, medians, seed 0):")
+    for model in ["two-lobe", *(f"two-lobe+{e}" for e in CATALOGUE)]:
+        for engine in ("compiled", "numpy"):
+            time_fit(meas, engine, model=model)  # warm-up
+        t = {"compiled": [], "numpy": []}
+        res = {}
+        for _ in range(repeats):
+            for engine in t:
+                ms, res[engine] = time_fit(meas, engine, model=model)
+                t[engine].append(ms)
+        mc, mn = statistics.median(t["compiled"]), statistics.median(t["numpy"])
+        nf = res["compiled"].nfev
+        print(f"  {model:32s} compiled {mc:8.1f} ms ({mc * 1e3 / nf:6.1f} us/eval, nfev {nf:5d})"
+              f"  numpy {mn:8.1f} ms   numpy / compiled {mn / mc:5.1f}x")
+
+
 def main(argv=None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--repeats", type=int, default=200)
     parser.add_argument("--glossy", type=int, default=40, help="generated glossy materials")
+    parser.add_argument("--extended", type=int, default=5, metavar="REPEATS",
+                        help="repeats of the extended models' comparison (0: skip it)")
+    parser.add_argument("--extended-only", action="store_true",
+                        help="only the extended models' comparison")
     args = parser.parse_args(argv)
+    if args.extended_only:
+        extended(max(args.extended, 1))
+        return
 
     meas = load_bundled("terrazzo")
     for engine in ("compiled", "numpy"):  # warm-up: imports, the kernel's cache
@@ -201,6 +235,8 @@ def main(argv=None) -> None:
                 line.append(f"{engine} {ms:7.1f} ms")
             print(f"  {name:<26} {table.n_points:5d} points: " + ", ".join(line)
                   + f"  R^2 {res.r2:.4f}" if res is not None else "")
+    if args.extended:
+        extended(args.extended)
     peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
     print(f"peak memory (max RSS of this process): {peak:.0f} MB")
     print("paper (Table 4, MATLAB R2015, Core 2 Duo E8400): 273-660 ms per fit")

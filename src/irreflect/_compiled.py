@@ -68,7 +68,7 @@ def build_notice(stream=None):
         return
     stream = sys.stderr if stream is None else stream
     print(f"irreflect: first use of this install: compiling the fitting kernel (once, about "
-          f"1-3 min; cached in {folder}) ...", file=stream, flush=True)
+          f"1-5 min; cached in {folder}) ...", file=stream, flush=True)
     t0 = time.perf_counter()
     yield folder
     print(f"irreflect: fitting kernel compiled in {time.perf_counter() - t0:.0f} s; later "
