@@ -22,6 +22,7 @@ from __future__ import annotations
 import dataclasses
 import os
 import warnings
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -1147,15 +1148,24 @@ def _not_rows(rows) -> str:
     """Why ``rows`` are not (gamma, theta, power[, sigma]) rows of numbers: the first row of
     another length, or the first value that is not a number ("found list" said neither)."""
     head = "readings must be a table or (gamma, theta, power[, sigma]) rows of numbers"
-    if isinstance(rows, dict):
+    if isinstance(rows, Mapping):
         return (f"{head}; found a dict: pass pandas.DataFrame(...) of it, with columns "
                 "gamma_deg, theta_deg, power[, sigma]")
+    if isinstance(rows, pd.Series):  # a table's row (df.iloc[i]): its labels name the values
+        return (f"{head}; found a pandas Series (one row of a table): pass a table, "
+                "df.iloc[[i]] rather than df.iloc[i], or series.to_frame().T")
     try:
         items = list(rows)
     except TypeError:
         return f"{head}; found {type(rows).__name__}"
     lengths = set()
     for i, row in enumerate(items, 1):
+        if isinstance(row, Mapping | pd.Series):
+            # records: iterating one gave its keys ("found 'gamma_deg'"); a table's rows
+            # (iterrows) were read by position, whatever their labels' order
+            what = "dict" if isinstance(row, Mapping) else "pandas Series"
+            return (f"{head}; found a {what} as reading {i}: pass pandas.DataFrame(rows) of "
+                    "them, each with keys gamma_deg, theta_deg, power[, sigma]")
         try:
             values = list(row)
         except TypeError:
@@ -1184,11 +1194,19 @@ def _as_rows(rows) -> pd.DataFrame:
         frame = rows
     elif isinstance(rows, str | os.PathLike):
         frame = read_measurements(Path(rows)).to_frame()
+    elif isinstance(rows, Mapping | pd.Series):
+        raise DataError(_not_rows(rows))
     else:
         try:
-            arr = np.asarray(list(rows), float)
-        except (TypeError, ValueError) as exc:
+            items = list(rows)
+        except TypeError as exc:
             raise DataError(_not_rows(rows)) from exc
+        try:
+            if any(isinstance(row, Mapping | pd.Series) for row in items):
+                raise TypeError("rows with labels, read by position")
+            arr = np.asarray(items, float)
+        except (TypeError, ValueError) as exc:
+            raise DataError(_not_rows(items)) from exc
         if arr.size == 0:
             return pd.DataFrame(columns=["gamma_deg", "theta_deg", "power"])
         if arr.ndim == 1 and arr.size in (3, 4):
