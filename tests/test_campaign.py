@@ -2019,3 +2019,30 @@ def test_leverage_gain_counts_only_the_picture_a_fit_of_the_model_follows():
 
     with pytest.raises(IrreflectError):
         dataclasses.replace(DEFAULT_RULE, leverage=1.5)
+
+
+def test_a_fully_measured_instrument_ends_the_scripted_loop_with_one_line(tmp_path):
+    """The documented loop ``while not verdict().stop: add(read(propose(3)))`` ran for ever
+    on an instrument whose 16 settings were all measured: propose returned an empty table,
+    add took it, and the verdict said continue (the curve moved by 156 % of its variance).
+    propose now refuses with what is left and the fix; ``next`` still prints its line."""
+    tool = Instrument(gammas_deg=(-30, -50), theta_min=0, theta_max=70, theta_step=10)
+    campaign = Campaign(tool, seed=0)
+    assert campaign.n_free == 16
+    rows = campaign.propose(50)[["gamma_deg", "theta_deg"]]
+    assert len(rows) == 16
+    power = two_lobe_power(np.radians(rows.gamma_deg.to_numpy()),
+                           np.radians(rows.theta_deg.to_numpy()), *GLOSSY)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        campaign.add(rows.assign(power=power))
+        assert campaign.n_free == 0
+        with pytest.raises(IrreflectError, match=r"^no setting left to propose: every one of "
+                                                 r"the 16 settings") as info:
+            campaign.propose(3)
+    assert "\n" not in str(info.value) and "take campaign.fit as it is" in str(info.value)
+    measured = tmp_path / "m.csv"
+    rows.assign(power=power).to_csv(measured, index=False)
+    code, out, err = _run(["next", measured, "--n", "3", "--gammas", "-30", "-50",
+                           "--theta-min", "0", "--theta-max", "70", "--theta-step", "10"])
+    assert code == 0 and "no setting left to propose" in out and "verdict: " in out

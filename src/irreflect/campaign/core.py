@@ -625,10 +625,23 @@ class Campaign:
         """The next ``k`` settings: a table with ``gamma_deg, theta_deg, why, new_gamma,
         gain`` (gain: the share of the range's predicted-curve uncertainty the reading
         removes, given the proposals before it), in measurement order (each angle of
-        incidence set once, the receiver sweeping)."""
+        incidence set once, the receiver sweeping); fewer than ``k`` when fewer settings are
+        left (:attr:`n_free`), and an error when none is."""
         k = check_int(k, "k", 1)
         state = self._current()
         taken = self._taken()
+        if not self._free_mask(taken).any():
+            # an empty table left a script's `while not verdict().stop` loop adding nothing
+            # for ever (the verdict said continue on a fully measured instrument)
+            limit = self.instrument.max_gamma_settings
+            raise IrreflectError(
+                f"no setting left to propose: every one of the {len(self._settings)} "
+                f"settings the campaign scores is measured or within the minimum separation "
+                f"({self.instrument.min_separation:g} deg) of a reading at its angle of "
+                "incidence" + (f", or at an angle beyond the {limit} allowed" if limit else "")
+                + f" (verdict: {self.verdict().text.split(';')[0]}): widen the instrument "
+                "(receiver range, angles of incidence) or take campaign.fit as it is; "
+                "campaign.n_free says how many settings are left")
         if state.fit is None:
             rows = self._opening(k, taken)
         else:
@@ -642,6 +655,11 @@ class Campaign:
             out["new_gamma"] = ~key.isin(measured) & ~key.duplicated()
             out["why"] = _new_gamma_reason_first(out)
         return out
+
+    @property
+    def n_free(self) -> int:
+        """How many settings a proposal may still choose (0: :meth:`propose` refuses)."""
+        return int(self._free_mask(self._taken()).sum())
 
     def _taken(self) -> list[tuple[float, float]]:
         return [(float(g), float(t)) for g, t in zip(self._rows["gamma_deg"],
