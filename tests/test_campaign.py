@@ -2046,3 +2046,30 @@ def test_a_fully_measured_instrument_ends_the_scripted_loop_with_one_line(tmp_pa
     code, out, err = _run(["next", measured, "--n", "3", "--gammas", "-30", "-50",
                            "--theta-min", "0", "--theta-max", "70", "--theta-step", "10"])
     assert code == 0 and "no setting left to propose" in out and "verdict: " in out
+
+
+def test_the_reasons_call_ill_determined_what_the_verdict_does():
+    """Fourteen readings of a GGX + Oren-Nayar material (a simulator of the lab's, 2 %
+    noise): the verdict said "ill-determined: u_ns" (the reported fit, the quadrature
+    estimate) while a proposal said "shrinks the standard error of u_as (ill-determined)"
+    and no lobe proposal said it brackets the lobe's width: the reasons named the weighted
+    fit's coefficients. The proposals themselves are unchanged."""
+    rows = [(-10, -40, 0.177286), (-10, 10, 0.295756), (-10, 11, 0.301279),
+            (-40, 40, 0.217214), (-40, 75, 0.056693), (-70, 0, 0.080195),
+            (-70, 68, 0.273346), (-70, 70, 0.293998), (-55, 0, 0.134496),
+            (-40, 7, 0.182664), (-55, 33, 0.132185), (-10, -3, 0.273908),
+            (-70, -18, 0.079698), (-25, -2, 0.217426)]
+    tool = Instrument(gammas_deg=(-10, -25, -40, -55, -70), theta_min=-80, theta_max=80)
+    campaign = Campaign(tool, rows, seed=5)
+    ill = campaign.verdict().ill_determined
+    proposals = campaign.propose(2)
+    assert [(r.gamma_deg, r.theta_deg) for r in proposals.itertuples()] == [(-55, 63),
+                                                                             (-70, 39)]
+    names = campaign.model.param_names
+    for why in proposals["why"]:
+        for name in names:
+            assert (f"{name} (ill-determined)" in why) <= (name in ill), why
+            assert (f"of {name} by" in why) <= (name not in ill), why
+        if "specular lobe" in why:
+            assert ("brackets the specular lobe's width" in why) == ("u_ns" in ill), why
+    assert "u_as" not in ill and "of u_as by 39%" in proposals["why"].iloc[0]

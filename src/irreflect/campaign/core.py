@@ -745,6 +745,10 @@ class Campaign:
             rival_preds = [np.nan_to_num(self.model.predict_deg(q, s[:, 0], s[:, 1]))
                            for q in state.extra.get("rivals", ())]
         projector = self._projector(res) if self.rule.leverage else None
+        # the reasons name the coefficients the verdict calls ill-determined: those of the
+        # fit the campaign reports (the estimate's; the weighted fit's had a proposal say
+        # "u_as (ill-determined)" beside a verdict of "ill-determined: u_ns")
+        shown = state.estimate if state.estimate is not None else res
         rows = []
         extra_rows, extra_noise = [], []
         for _ in range(k):
@@ -776,7 +780,7 @@ class Campaign:
                 else:
                     why += f"; a new angle of incidence between the measured ones ({abs(g):g} deg)"
             if drop > 0.01:
-                flag = " (ill-determined)" if coef in res.ill_determined else ""
+                flag = " (ill-determined)" if coef in shown.ill_determined else ""
                 why += f"; shrinks the standard error of {coef}{flag} by {drop:.0%}"
             for rival in rival_preds:
                 gap = abs(float(rival[j]) - float(prior_pred[j]))
@@ -784,7 +788,7 @@ class Campaign:
                     why += (f"; tests a rival fit the readings allow as well (it predicts "
                             f"{rival[j]:.3g} here, the fit {prior_pred[j]:.3g})")
                     break
-            if "specular lobe" in why and "u_ns" in res.ill_determined:
+            if "specular lobe" in why and "u_ns" in shown.ill_determined:
                 why += "; brackets the specular lobe's width"
             share = float(gains[j]) / total if total > 0 else float("nan")
             rows.append((g, t, why, round(g, 6) not in measured_g, share))
