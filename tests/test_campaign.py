@@ -2073,3 +2073,22 @@ def test_the_reasons_call_ill_determined_what_the_verdict_does():
         if "specular lobe" in why:
             assert ("brackets the specular lobe's width" in why) == ("u_ns" in ill), why
     assert "u_as" not in ill and "of u_as by 39%" in proposals["why"].iloc[0]
+
+
+def test_the_python_campaign_reads_measured_csv_as_next_does(tmp_path):
+    """``Campaign(tool, "measured.csv")`` refused the file the walkthrough starts from (its
+    header alone: "the table has no rows"), and a file of readings that are all 0 so far
+    (a glossy material's first readings beyond its lobe) was checked as a whole table;
+    ``irreflect next`` reads both."""
+    tool = Instrument(gammas_deg=(-10, -30, -50, -70), theta_min=-80, theta_max=80)
+    measured = tmp_path / "measured.csv"
+    measured.write_text("gamma_deg,theta_deg,power\n")
+    campaign = Campaign(tool, measured, seed=0)
+    assert campaign.n_measured == 0
+    assert campaign.propose(8).equals(Campaign(tool, seed=0).propose(8))
+    assert campaign.add(measured).n_measured == 0
+    measured.write_text("gamma_deg,theta_deg,power\n-10,-40,0\n-70,0,0\n")
+    assert Campaign(tool, measured).n_measured == 2
+    measured.write_text("gamma,theta_deg,power\n")
+    with pytest.raises(DataError, match="missing column 'gamma_deg'"):
+        Campaign(tool, measured)

@@ -31,7 +31,7 @@ import pandas as pd
 
 from .. import metrics
 from .._text import count
-from ..data import DataNotice, Measurements, as_measurements, read_measurements, validate_table
+from ..data import DataNotice, Measurements, as_measurements, validate_table
 from ..errors import DataError, FitError, FitWarning, IrreflectError
 from ..fitting import AVERAGED_OPTIONS, FitOptions, FitResult, fit, fit_averaged, judge
 from ..models import get_model
@@ -54,6 +54,7 @@ from .design import (
     specular_half_width,
 )
 from .instrument import MAX_SETTINGS, Instrument, thin_settings
+from .io import read_readings
 from .misfit import misfit_note
 from .quadrature import accepted_estimate
 from .weights import (  # noqa: F401 - range_weights is documented here
@@ -1215,7 +1216,12 @@ def _as_rows(rows) -> pd.DataFrame:
     elif isinstance(rows, pd.DataFrame):
         frame = rows
     elif isinstance(rows, str | os.PathLike):
-        frame = read_measurements(Path(rows)).to_frame()
+        # as ``irreflect next`` reads MEASURED.csv: a header alone is nothing measured yet
+        # (it was refused, "the table has no rows"), and the readings so far may all be 0
+        meas = read_readings(Path(rows))
+        if meas is None:
+            return pd.DataFrame(columns=["gamma_deg", "theta_deg", "power"])
+        frame = meas.to_frame()
     elif isinstance(rows, Mapping | pd.Series):
         raise DataError(_not_rows(rows))
     else:
