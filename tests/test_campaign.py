@@ -2092,3 +2092,12 @@ def test_the_python_campaign_reads_measured_csv_as_next_does(tmp_path):
     measured.write_text("gamma,theta_deg,power\n")
     with pytest.raises(DataError, match="missing column 'gamma_deg'"):
         Campaign(tool, measured)
+
+
+@pytest.mark.parametrize("k", [0, -1, 2.0, "3", True])
+def test_propose_names_its_argument_when_k_is_not_a_count(k):
+    """propose(0) said "k must be an integer >= 1; found 0"."""
+    campaign = Campaign(Instrument(gammas_deg=(-10, -30, -50)))
+    with pytest.raises(IrreflectError, match=r"^propose\(k\): k, the number of settings to "
+                                             r"propose, must be an integer >= 1; found "):
+        campaign.propose(k)

@@ -628,7 +628,8 @@ class Campaign:
         removes, given the proposals before it), in measurement order (each angle of
         incidence set once, the receiver sweeping); fewer than ``k`` when fewer settings are
         left (:attr:`n_free`), and an error when none is."""
-        k = check_int(k, "k", 1)
+        # "k must be an integer >= 1; found 0" named neither the call nor what k counts
+        k = check_int(k, "propose(k): k, the number of settings to propose,", 1)
         state = self._current()
         taken = self._taken()
         if not self._free_mask(taken).any():
