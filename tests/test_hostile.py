@@ -1121,7 +1121,12 @@ def test_a_reading_taken_at_the_instruments_angle_says_so_when_it_meets_another(
     with pytest.raises(IrreflectError, match=r"reading \(-20, 20\) is given twice \(gamma "
                                              r"-20\.1 is taken at -20, an angle of incidence"):
         campaign.add([(-20.1, 20, 0.2)])
-    with pytest.raises(IrreflectError, match=r"is given twice: average"):
+    # a repeat of a reading the campaign holds: "average the repeated readings into one
+    # row" could not be done through add (it replaces nothing)
+    with pytest.raises(IrreflectError, match=r"is given twice: the campaign already holds it "
+                                             r"\(one reading per setting\): leave the repeat "
+                                             r"out, or average the two and build the "
+                                             r"campaign anew"):
         campaign.add([(-20, 20, 0.2)])
     assert campaign.n_measured == 1
     measured = tmp_path / "m.csv"

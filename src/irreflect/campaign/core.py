@@ -298,10 +298,17 @@ class Campaign:
                 if off:
                     moved = (f" (gamma {off[0]:g} is taken at {at:g}, an angle of incidence of "
                              "the instrument: within the goniometer's jitter of it)")
+            n_old = len(combined) - len(new)
+            fix = ("average the repeated readings into one row, or remove one"
+                   if i >= n_old else
+                   # the campaign holds it already: "average ... into one row" could not be
+                   # done to a reading already added (add has no way to replace one)
+                   "the campaign already holds it (one reading per setting): leave the "
+                   "repeat out, or average the two and build the campaign anew, "
+                   "Campaign(instrument, readings), from the readings with that row replaced")
             raise DataError(
                 f"reading ({combined['gamma_deg'].iloc[i]:g}, "
-                f"{combined['theta_deg'].iloc[i]:g}) is given twice{moved}: average the "
-                "repeated readings into one row, or remove one")
+                f"{combined['theta_deg'].iloc[i]:g}) is given twice{moved}: {fix}")
         frame = combined.copy()
         # the table's checks (signs, sigma)
         validate_table(frame, self.name, partial=True, noise_floor=self.noise_floor)
