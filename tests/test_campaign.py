@@ -2019,3 +2019,85 @@ def test_leverage_gain_counts_only_the_picture_a_fit_of_the_model_follows():
 
     with pytest.raises(IrreflectError):
         dataclasses.replace(DEFAULT_RULE, leverage=1.5)
+
+
+def test_a_fully_measured_instrument_ends_the_scripted_loop_with_one_line(tmp_path):
+    """The documented loop ``while not verdict().stop: add(read(propose(3)))`` ran for ever
+    on an instrument whose 16 settings were all measured: propose returned an empty table,
+    add took it, and the verdict said continue (the curve moved by 156 % of its variance).
+    propose now refuses with what is left and the fix; ``next`` still prints its line."""
+    tool = Instrument(gammas_deg=(-30, -50), theta_min=0, theta_max=70, theta_step=10)
+    campaign = Campaign(tool, seed=0)
+    assert campaign.n_free == 16
+    rows = campaign.propose(50)[["gamma_deg", "theta_deg"]]
+    assert len(rows) == 16
+    power = two_lobe_power(np.radians(rows.gamma_deg.to_numpy()),
+                           np.radians(rows.theta_deg.to_numpy()), *GLOSSY)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        campaign.add(rows.assign(power=power))
+        assert campaign.n_free == 0
+        with pytest.raises(IrreflectError, match=r"^no setting left to propose: every one of "
+                                                 r"the 16 settings") as info:
+            campaign.propose(3)
+    assert "\n" not in str(info.value) and "take campaign.fit as it is" in str(info.value)
+    measured = tmp_path / "m.csv"
+    rows.assign(power=power).to_csv(measured, index=False)
+    code, out, err = _run(["next", measured, "--n", "3", "--gammas", "-30", "-50",
+                           "--theta-min", "0", "--theta-max", "70", "--theta-step", "10"])
+    assert code == 0 and "no setting left to propose" in out and "verdict: " in out
+
+
+def test_the_reasons_call_ill_determined_what_the_verdict_does():
+    """Fourteen readings of a GGX + Oren-Nayar material (a simulator of the lab's, 2 %
+    noise): the verdict said "ill-determined: u_ns" (the reported fit, the quadrature
+    estimate) while a proposal said "shrinks the standard error of u_as (ill-determined)"
+    and no lobe proposal said it brackets the lobe's width: the reasons named the weighted
+    fit's coefficients. The proposals themselves are unchanged."""
+    rows = [(-10, -40, 0.177286), (-10, 10, 0.295756), (-10, 11, 0.301279),
+            (-40, 40, 0.217214), (-40, 75, 0.056693), (-70, 0, 0.080195),
+            (-70, 68, 0.273346), (-70, 70, 0.293998), (-55, 0, 0.134496),
+            (-40, 7, 0.182664), (-55, 33, 0.132185), (-10, -3, 0.273908),
+            (-70, -18, 0.079698), (-25, -2, 0.217426)]
+    tool = Instrument(gammas_deg=(-10, -25, -40, -55, -70), theta_min=-80, theta_max=80)
+    campaign = Campaign(tool, rows, seed=5)
+    ill = campaign.verdict().ill_determined
+    proposals = campaign.propose(2)
+    assert [(r.gamma_deg, r.theta_deg) for r in proposals.itertuples()] == [(-55, 63),
+                                                                             (-70, 39)]
+    names = campaign.model.param_names
+    for why in proposals["why"]:
+        for name in names:
+            assert (f"{name} (ill-determined)" in why) <= (name in ill), why
+            assert (f"of {name} by" in why) <= (name not in ill), why
+        if "specular lobe" in why:
+            assert ("brackets the specular lobe's width" in why) == ("u_ns" in ill), why
+    assert "u_as" not in ill and "of u_as by 39%" in proposals["why"].iloc[0]
+
+
+def test_the_python_campaign_reads_measured_csv_as_next_does(tmp_path):
+    """``Campaign(tool, "measured.csv")`` refused the file the walkthrough starts from (its
+    header alone: "the table has no rows"), and a file of readings that are all 0 so far
+    (a glossy material's first readings beyond its lobe) was checked as a whole table;
+    ``irreflect next`` reads both."""
+    tool = Instrument(gammas_deg=(-10, -30, -50, -70), theta_min=-80, theta_max=80)
+    measured = tmp_path / "measured.csv"
+    measured.write_text("gamma_deg,theta_deg,power\n")
+    campaign = Campaign(tool, measured, seed=0)
+    assert campaign.n_measured == 0
+    assert campaign.propose(8).equals(Campaign(tool, seed=0).propose(8))
+    assert campaign.add(measured).n_measured == 0
+    measured.write_text("gamma_deg,theta_deg,power\n-10,-40,0\n-70,0,0\n")
+    assert Campaign(tool, measured).n_measured == 2
+    measured.write_text("gamma,theta_deg,power\n")
+    with pytest.raises(DataError, match="missing column 'gamma_deg'"):
+        Campaign(tool, measured)
+
+
+@pytest.mark.parametrize("k", [0, -1, 2.0, "3", True])
+def test_propose_names_its_argument_when_k_is_not_a_count(k):
+    """propose(0) said "k must be an integer >= 1; found 0"."""
+    campaign = Campaign(Instrument(gammas_deg=(-10, -30, -50)))
+    with pytest.raises(IrreflectError, match=r"^propose\(k\): k, the number of settings to "
+                                             r"propose, must be an integer >= 1; found "):
+        campaign.propose(k)

@@ -1002,6 +1002,18 @@ def test_next_says_when_it_proposes_fewer_settings_than_asked(tmp_path):
     ((-20, 20, 0.1), "found one row of 3 numbers, not in a list: pass [(-20.0, 20.0, 0.1)]"),
     ({"gamma_deg": [-20], "theta_deg": [20], "power": [0.1]}, "found a dict: pass "
                                                                "pandas.DataFrame"),
+    # records were told "found 'gamma_deg' in reading 1: give the number alone (power in
+    # any one unit, without the unit's name)"
+    ([{"gamma_deg": -20, "theta_deg": 20, "power": 0.1}], "found a dict as reading 1: pass "
+                                                          "pandas.DataFrame(rows)"),
+    # a table's row (df.iloc[0]) was taken by position and the fix offered was its values
+    # in the Series' order: here (20.0, -20.0, 0.1), theta and gamma swapped
+    (pd.Series({"theta_deg": 20.0, "gamma_deg": -20.0, "power": 0.1}),
+     "found a pandas Series (one row of a table): pass a table, df.iloc[[i]]"),
+    # rows of iterrows() were read by position: theta taken as gamma, silently
+    ([row for _, row in pd.DataFrame({"theta_deg": [20.0, 40.0], "gamma_deg": [-20.0, -40.0],
+                                      "power": [0.1, 0.2]}).iterrows()],
+     "found a pandas Series as reading 1: pass pandas.DataFrame(rows)"),
 ])
 def test_campaign_add_names_what_is_wrong_with_the_rows(rows, words):
     """A ragged list or a power with its unit was refused as "found list", a single reading
@@ -1109,7 +1121,12 @@ def test_a_reading_taken_at_the_instruments_angle_says_so_when_it_meets_another(
     with pytest.raises(IrreflectError, match=r"reading \(-20, 20\) is given twice \(gamma "
                                              r"-20\.1 is taken at -20, an angle of incidence"):
         campaign.add([(-20.1, 20, 0.2)])
-    with pytest.raises(IrreflectError, match=r"is given twice: average"):
+    # a repeat of a reading the campaign holds: "average the repeated readings into one
+    # row" could not be done through add (it replaces nothing)
+    with pytest.raises(IrreflectError, match=r"is given twice: the campaign already holds it "
+                                             r"\(one reading per setting\): leave the repeat "
+                                             r"out, or average the two and build the "
+                                             r"campaign anew"):
         campaign.add([(-20, 20, 0.2)])
     assert campaign.n_measured == 1
     measured = tmp_path / "m.csv"

@@ -22,6 +22,7 @@ from __future__ import annotations
 import dataclasses
 import os
 import warnings
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -30,7 +31,7 @@ import pandas as pd
 
 from .. import metrics
 from .._text import count
-from ..data import DataNotice, Measurements, as_measurements, read_measurements, validate_table
+from ..data import DataNotice, Measurements, as_measurements, validate_table
 from ..errors import DataError, FitError, FitWarning, IrreflectError
 from ..fitting import AVERAGED_OPTIONS, FitOptions, FitResult, fit, fit_averaged, judge
 from ..models import get_model
@@ -53,6 +54,7 @@ from .design import (
     specular_half_width,
 )
 from .instrument import MAX_SETTINGS, Instrument, thin_settings
+from .io import read_readings
 from .misfit import misfit_note
 from .quadrature import accepted_estimate
 from .weights import (  # noqa: F401 - range_weights is documented here
@@ -296,10 +298,17 @@ class Campaign:
                 if off:
                     moved = (f" (gamma {off[0]:g} is taken at {at:g}, an angle of incidence of "
                              "the instrument: within the goniometer's jitter of it)")
+            n_old = len(combined) - len(new)
+            fix = ("average the repeated readings into one row, or remove one"
+                   if i >= n_old else
+                   # the campaign holds it already: "average ... into one row" could not be
+                   # done to a reading already added (add has no way to replace one)
+                   "the campaign already holds it (one reading per setting): leave the "
+                   "repeat out, or average the two and build the campaign anew, "
+                   "Campaign(instrument, readings), from the readings with that row replaced")
             raise DataError(
                 f"reading ({combined['gamma_deg'].iloc[i]:g}, "
-                f"{combined['theta_deg'].iloc[i]:g}) is given twice{moved}: average the "
-                "repeated readings into one row, or remove one")
+                f"{combined['theta_deg'].iloc[i]:g}) is given twice{moved}: {fix}")
         frame = combined.copy()
         # the table's checks (signs, sigma)
         validate_table(frame, self.name, partial=True, noise_floor=self.noise_floor)
@@ -624,10 +633,24 @@ class Campaign:
         """The next ``k`` settings: a table with ``gamma_deg, theta_deg, why, new_gamma,
         gain`` (gain: the share of the range's predicted-curve uncertainty the reading
         removes, given the proposals before it), in measurement order (each angle of
-        incidence set once, the receiver sweeping)."""
-        k = check_int(k, "k", 1)
+        incidence set once, the receiver sweeping); fewer than ``k`` when fewer settings are
+        left (:attr:`n_free`), and an error when none is."""
+        # "k must be an integer >= 1; found 0" named neither the call nor what k counts
+        k = check_int(k, "propose(k): k, the number of settings to propose,", 1)
         state = self._current()
         taken = self._taken()
+        if not self._free_mask(taken).any():
+            # an empty table left a script's `while not verdict().stop` loop adding nothing
+            # for ever (the verdict said continue on a fully measured instrument)
+            limit = self.instrument.max_gamma_settings
+            raise IrreflectError(
+                f"no setting left to propose: every one of the {len(self._settings)} "
+                f"settings the campaign scores is measured or within the minimum separation "
+                f"({self.instrument.min_separation:g} deg) of a reading at its angle of "
+                "incidence" + (f", or at an angle beyond the {limit} allowed" if limit else "")
+                + f" (verdict: {self.verdict().text.split(';')[0]}): widen the instrument "
+                "(receiver range, angles of incidence) or take campaign.fit as it is; "
+                "campaign.n_free says how many settings are left")
         if state.fit is None:
             rows = self._opening(k, taken)
         else:
@@ -641,6 +664,11 @@ class Campaign:
             out["new_gamma"] = ~key.isin(measured) & ~key.duplicated()
             out["why"] = _new_gamma_reason_first(out)
         return out
+
+    @property
+    def n_free(self) -> int:
+        """How many settings a proposal may still choose (0: :meth:`propose` refuses)."""
+        return int(self._free_mask(self._taken()).sum())
 
     def _taken(self) -> list[tuple[float, float]]:
         return [(float(g), float(t)) for g, t in zip(self._rows["gamma_deg"],
@@ -726,6 +754,10 @@ class Campaign:
             rival_preds = [np.nan_to_num(self.model.predict_deg(q, s[:, 0], s[:, 1]))
                            for q in state.extra.get("rivals", ())]
         projector = self._projector(res) if self.rule.leverage else None
+        # the reasons name the coefficients the verdict calls ill-determined: those of the
+        # fit the campaign reports (the estimate's; the weighted fit's had a proposal say
+        # "u_as (ill-determined)" beside a verdict of "ill-determined: u_ns")
+        shown = state.estimate if state.estimate is not None else res
         rows = []
         extra_rows, extra_noise = [], []
         for _ in range(k):
@@ -757,7 +789,7 @@ class Campaign:
                 else:
                     why += f"; a new angle of incidence between the measured ones ({abs(g):g} deg)"
             if drop > 0.01:
-                flag = " (ill-determined)" if coef in res.ill_determined else ""
+                flag = " (ill-determined)" if coef in shown.ill_determined else ""
                 why += f"; shrinks the standard error of {coef}{flag} by {drop:.0%}"
             for rival in rival_preds:
                 gap = abs(float(rival[j]) - float(prior_pred[j]))
@@ -765,7 +797,7 @@ class Campaign:
                     why += (f"; tests a rival fit the readings allow as well (it predicts "
                             f"{rival[j]:.3g} here, the fit {prior_pred[j]:.3g})")
                     break
-            if "specular lobe" in why and "u_ns" in res.ill_determined:
+            if "specular lobe" in why and "u_ns" in shown.ill_determined:
                 why += "; brackets the specular lobe's width"
             share = float(gains[j]) / total if total > 0 else float("nan")
             rows.append((g, t, why, round(g, 6) not in measured_g, share))
@@ -1147,15 +1179,24 @@ def _not_rows(rows) -> str:
     """Why ``rows`` are not (gamma, theta, power[, sigma]) rows of numbers: the first row of
     another length, or the first value that is not a number ("found list" said neither)."""
     head = "readings must be a table or (gamma, theta, power[, sigma]) rows of numbers"
-    if isinstance(rows, dict):
+    if isinstance(rows, Mapping):
         return (f"{head}; found a dict: pass pandas.DataFrame(...) of it, with columns "
                 "gamma_deg, theta_deg, power[, sigma]")
+    if isinstance(rows, pd.Series):  # a table's row (df.iloc[i]): its labels name the values
+        return (f"{head}; found a pandas Series (one row of a table): pass a table, "
+                "df.iloc[[i]] rather than df.iloc[i], or series.to_frame().T")
     try:
         items = list(rows)
     except TypeError:
         return f"{head}; found {type(rows).__name__}"
     lengths = set()
     for i, row in enumerate(items, 1):
+        if isinstance(row, Mapping | pd.Series):
+            # records: iterating one gave its keys ("found 'gamma_deg'"); a table's rows
+            # (iterrows) were read by position, whatever their labels' order
+            what = "dict" if isinstance(row, Mapping) else "pandas Series"
+            return (f"{head}; found a {what} as reading {i}: pass pandas.DataFrame(rows) of "
+                    "them, each with keys gamma_deg, theta_deg, power[, sigma]")
         try:
             values = list(row)
         except TypeError:
@@ -1183,12 +1224,25 @@ def _as_rows(rows) -> pd.DataFrame:
     elif isinstance(rows, pd.DataFrame):
         frame = rows
     elif isinstance(rows, str | os.PathLike):
-        frame = read_measurements(Path(rows)).to_frame()
+        # as ``irreflect next`` reads MEASURED.csv: a header alone is nothing measured yet
+        # (it was refused, "the table has no rows"), and the readings so far may all be 0
+        meas = read_readings(Path(rows))
+        if meas is None:
+            return pd.DataFrame(columns=["gamma_deg", "theta_deg", "power"])
+        frame = meas.to_frame()
+    elif isinstance(rows, Mapping | pd.Series):
+        raise DataError(_not_rows(rows))
     else:
         try:
-            arr = np.asarray(list(rows), float)
-        except (TypeError, ValueError) as exc:
+            items = list(rows)
+        except TypeError as exc:
             raise DataError(_not_rows(rows)) from exc
+        try:
+            if any(isinstance(row, Mapping | pd.Series) for row in items):
+                raise TypeError("rows with labels, read by position")
+            arr = np.asarray(items, float)
+        except (TypeError, ValueError) as exc:
+            raise DataError(_not_rows(items)) from exc
         if arr.size == 0:
             return pd.DataFrame(columns=["gamma_deg", "theta_deg", "power"])
         if arr.ndim == 1 and arr.size in (3, 4):

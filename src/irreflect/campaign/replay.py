@@ -371,6 +371,8 @@ def replay_adaptive(source: DenseInstrument, n_max: int = 25, *, model="two-lobe
     t0 = time.perf_counter()
     judged = 0.0  # the verdict's time, counted with the proposal after it (they share work)
     while campaign.n_measured < n_max:
+        if not campaign.n_free:
+            break
         start = time.perf_counter()
         proposal = campaign.propose(min(batch, n_max - campaign.n_measured))
         times.append(time.perf_counter() - start + judged)

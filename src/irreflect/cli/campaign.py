@@ -89,7 +89,13 @@ def _next(args) -> int:
                              max_rows=NEXT_MAX_READINGS)
     name = Path(args.measured).stem
     campaign = Campaign(tool, readings, model=model.name, seed=args.seed, name=name)
-    proposals = campaign.propose(args.n)
+    if campaign.n_free:
+        proposals = campaign.propose(args.n)
+    else:  # printed as "no setting left to propose", with the verdict
+        import pandas as pd
+
+        proposals = pd.DataFrame(columns=["gamma_deg", "theta_deg", "why", "new_gamma",
+                                          "gain"])
     verdict = campaign.verdict()
     if args.save is not None:
         if campaign.fit is None:
