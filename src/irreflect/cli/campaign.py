@@ -77,6 +77,13 @@ def _cmd_next(args) -> int:
         return _next(args)
 
 
+def _no_proposals():
+    """The empty proposals table (every setting is measured: ``propose`` refuses)."""
+    import pandas as pd
+
+    return pd.DataFrame(columns=["gamma_deg", "theta_deg", "why", "new_gamma", "gain"])
+
+
 def _next(args) -> int:
     from .._atomic import atomic_path
     from ..campaign import Campaign
@@ -89,13 +96,8 @@ def _next(args) -> int:
                              max_rows=NEXT_MAX_READINGS)
     name = Path(args.measured).stem
     campaign = Campaign(tool, readings, model=model.name, seed=args.seed, name=name)
-    if campaign.n_free:
-        proposals = campaign.propose(args.n)
-    else:  # printed as "no setting left to propose", with the verdict
-        import pandas as pd
-
-        proposals = pd.DataFrame(columns=["gamma_deg", "theta_deg", "why", "new_gamma",
-                                          "gain"])
+    # none left: printed as "no setting left to propose", with the verdict
+    proposals = campaign.propose(args.n) if campaign.n_free else _no_proposals()
     verdict = campaign.verdict()
     if args.save is not None:
         if campaign.fit is None:
