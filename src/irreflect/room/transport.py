@@ -237,29 +237,24 @@ def _cone_about(a, n, cos_psi, az):
     tn = math.sqrt(tx * tx + ty * ty + tz * tz)
     if tn < 1e-9:
         return _cone(a, cos_psi, az)
-    tx /= tn
-    ty /= tn
-    tz /= tn
-    bx = a[1] * tz - a[2] * ty
-    by = a[2] * tx - a[0] * tz
-    bz = a[0] * ty - a[1] * tx
-    s = math.sqrt(max(0.0, 1.0 - cos_psi * cos_psi))
-    c1 = math.cos(az) * s
-    s1 = math.sin(az) * s
-    return (cos_psi * a[0] + c1 * tx + s1 * bx, cos_psi * a[1] + c1 * ty + s1 * by,
-            cos_psi * a[2] + c1 * tz + s1 * bz)
+    return _cone_in(a, tx / tn, ty / tn, tz / tn, cos_psi, az)
 
 
 @hot
 def _cone(a, cos_psi, az):
+    """As :func:`_cone_about`, azimuth from a tangent fixed by ``a`` alone."""
     if abs(a[2]) < 0.9:
         tx, ty, tz = -a[1], a[0], 0.0
     else:
         tx, ty, tz = 0.0, -a[2], a[1]
     tn = math.sqrt(tx * tx + ty * ty + tz * tz)
-    tx /= tn
-    ty /= tn
-    tz /= tn
+    return _cone_in(a, tx / tn, ty / tn, tz / tn, cos_psi, az)
+
+
+@hot
+def _cone_in(a, tx, ty, tz, cos_psi, az):
+    """Direction at angle ``acos(cos_psi)`` from unit ``a``, azimuth ``az`` from the unit
+    tangent ``t`` (perpendicular to ``a``) toward ``a x t``."""
     bx = a[1] * tz - a[2] * ty
     by = a[2] * tx - a[0] * tz
     bz = a[0] * ty - a[1] * tx
