@@ -602,10 +602,7 @@ class Campaign:
                               meas.power - center_read)
         # never above both the centre's prediction and the largest reading
         surrogate = np.clip(center_range + mean, 0.0, cap)
-        if self._setting_count is None:  # the range's points nearest each setting
-            near, size = range_cells(self._range, s[:, 0], s[:, 1])
-            self._setting_count = np.bincount(near, minlength=size).astype(float)
-        count = self._setting_count
+        count = self._counts()
         keep = (count > 0) & np.isfinite(surrogate)
         table = Measurements(gamma_deg=s[keep, 0], theta_deg=s[keep, 1],
                              power=surrogate[keep], sigma=None, name=meas.name)
@@ -810,11 +807,17 @@ class Campaign:
         the share of the range each setting stands for (the quadrature estimate's weights)."""
         s = self._settings
         _, jac = _jacobian(self.model, res.values, s[:, 0], s[:, 1])
+        count = self._counts()
+        w = count / max(float(count.mean()), 1e-300)
+        return jac, np.linalg.pinv(jac.T @ (w[:, None] * jac), rcond=1e-10), w
+
+    def _counts(self) -> np.ndarray:
+        """Per design setting, how many points of the range are nearest it (computed once)."""
         if self._setting_count is None:
+            s = self._settings
             near, size = range_cells(self._range, s[:, 0], s[:, 1])
             self._setting_count = np.bincount(near, minlength=size).astype(float)
-        w = self._setting_count / max(float(self._setting_count.mean()), 1e-300)
-        return jac, np.linalg.pinv(jac.T @ (w[:, None] * jac), rcond=1e-10), w
+        return self._setting_count
 
     # ------------------------------------------------------------------ verdict
     def unresolved_lobe(self) -> str:
