@@ -279,6 +279,29 @@ def test_a_polar_area_error_beyond_1000_percent_is_printed_as_such_and_kept_in_j
         "> 1000", " 250.0", "     -")
 
 
+def test_the_per_angle_table_keeps_its_columns_apart_when_a_value_fills_its_cell():
+    # a held-out carpet table (share 0.000505 next to a curve error of 45.7 %) printed
+    # '45.70.000505', and '247.61e-05': the cells had no space between them
+    from irreflect.verdict import AngleVerdict, FitVerdict
+
+    angles = tuple(AngleVerdict(gamma_deg=g, n_points=30, polar_error_pct=err,
+                                polar_error_at_points_pct=err, specular_share=share,
+                                lobe_half_width_deg=hw, lobe_points_1hw=0, lobe_points_2hw=1,
+                                lobe_matters=True)
+                   for g, err, share, hw in ((45.0, 45.7, 0.000505, 0.5),
+                                             (70.0, 247.6, 1.77e-06, 1234.5),
+                                             (20.0, 3.5, 0.0344, 20.6)))
+    verdict = FitVerdict(angles=angles, at_bound=(), ill_determined=(), converged=True,
+                         saturated_gammas_deg=())
+    rows = {r.split()[0]: r.split() for r in verdict.table()[1:]}
+    assert rows["45"][2:6] == ["45.7", "45.7", "0.000505", "0.5"]
+    assert rows["70"][2:6] == ["248", "248", "1.77e-06", "1.23e+03"]
+    # values that fit their cells keep the header's alignment
+    head = verdict.table()[0]
+    row = next(r for r in verdict.table() if r.split()[0] == "20")
+    assert row.index("0.0344") + len("0.0344") == head.index("a_s") + len("a_s")
+
+
 def _five_deg_table(extra=()):
     """The two-lobe model's own law (a lobe 3.2-3.6 deg wide, u_ns 320) with receivers every
     5 deg (plus ``extra`` offsets from the mirror), none within 4 deg of the source."""

@@ -245,7 +245,7 @@ class FitVerdict:
             rows.append(f"{a.gamma_deg:>8g}{a.n_points:>8d}"
                         f"{_pct_cell(a.polar_error_at_points_pct, 11)}"
                         f"{_pct_cell(a.polar_error_pct, 13)}"
-                        f"{a.specular_share:>8.3g}{a.lobe_half_width_deg:>11.3g}"
+                        f" {a.specular_share:>7.3g} {a.lobe_half_width_deg:>10.3g}"
                         f"{a.lobe_points_1hw:>9d}{a.lobe_points_2hw:>9d}  {word}")
         rows += _no_area_notes(self.angles)
         return rows
@@ -365,7 +365,8 @@ def _pct(x: float) -> str:
 
 def _pct_cell(x: float, width: int) -> str:
     """A table cell of a polar-area error (%): as :func:`_pct`, '-' where there is none."""
-    return f"{_pct(x):>{width}}" if not np.isnan(x) else f"{'-':>{width}}"
+    # a leading space: a wide value still stands apart from the cell before it
+    return f" {_pct(x):>{width - 1}}" if not np.isnan(x) else f"{'-':>{width}}"
 
 
 def _num(x: float):
