@@ -11,6 +11,7 @@ $(STAMP): pyproject.toml
 	$(BIN)/pip install --quiet --upgrade pip
 	$(BIN)/pip install --quiet -e '.[dev,docs]'
 	$(BIN)/python -c "from irreflect.fitting import warm; warm()"  # compile the fitting kernel once
+	$(BIN)/python -c "from irreflect.room.warm import warm; warm()"  # and the room kernels
 	touch $(STAMP)
 
 venv: $(STAMP)

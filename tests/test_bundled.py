@@ -152,3 +152,58 @@ def test_a_cold_kernel_cache_is_announced_by_a_direct_call_of_fit_subsets(monkey
     err = capsys.readouterr().err
     assert looks == [1] and err.count("compiling the fitting kernel (once") == 1
     assert not first.failed.any()
+
+
+def test_the_room_kernels_are_compiled_by_the_install_and_a_cold_cache_is_announced(
+        tmp_path, monkeypatch, capsys):
+    """The room's compiled kernels were built by the first simulation, in silence: a
+    minute on a fresh install (57 s here), inside whichever test or `irreflect room` ran
+    first. `make venv` now builds them (irreflect.room.warm), and `irreflect room` on a cold
+    cache says so before it simulates."""
+    import irreflect._compiled as compiled
+    import irreflect.room.warm as room_warm
+
+    built = io.StringIO()
+    compiled.ensure_room_compiled(room_warm.warm, built)  # normally warm: nothing built
+    folder, cold = compiled.kernel_cache(compiled.ROOM_ENTRY_POINTS, "irreflect.room")
+    assert cold is False and folder is not None
+    assert any(folder.glob("transport.lobe_matrix-*.nbi"))
+    assert compiled.ensure_room_compiled(room_warm.warm, io.StringIO()) is None
+
+    calls = []
+    real = compiled.kernel_cache
+    monkeypatch.setattr(compiled, "kernel_cache", lambda entry=compiled.ENTRY_POINTS,
+                        package="irreflect.fitting": (Path("c"), True)
+                        if package == "irreflect.room" else real(entry, package))
+    monkeypatch.setattr(room_warm, "warm", lambda: calls.append("built"))
+    scene = tmp_path / "scene.toml"
+    scene.write_text("""
+[scene]
+name = "tiny"
+[room]
+size_m = [3.0, 3.0, 2.5]
+[room.materials]
+walls = "white"
+ceiling = "white"
+floor = "white"
+[materials.white]
+lambertian = 0.7
+[[emitter]]
+name = "lamp"
+position_m = [1.5, 1.5, 2.5]
+direction = [0, 0, -1]
+lambertian_order = 1
+power_w = 1.0
+[[receiver]]
+name = "rx"
+position_m = [0.5, 1.0, 0.8]
+direction = [0, 0, 1]
+area_m2 = 1e-4
+fov_deg = 85
+""")
+    code = main(["room", str(scene), "--out", str(tmp_path / "out"), "--rays", "500",
+                 "--no-figures", "--quiet"])
+    err = capsys.readouterr().err
+    assert code == 0 and calls == ["built"]
+    assert err.count("compiling the room simulation's kernels (once") == 1
+    assert "room kernels compiled in" in err

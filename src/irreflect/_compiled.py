@@ -28,15 +28,23 @@ ENTRY_POINTS = (("search_kernel", "search"), ("finish_kernel", "tl_finish"),
                 ("subsets_kernel", "subset_search"))
 
 
-def kernel_cache() -> tuple[Path | None, bool | None]:
+#: The room simulation's compiled kernels whose cache decides whether a build is due (what
+#: :func:`irreflect.room.warm.warm` compiles), as (module of :mod:`irreflect.room`, name).
+ROOM_ENTRY_POINTS = (("kernels", "term_albedo_table"), ("transport", "lobe_matrix"))
+
+
+def kernel_cache(entry_points=ENTRY_POINTS,
+                 package: str = "irreflect.fitting") -> tuple[Path | None, bool | None]:
     """(the folder numba caches the kernel in, whether a build is due): ``True`` when an
     entry point has no cached code for this source and numba version, ``None`` when numba's
-    cache cannot be inspected (then nothing is announced)."""
+    cache cannot be inspected (then nothing is announced). ``entry_points`` and
+    ``package``: the fitter's by default, :data:`ROOM_ENTRY_POINTS` in
+    ``irreflect.room`` for the room's."""
     import importlib
 
     folder, cold = None, False
-    for module, name in ENTRY_POINTS:
-        kernel = importlib.import_module(f"irreflect.fitting.{module}")
+    for module, name in entry_points:
+        kernel = importlib.import_module(f"{package}.{module}")
         cache = getattr(getattr(kernel, name, None), "_cache", None)
         try:
             folder = Path(cache.cache_path)
@@ -86,3 +94,22 @@ def ensure_compiled(build, stream=None) -> float | None:
         if building is not None:
             build()
     return None if building is None else time.perf_counter() - t0
+
+
+def ensure_room_compiled(build, stream=None) -> float | None:
+    """As :func:`ensure_compiled`, for the room simulation's kernels (``build``:
+    :func:`irreflect.room.warm.warm`): a cold cache is built before the simulation, with a
+    line before and after on ``stream`` (stderr), instead of a first ``irreflect room`` that
+    sits a minute or more in a silent build; returns the seconds, or None."""
+    folder, cold = kernel_cache(ROOM_ENTRY_POINTS, "irreflect.room")
+    if not cold:
+        return None
+    stream = sys.stderr if stream is None else stream
+    print(f"irreflect: first use of this install: compiling the room simulation's kernels "
+          f"(once, about 1-2 min; cached in {folder}) ...", file=stream, flush=True)
+    t0 = time.perf_counter()
+    build()
+    seconds = time.perf_counter() - t0
+    print(f"irreflect: room kernels compiled in {seconds:.0f} s; later runs load them from "
+          "the cache", file=stream, flush=True)
+    return seconds

@@ -34,6 +34,10 @@ def _room(args) -> int:
                                         "cell_m": args.cell, "rays": args.rays,
                                         "time_resolution_ns": args.dt})
     check_room_budget(scene, settings, CLI_OPTIONS, args.workers)  # before any work
+    from .._compiled import ensure_room_compiled
+    from ..room.warm import warm
+
+    ensure_room_compiled(warm)  # a cold cache: built now, announced, not silently
     for line in material_notes(scene, allow_unphysical=args.allow_unphysical):
         print(line)
     _warn_materials(scene)
