@@ -1,4 +1,5 @@
-"""Reference optimisers the tests hold irreflect's fitter to (independent of its search)."""
+"""Reference optimisers the tests hold irreflect's fitter to (independent of its search),
+and a tiny room scene."""
 
 from __future__ import annotations
 
@@ -108,3 +109,34 @@ def noisy_oren_nayar(seed: int):
     rng = np.random.default_rng(seed)
     y = y * (1 + 0.029 * rng.standard_normal(y.size)) + 1e-4 * y.max() * rng.standard_normal(y.size)
     return pd.DataFrame({"gamma_deg": g, "theta_deg": t, "power": y})
+
+
+def tiny_room(floor: str = "white", materials: str = "") -> str:
+    """A 3 x 3 x 2.5 m room scene (TOML): Lambertian white walls and ceiling, the floor
+    material ``floor`` (defined in ``materials``, more TOML, unless it is ``white``), one
+    lamp at the ceiling and one receiver."""
+    return f"""
+[scene]
+name = "tiny"
+[room]
+size_m = [3.0, 3.0, 2.5]
+[room.materials]
+walls = "white"
+ceiling = "white"
+floor = "{floor}"
+[materials.white]
+lambertian = 0.7
+{materials}
+[[emitter]]
+name = "lamp"
+position_m = [1.5, 1.5, 2.5]
+direction = [0, 0, -1]
+lambertian_order = 1
+power_w = 1.0
+[[receiver]]
+name = "rx"
+position_m = [0.5, 1.0, 0.8]
+direction = [0, 0, 1]
+area_m2 = 1e-4
+fov_deg = 85
+"""

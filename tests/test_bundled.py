@@ -22,6 +22,7 @@ from irreflect.data import (
 )
 from irreflect.errors import DataError
 from irreflect.paper import PAPER_TABLES, paper_tables_dir
+from tests.helpers import tiny_room
 
 
 def _run(argv):
@@ -177,30 +178,7 @@ def test_the_room_kernels_are_compiled_by_the_install_and_a_cold_cache_is_announ
                         if package == "irreflect.room" else real(entry, package))
     monkeypatch.setattr(room_warm, "warm", lambda: calls.append("built"))
     scene = tmp_path / "scene.toml"
-    scene.write_text("""
-[scene]
-name = "tiny"
-[room]
-size_m = [3.0, 3.0, 2.5]
-[room.materials]
-walls = "white"
-ceiling = "white"
-floor = "white"
-[materials.white]
-lambertian = 0.7
-[[emitter]]
-name = "lamp"
-position_m = [1.5, 1.5, 2.5]
-direction = [0, 0, -1]
-lambertian_order = 1
-power_w = 1.0
-[[receiver]]
-name = "rx"
-position_m = [0.5, 1.0, 0.8]
-direction = [0, 0, 1]
-area_m2 = 1e-4
-fov_deg = 85
-""")
+    scene.write_text(tiny_room())
     code = main(["room", str(scene), "--out", str(tmp_path / "out"), "--rays", "500",
                  "--no-figures", "--quiet"])
     err = capsys.readouterr().err

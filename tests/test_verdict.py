@@ -14,34 +14,9 @@ from irreflect.cli import main
 from irreflect.data import Measurements, load_bundled
 from irreflect.errors import FitWarning
 from irreflect.models import two_lobe_power
+from tests.helpers import tiny_room
 
-ROOM = """
-[scene]
-name = "tiny"
-[room]
-size_m = [3.0, 3.0, 2.5]
-[room.materials]
-walls = "white"
-ceiling = "white"
-floor = "floor"
-[materials.white]
-lambertian = 0.7
-[materials.floor]
-file = "{file}"
-reflectance = 0.5
-[[emitter]]
-name = "lamp"
-position_m = [1.5, 1.5, 2.5]
-direction = [0, 0, -1]
-lambertian_order = 1
-power_w = 1.0
-[[receiver]]
-name = "rx"
-position_m = [0.5, 1.0, 0.8]
-direction = [0, 0, 1]
-area_m2 = 1e-4
-fov_deg = 85
-"""
+ROOM = tiny_room("floor", '[materials.floor]\nfile = "{file}"\nreflectance = 0.5')
 
 
 def _narrow_lobe_table(seed=0):
