@@ -9,9 +9,9 @@ import numpy as np
 
 def warm() -> None:
     """Run both methods once on small scenes that use every compiled path (the bundled
-    office: fitted glossy and matte materials, furniture, several receivers; the glossy test
-    room with glossy walls, and with the paper's surface model), so that numba's on-disk cache holds the
-    room kernels. ``make`` runs it after installing, as it runs
+    office: fitted glossy and matte materials, furniture, several receivers; the glossy
+    test room with glossy walls, and with the paper's surface model), so that numba's
+    on-disk cache holds the room kernels. ``make`` runs it after installing, as it runs
     :func:`irreflect.fitting.warm`: a first ``irreflect room`` (or a test worker) then
     loads the kernels instead of compiling them."""
     from ..data import bundled_dir
