@@ -185,3 +185,39 @@ def test_the_room_kernels_are_compiled_by_the_install_and_a_cold_cache_is_announ
     assert code == 0 and calls == ["built"]
     assert err.count("compiling the room simulation's kernels (once") == 1
     assert "room kernels compiled in" in err
+
+
+def test_reproduce_with_a_scene_builds_a_cold_room_cache_before_its_first_fit(
+        tmp_path, monkeypatch, capsys):
+    """`irreflect reproduce --scene` on a pip install (no `make venv` to build the room
+    kernels) compiled them silently inside its room section, a minute into the report. Now
+    a cold cache is built, announced, once the datasets are read and before any fit."""
+    import irreflect._compiled as compiled
+    import irreflect.report.runner as runner
+    import irreflect.room.warm as room_warm
+
+    calls = []
+    real = compiled.kernel_cache
+    monkeypatch.setattr(compiled, "kernel_cache", lambda entry=compiled.ENTRY_POINTS,
+                        package="irreflect.fitting": (Path("c"), True)
+                        if package == "irreflect.room" else real(entry, package))
+    monkeypatch.setattr(room_warm, "warm", lambda: calls.append("built"))
+
+    class Reached(Exception):
+        pass
+
+    def first_work(*args, **kwargs):  # where the fits begin
+        calls.append("report")
+        raise Reached
+
+    monkeypatch.setattr(runner, "_run_report", first_work)
+    scene = tmp_path / "scene.toml"
+    scene.write_text(tiny_room())
+    with pytest.raises(Reached):
+        runner.reproduce(out_dir=tmp_path / "out", scene=scene, progress=False)
+    assert calls == ["built", "report"]
+    assert capsys.readouterr().err.count("compiling the room simulation's kernels (once") == 1
+    calls.clear()  # without a scene nothing is built
+    with pytest.raises(Reached):
+        runner.reproduce(out_dir=tmp_path / "out2", progress=False)
+    assert calls == ["report"]

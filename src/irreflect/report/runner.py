@@ -118,6 +118,13 @@ def reproduce(out_dir="out", data_dir=None, quick=False, seed=0, progress=True,
 def _reproduce(out_dir: Path, data_dir, quick, seed, progress, t_start, scene=None,
                allow_unphysical=False) -> dict:
     datasets, recon = _load_datasets(data_dir)
+    if scene is not None:
+        # a cold cache (a pip install: make venv builds it) is built here, announced, not
+        # silently inside the room section a minute into the run
+        from .._compiled import ensure_room_compiled
+        from ..room.warm import warm
+
+        ensure_room_compiled(warm)
     # a fit per dataset, each section once and once per dataset, the selection figures,
     # the PTFE table the comparison adds, the room section
     steps = (len(datasets) * (1 + 1) + len(SECTIONS) * (1 + len(datasets)) + len(datasets)
