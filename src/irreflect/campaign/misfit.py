@@ -8,6 +8,7 @@ import numpy as np
 from scipy import special
 
 from .. import metrics
+from .._text import p_text
 from ..data import Measurements
 from ..fitting import FitResult
 
@@ -41,5 +42,5 @@ def misfit_note(res: FitResult, meas: Measurements, weighted: Measurements,
     if not p < LACK_OF_FIT_P:
         return ""
     return (f"the readings depart from the fit by chi^2/dof {chi2 / dof:.3g} against their "
-            f"sigma (p = {p:.2g}): the model may lack an effect of this material, or the "
+            f"sigma ({p_text(p)}): the model may lack an effect of this material, or the "
             "sigma understates the noise (irreflect diagnose on the readings names it)")

@@ -30,6 +30,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import special
 
+from .._text import p_text
 from ..data import as_measurements
 from ..errors import IrreflectError
 
@@ -330,7 +331,7 @@ def estimate_noise(measurements, residuals=None, *, fitted=None, order: int = 2,
         if p < alpha and rho > 0:
             a_hat = max(float(np.sqrt(big_a)), floor)
             b_hat = float(np.sqrt(big_a * rho))
-            test = f"; noise proportional to the power found (likelihood ratio p = {p:.2g})"
+            test = f"; noise proportional to the power found (likelihood ratio {p_text(p)})"
             a_hat, note = _additive_bound(e2, s2, big_a, rho, alpha, a_hat)
             test += note
         else:

@@ -67,6 +67,7 @@ import numpy as np
 from scipy import special
 
 from .._jsonio import finite
+from .._text import p_text
 from ..data import Measurements, as_measurements
 from ..errors import FitError, FitWarning, IrreflectError
 from ..fitting import FitResult, fit
@@ -348,7 +349,7 @@ class Diagnosis:
                          f"{a.level(self.alpha):.3g}):")
             for s in a.structure:
                 mark = " *" if s.p_value < a.level(self.alpha) else ""
-                lines.append(f"    {s.name:<44} {_p_text(s.p_value)}{mark}  [{s.where}]")
+                lines.append(f"    {s.name:<44} {p_text(s.p_value)}{mark}  [{s.where}]")
             worst = sorted(a.gamma_chi2.items(), key=lambda kv: -kv[1])[:3]
             lines.append("  chi2/points by gamma (1 = noise): "
                          + ", ".join(f"{_deg(g)} deg: {v:.3g}" for g, v in worst))
@@ -367,7 +368,7 @@ class Diagnosis:
                 lines.append(f"  explanations with {i + 1} effect(s) (likelihood ratio to "
                              "the one grown from; share of its excess residual explained):")
                 for c in self.candidates[i]:
-                    lr = f"LR {c.lr:9.1f} (df {c.df}, {_p_text(c.p_value)})" \
+                    lr = f"LR {c.lr:9.1f} (df {c.df}, {p_text(c.p_value)})" \
                         if np.isfinite(c.lr) else f"{'':>28}"
                     lines.append(f"    {c.name:<34} {lr} {100 * c.share_explained:>5.0f}%  "
                                  f"{c.reason}")
@@ -406,19 +407,10 @@ class Diagnosis:
         return f"\n  (fitted weighted by the estimated noise{unweighted})"
 
 
-def _p_text(p: float) -> str:
-    """``p = 0.012``, ``p = 3.1e-09`` or ``p < 1e-300`` (underflow)."""
-    if not np.isfinite(p):
-        return "p = n/a"
-    if p <= 0.0:
-        return "p < 1e-300"
-    return f"p = {p:.3g}" if p >= 1e-4 else f"p = {p:.1e}"
-
-
 def _assessment_line(a: Assessment) -> str:
     lof = a.lack_of_fit
     return (f"  RMSE {a.fit.rmse:.4g}   R^2 {a.fit.r2:.5f}   chi2/dof {lof.ratio:.3g} "
-            f"(dof {lof.dof}, {lof.test} {_p_text(lof.p_value)})   -2 ln L {a.deviance:.1f}")
+            f"(dof {lof.dof}, {lof.test} {p_text(lof.p_value)})   -2 ln L {a.deviance:.1f}")
 
 
 def assess(result: FitResult, noise: NoiseEstimate, effects: Sequence[str] = (),
@@ -1086,11 +1078,11 @@ def _effect(name: str, c: Candidate | None, result: FitResult, sets: ModelSets) 
 def _verdict(steps, effects, alternatives, common, separating, alpha, base, target, meas):
     final = steps[-1]
     lof = final.lack_of_fit
-    stat = f"chi2/dof = {lof.ratio:.3g}, {_p_text(lof.p_value)}"
+    stat = f"chi2/dof = {lof.ratio:.3g}, {p_text(lof.p_value)}"
     named = ", ".join(f"{e.name} ({_param_text(e)})" for e in effects)
     where = []
     if not final.consistent(alpha):
-        where = [f"{s.name} ({_p_text(s.p_value)}): {s.where}" for s in final.flagged(alpha)]
+        where = [f"{s.name} ({p_text(s.p_value)}): {s.where}" for s in final.flagged(alpha)]
         worst = sorted(final.gamma_chi2.items(), key=lambda kv: -kv[1])[:2]
         where.append("largest chi2/points at " + ", ".join(f"gamma {_deg(g)} deg ({v:.3g})"
                                                            for g, v in worst))

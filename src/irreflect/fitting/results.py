@@ -12,6 +12,7 @@ from warnings import warn
 import numpy as np
 
 from .. import metrics
+from .._text import p_text
 from ..data import check_enough_points
 from ..errors import DataError, FitWarning, IrreflectError
 from ..models import (
@@ -352,7 +353,7 @@ def sigma_note(model, values, stderr, ill, chi2_reduced: float, dof: int) -> tup
     more = [q.name for q, bad in zip(model.params, scaled, strict=True)
             if bad and q.name not in ill]
     return (f"{SIGMA_NOTE_HEAD} {chi2_reduced:.3g} against "
-            f"their sigma (p = {p:.2g}): the model lacks an effect of the material "
+            f"their sigma ({p_text(p)}): the model lacks an effect of the material "
             "(irreflect diagnose names it) or sigma understates the noise, and the standard "
             "errors, which take sigma as given, understate the uncertainty"
             + (f" (scaled by sqrt(chi^2/dof), {', '.join(more)} would be ill-determined)"
