@@ -790,3 +790,41 @@ def test_a_named_effect_whose_parameter_sits_at_its_bound_says_so():
     assert "n_r = 1 +-" not in d.summary and "n_r = 1 +-" not in d.report()
     entry = next(e for e in d.to_dict()["effects"] if e["name"] == "retroreflection")
     assert entry["at_bound"] == ["n_r"]
+
+
+def _sheen_table(offset_share: float = 0.0, sheen: float = 0.8, seed: int = 7):
+    """A near-Lambertian surface with a sheen toward grazing reception (the diffuse curve
+    times 1 + sheen sin^4 theta: outside the catalogue), 1 % noise and a sigma column; with
+    ``offset_share`` a constant offset of that share of the median reading added."""
+    rng = np.random.default_rng(seed)
+    g, t = np.meshgrid([-30.0, -45.0, -60.0, -75.0], np.arange(-85.0, 85.01, 2.0), indexing="ij")
+    g, t = g.ravel(), t.ravel()
+    keep = np.abs(t - g) > 4.0  # the receiver kept off the source
+    g, t = g[keep], t[keep]
+    clean = two_lobe_power(np.radians(g), np.radians(t), 0.02, 0.0, 1.0, 0.0, 300.0, 0.0,
+                           1e-3) * (1.0 + sheen * np.sin(np.radians(t)) ** 4)
+    clean = clean + offset_share * np.median(clean)
+    sigma = 0.01 * clean + 1e-3 * np.median(clean)
+    return Measurements(gamma_deg=g, theta_deg=t, power=clean + sigma * rng.standard_normal(
+        g.size), sigma=sigma, name="sheen")
+
+
+def test_a_sheen_is_not_named_a_negative_background_and_a_real_offset_still_is():
+    """A sheen toward grazing reception (an unseen table of stop 52) was named 'background'
+    with b = -0.000117 against a median reading of 0.000134: a dark level subtracted by
+    nearly the whole signal, which the negative offset fits because it lets the diffuse lobe
+    flatten. Such an offset is now not named, and said why; a negative offset of a few per
+    cent of the readings, and a sheen-free table's offset, still are."""
+    d = diagnose(_sheen_table(), seed=0)
+    assert "background" not in _names(d), d.summary
+    from irreflect.diagnose.workflow import NEGATIVE_BACKGROUND_SHARE
+
+    refused = [c for row in d.candidates for c in row if c.name == "background"]
+    assert refused and refused[0].reason.startswith("not named: a negative offset b = -")
+    assert "fits the data too with a negative offset" in d.summary
+    share = float(refused[0].reason.split(", ")[1].split("%")[0]) / 100
+    assert share > NEGATIVE_BACKGROUND_SHARE
+    for offset in (-0.05, 0.3):  # an offset, with no sheen: named, and of the right sign
+        d = diagnose(_sheen_table(offset, sheen=0.0), seed=0)
+        assert _names(d) == ["background"], (offset, d.summary)
+        assert np.sign(d.effects[0].params["b"]) == np.sign(offset)

@@ -105,6 +105,19 @@ from .structure import (
     structure_tests,
 )
 
+#: A negative background (a dark level subtracted too far) is not named when its magnitude
+#: passes this share of the median reading: a table whose detector offset is most of its
+#: signal is a broken measurement the dark reading shows, and a shape the model lacks fits
+#: the same way (an unseen sheen toward grazing reception, stop 52: b = -0.000117 against a
+#: median reading of 0.000134 was named "background", and the residual stayed structured)
+NEGATIVE_BACKGROUND_SHARE = 0.25
+
+
+def _offset_text(b: float, median: float, head: str = "not named: ") -> str:
+    return (f"{head}a negative offset b = {b:.3g}, {-b / median:.0%} of the median reading, "
+            "would be a dark level subtracted that far beyond the true one, and a shape the "
+            "model lacks fits the same way (check the dark reading)")
+
 #: verdict codes (the ``verdict`` key of the JSON output)
 NO_MISSING_EFFECT = "no missing effect"
 EFFECTS_FOUND = "effects found"
@@ -472,6 +485,23 @@ class _Search:
         #: verdict per explanation holding it: (smooth, sentence)
         self.gain_level = 0.01
         self.smooth_of: dict[str, tuple[bool, str]] = {}
+        #: explanations whose background is implausibly negative (:meth:`offset_refused`):
+        #: (b, the median reading)
+        self.offsets: dict[str, tuple[float, float]] = {}
+
+    def offset_refused(self, effects) -> bool:
+        """Whether the fit of ``effects`` (which holds the background) puts it below zero
+        by more than :data:`NEGATIVE_BACKGROUND_SHARE` of the median reading (the reason
+        kept in :attr:`offsets`)."""
+        a = self.get(effects)
+        if a is None or "b" not in a.fit.param_names:
+            return False
+        b = float(a.fit.values[list(a.fit.param_names).index("b")])
+        median = float(np.median(np.abs(self.meas.power)))
+        if not (b < 0.0 and median > 0.0 and -b > NEGATIVE_BACKGROUND_SHARE * median):
+            return False
+        self.offsets[set_name(effects)] = (b, median)
+        return True
 
     def add(self, key: str, result: FitResult, effects) -> Assessment:
         a = assess(result, self.noise, effects, polar=False)
@@ -488,6 +518,7 @@ class _Search:
         self.weights = 1.0 / noise.sigma
         self.stale = set(self.fits)
         self.smooth_of = {}
+        self.offsets = {}
 
     def smooth(self, effects) -> tuple[bool, str]:
         """Whether the gain factors of the fit of ``effects`` (which holds the gain drift)
@@ -655,6 +686,8 @@ def _select(search: _Search, names, max_effects: int, alpha: float, min_share: f
                         # factors a smooth law of gamma would give: no drift, and no
                         # rival of the catalogue's explanations either
                         search.parsimony.add(set_name(u))
+                        continue
+                    if "background" in u and search.offset_refused(u):
                         continue
                     counted_here = True
                     grown.append(u)
@@ -850,11 +883,23 @@ def _ranked(search, rounds, chain, final, min_share) -> list:
             if c.name in search.parsimony:
                 reason = (GAIN_SMOOTH if search.smooth_of.get(c.name, (False, ""))[0]
                           else GAIN_PARSIMONY)
+            elif c.name in search.offsets:
+                reason = _offset_text(*search.offsets[c.name])
             out.append(dataclasses.replace(c, accepted=named, reason=reason))
         ranked.append(tuple(sorted(out, key=lambda c: (c.assessment is None,
                                                        c.assessment.deviance if c.assessment
                                                        else 0.0))))
     return ranked
+
+
+def _offset_note(search) -> str:
+    """The sentence of the best-fitting explanation with a background that was not grown
+    because it is implausibly negative (:meth:`_Search.offset_refused`; "" when none)."""
+    if not search.offsets:
+        return ""
+    best = min(search.offsets, key=lambda k: search.fits[k].deviance)
+    return "; " + _offset_text(*search.offsets[best], head=f"{best} fits the data too with "
+                               ) + ": it is not named"
 
 
 def _smooth_note(search) -> str:
@@ -987,7 +1032,7 @@ def diagnose(measurements, model="two-lobe", *, extensions: Sequence[str] | None
     alt_fits, separating = _separation(search, final, alternatives, meas, target, separate)
     verdict, summary, where = _verdict(steps, effects, alternatives, common, separating,
                                        alpha, base, target, meas)
-    summary += _untested(rounds) + artefact_note(effects) + smooth_note
+    summary += _untested(rounds) + artefact_note(effects) + smooth_note + _offset_note(search)
     if len(steps) > 1:  # the extended model is a result too: say what is doubtful about it
         for text in steps[-1].fit.warnings:
             if text.startswith(SIGMA_NOTE_HEAD):  # the verdict's own test of the noise
