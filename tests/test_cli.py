@@ -34,6 +34,12 @@ def test_fit_warns_when_the_sigma_column_decides_the_fit(tmp_path, capsys):
     assert "the points of smallest sigma decide it" in captured.err
     assert "irreflect fit --ignore-sigma" in captured.err
     assert "smallest sigma decide it" in material.read_text()  # the file carries it
+    # one warning of the misfit beyond the noise, not two: the fit's chi^2/dof note is
+    # folded into it (stop 52: "reduced chi^2 59" and "chi^2/dof 59" on two lines)
+    assert "depart from the fit by chi^2/dof" not in captured.err
+    assert "depart from the fit by chi^2/dof" not in material.read_text()
+    assert captured.err.count("reduced chi^2") == 1
+    assert "standard errors take sigma as given" in captured.err
     assert main(["fit", str(path), "--json"]) == 0
     d = json.loads(capsys.readouterr().out)
     assert d["r2"] < 0.9 and d["unweighted_r2"] > 0.98

@@ -6,6 +6,7 @@ import contextlib
 import dataclasses
 import math
 import sys
+import warnings
 
 from .options import (
     POSITIVE,
@@ -56,8 +57,10 @@ def _cmd_fit(args) -> int:
     with claim:  # the material file's path is checked and locked before any work
         meas = load_data(args)  # with --ignore-sigma, without its sigma column
         # resolution 0: the plain fit
-        result = fit_averaged(meas, model, args.resolution, seed=args.seed or 0,
-                              engine=_engine(meas.n_points))
+        with warnings.catch_warnings(record=True) as said:
+            warnings.simplefilter("always")
+            result = fit_averaged(meas, model, args.resolution, seed=args.seed or 0,
+                                  engine=_engine(meas.n_points))
         unweighted = math.nan
         if meas.sigma is not None:
             from ..fitting import weights_check
@@ -65,9 +68,12 @@ def _cmd_fit(args) -> int:
             text, unweighted = weights_check(meas, result, model, args.resolution,
                                              args.seed or 0)
             if text:  # said, and carried by the material file
+                said, result, text = _one_chi2_warning(said, result, text)
                 print(f"irreflect: warning: {meas.name}, {result.model}: {text}",
                       file=sys.stderr)
                 result = dataclasses.replace(result, warnings=result.warnings + (text,))
+        for w in said:  # on to the command's notes
+            warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
         from ..data import saturation_note
 
         clipped = saturation_note(meas.gamma_deg, meas.power, meas.name)
@@ -142,6 +148,27 @@ def _cmd_plot(args) -> int:
         save_figure(ax.figure, args.out)
     print(f"wrote {args.out}")
     return 0
+
+
+def _one_chi2_warning(said, result, text: str):
+    """``(said, result, text)`` with the fit's chi^2/dof warning (``sigma_note``) left out of
+    the caught warnings and of ``result.warnings``, and what it adds folded into the weights
+    warning ``text``: both spoke of the same chi^2 (an unseen table with a sigma column gave
+    "misfits beyond the noise (reduced chi^2 59)" and "depart from the fit by chi^2/dof 59"
+    on two lines)."""
+    from ..fitting.results import SIGMA_NOTE_HEAD
+
+    notes = [w for w in result.warnings if w.startswith(SIGMA_NOTE_HEAD)]
+    if not notes:
+        return said, result, text
+    said = [w for w in said if SIGMA_NOTE_HEAD not in str(w.message)]
+    result = dataclasses.replace(result, warnings=tuple(w for w in result.warnings
+                                                        if w not in notes))
+    scaled = notes[0].split(" (scaled by sqrt(chi^2/dof), ")
+    more = f"; scaled by sqrt(chi^2/dof), {scaled[1][:-1]}" if len(scaled) > 1 else ""
+    return said, result, (f"{text}. Its standard errors take sigma as given and understate "
+                          f"the uncertainty{more}; irreflect diagnose names what the model "
+                          "lacks")
 
 
 def _warn_if_sigma_decides(meas, result, model: str, args) -> None:
