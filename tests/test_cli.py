@@ -40,6 +40,10 @@ def test_fit_warns_when_the_sigma_column_decides_the_fit(tmp_path, capsys):
     assert "depart from the fit by chi^2/dof" not in material.read_text()
     assert captured.err.count("reduced chi^2") == 1
     assert "standard errors take sigma as given" in captured.err
+    assert main(["plot", str(path), "--fit", "--out", str(tmp_path / "p.png")]) == 0
+    err = capsys.readouterr().err  # plot --fit warns as fit does, once
+    assert "irreflect plot --fit --ignore-sigma" in err and err.count("reduced chi^2") == 1
+    assert "depart from the fit by chi^2/dof" not in err
     assert main(["fit", str(path), "--json"]) == 0
     d = json.loads(capsys.readouterr().out)
     assert d["r2"] < 0.9 and d["unweighted_r2"] > 0.98

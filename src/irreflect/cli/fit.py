@@ -137,9 +137,13 @@ def _cmd_plot(args) -> int:
         predict, title = None, meas.name
         if args.fit:
             # with a resolution, the curve drawn is what the receiver reads
-            result = fit_averaged(meas, model, args.resolution, seed=args.seed or 0,
-                                  engine=_engine(meas.n_points))
-            _warn_if_sigma_decides(meas, result, model, args)
+            with warnings.catch_warnings(record=True) as said:
+                warnings.simplefilter("always")
+                result = fit_averaged(meas, model, args.resolution, seed=args.seed or 0,
+                                      engine=_engine(meas.n_points))
+            said = _warn_if_sigma_decides(meas, result, model, args, said)
+            for w in said:  # on to the command's notes
+                warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
             predict = result.predict
             title = f"{meas.name}: {result.model} fit, R^2 = {result.r2:.4f}"
             if args.resolution:
@@ -171,16 +175,19 @@ def _one_chi2_warning(said, result, text: str):
                           "lacks")
 
 
-def _warn_if_sigma_decides(meas, result, model: str, args) -> None:
-    """The weighted fit drawn by ``plot --fit`` is warned of as ``fit`` warns of it."""
+def _warn_if_sigma_decides(meas, result, model: str, args, said):
+    """The weighted fit drawn by ``plot --fit`` is warned of as ``fit`` warns of it (one
+    warning of its chi^2: :func:`_one_chi2_warning`); returns the fit's other warnings."""
     if meas.sigma is None:
-        return
+        return said
     from ..fitting import weights_check
 
     text, _ = weights_check(meas, result, model, args.resolution, args.seed or 0)
     if text:
+        said, result, text = _one_chi2_warning(said, result, text)
         text = text.replace("irreflect fit --ignore-sigma", "irreflect plot --fit --ignore-sigma")
         print(f"irreflect: warning: {meas.name}, {result.model}: {text}", file=sys.stderr)
+    return said
 
 
 def _cmd_models(args) -> int:
