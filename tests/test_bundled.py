@@ -155,6 +155,21 @@ def test_a_cold_kernel_cache_is_announced_by_a_direct_call_of_fit_subsets(monkey
     assert not first.failed.any()
 
 
+def _cold_room_cache(monkeypatch) -> list:
+    """The room kernels' cache made to look cold, and their build replaced by a note in the
+    list returned ("built" for each build)."""
+    import irreflect._compiled as compiled
+    import irreflect.room.warm as room_warm
+
+    calls = []
+    real = compiled.kernel_cache
+    monkeypatch.setattr(compiled, "kernel_cache", lambda entry=compiled.ENTRY_POINTS,
+                        package="irreflect.fitting": (Path("c"), True)
+                        if package == "irreflect.room" else real(entry, package))
+    monkeypatch.setattr(room_warm, "warm", lambda: calls.append("built"))
+    return calls
+
+
 def test_the_room_kernels_are_compiled_by_the_install_and_a_cold_cache_is_announced(
         tmp_path, monkeypatch, capsys):
     """The room's compiled kernels were built by the first simulation, in silence: a
@@ -171,12 +186,7 @@ def test_the_room_kernels_are_compiled_by_the_install_and_a_cold_cache_is_announ
     assert any(folder.glob("transport.lobe_matrix-*.nbi"))
     assert compiled.ensure_room_compiled(room_warm.warm, io.StringIO()) is None
 
-    calls = []
-    real = compiled.kernel_cache
-    monkeypatch.setattr(compiled, "kernel_cache", lambda entry=compiled.ENTRY_POINTS,
-                        package="irreflect.fitting": (Path("c"), True)
-                        if package == "irreflect.room" else real(entry, package))
-    monkeypatch.setattr(room_warm, "warm", lambda: calls.append("built"))
+    calls = _cold_room_cache(monkeypatch)
     scene = tmp_path / "scene.toml"
     scene.write_text(tiny_room())
     code = main(["room", str(scene), "--out", str(tmp_path / "out"), "--rays", "500",
@@ -192,16 +202,9 @@ def test_reproduce_with_a_scene_builds_a_cold_room_cache_before_its_first_fit(
     """`irreflect reproduce --scene` on a pip install (no `make venv` to build the room
     kernels) compiled them silently inside its room section, a minute into the report. Now
     a cold cache is built, announced, once the datasets are read and before any fit."""
-    import irreflect._compiled as compiled
     import irreflect.report.runner as runner
-    import irreflect.room.warm as room_warm
 
-    calls = []
-    real = compiled.kernel_cache
-    monkeypatch.setattr(compiled, "kernel_cache", lambda entry=compiled.ENTRY_POINTS,
-                        package="irreflect.fitting": (Path("c"), True)
-                        if package == "irreflect.room" else real(entry, package))
-    monkeypatch.setattr(room_warm, "warm", lambda: calls.append("built"))
+    calls = _cold_room_cache(monkeypatch)
 
     class Reached(Exception):
         pass
