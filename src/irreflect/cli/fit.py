@@ -38,7 +38,6 @@ def _check_model_and_resolution(model: str, resolution: float) -> None:
 
 def _cmd_fit(args) -> int:
     from .._atomic import claim_output
-    from ..fitting import fit_averaged
 
     model = args.model
     _check_model_and_resolution(model, args.resolution)
@@ -57,10 +56,7 @@ def _cmd_fit(args) -> int:
     with claim:  # the material file's path is checked and locked before any work
         meas = load_data(args)  # with --ignore-sigma, without its sigma column
         # resolution 0: the plain fit
-        with warnings.catch_warnings(record=True) as said:
-            warnings.simplefilter("always")
-            result = fit_averaged(meas, model, args.resolution, seed=args.seed or 0,
-                                  engine=_engine(meas.n_points))
+        result, said = _fit_holding_warnings(meas, model, args)
         unweighted = math.nan
         if meas.sigma is not None:
             from ..fitting import weights_check
@@ -72,8 +68,7 @@ def _cmd_fit(args) -> int:
                 print(f"irreflect: warning: {meas.name}, {result.model}: {text}",
                       file=sys.stderr)
                 result = dataclasses.replace(result, warnings=result.warnings + (text,))
-        for w in said:  # on to the command's notes
-            warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
+        _pass_on(said)
         from ..data import saturation_note
 
         clipped = saturation_note(meas.gamma_deg, meas.power, meas.name)
@@ -120,7 +115,6 @@ def _cmd_fit(args) -> int:
 
 def _cmd_plot(args) -> int:
     from .._atomic import claim_output
-    from ..fitting import fit_averaged
     from ..plots import plot_polar, save_figure
 
     model = args.model or "two-lobe"
@@ -137,13 +131,8 @@ def _cmd_plot(args) -> int:
         predict, title = None, meas.name
         if args.fit:
             # with a resolution, the curve drawn is what the receiver reads
-            with warnings.catch_warnings(record=True) as said:
-                warnings.simplefilter("always")
-                result = fit_averaged(meas, model, args.resolution, seed=args.seed or 0,
-                                      engine=_engine(meas.n_points))
-            said = _warn_if_sigma_decides(meas, result, model, args, said)
-            for w in said:  # on to the command's notes
-                warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
+            result, said = _fit_holding_warnings(meas, model, args)
+            _pass_on(_warn_if_sigma_decides(meas, result, model, args, said))
             predict = result.predict
             title = f"{meas.name}: {result.model} fit, R^2 = {result.r2:.4f}"
             if args.resolution:
@@ -152,6 +141,25 @@ def _cmd_plot(args) -> int:
         save_figure(ax.figure, args.out)
     print(f"wrote {args.out}")
     return 0
+
+
+def _fit_holding_warnings(meas, model: str, args):
+    """``fit`` and ``plot --fit``'s fit, and the warnings it issued, held back until the
+    weights check has said whether one of them is folded into its own
+    (:func:`_one_chi2_warning`); :func:`_pass_on` issues the rest."""
+    from ..fitting import fit_averaged
+
+    with warnings.catch_warnings(record=True) as said:
+        warnings.simplefilter("always")
+        result = fit_averaged(meas, model, args.resolution, seed=args.seed or 0,
+                              engine=_engine(meas.n_points))
+    return result, said
+
+
+def _pass_on(said) -> None:
+    """The held-back warnings, on to the command's notes."""
+    for w in said:
+        warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
 
 
 def _one_chi2_warning(said, result, text: str):
