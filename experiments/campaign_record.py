@@ -3,7 +3,9 @@
 Replays the adaptive campaign (as ``irreflect campaign`` does: the dense table as the
 instrument, 25 readings, seed 0) on every table given, and keeps per reading the setting
 and power read, the weighted fit's and the quadrature estimate's coefficients and R^2
-against all points, the R^2 the campaign reports and the verdict. Faster than
+against all points, the R^2 the campaign reports and the verdict (with how far the fits
+without the last readings lie from the current one, and what keeps it from stopping: the
+input of experiments/stop_rules.py). Faster than
 ``bench_campaign.py`` (no other strategy, no hindsight bound), and it keeps what the
 benchmark does not: both fits, so that a choice between them, or a stop rule, can be
 replayed offline (docs/campaign.md, stop 51). Usage::
@@ -101,7 +103,9 @@ def run(job):
             state, verdict = campaign._current(), campaign.verdict()
             rec = {"n": campaign.n_measured, "g": float(p.gamma_deg.iloc[0]),
                    "t": float(p.theta_deg.iloc[0]), "p": float(power[0]),
-                   "stop": bool(verdict.stop), "why": str(p.why.iloc[0])}
+                   "stop": bool(verdict.stop), "why": str(p.why.iloc[0]),
+                   # the verdict's parts, for stop rules replayed offline (stop_rules.py)
+                   "moves": list(verdict.moves), "blocking": list(verdict.blocking)}
             _fit_row(campaign, meas, state.fit, "w", rec)
             _fit_row(campaign, meas, state.estimate, "e", rec)
             rec["r2rep"] = (float(campaign.r2_against(meas)) if campaign.fit is not None

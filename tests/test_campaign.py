@@ -9,6 +9,7 @@ import dataclasses
 import io
 import json
 import warnings
+from pathlib import Path
 
 import numpy as np
 import pandas as pd
@@ -455,6 +456,63 @@ def test_the_verdict_continues_until_the_curve_holds_then_stops():
     assert not any("explains the readings only" in verdicts[n].text for n in stops)
     low, high = verdicts[first].r2_band
     assert low <= high <= 1.0
+
+
+def test_the_verdict_carries_the_moves_it_judged_and_what_blocks_it():
+    # the verdict's moves (fits without the last 1..3 readings) and its blocking reasons
+    # are what experiments/stop_rules.py replays other stop rules on
+    from irreflect.campaign.core import STOP_HOLD, STOP_TOLERANCE
+
+    dense = _material(GLOSSY, step=2.0, noise=0.005, name="gloss")
+    _, verdicts, _ = replay_adaptive(DenseInstrument(dense), 16, seed=0)
+    assert verdicts[4].blocking == verdicts[4].reasons and verdicts[4].moves == ()
+    judged = [v for v in verdicts.values() if v.moves]
+    assert judged and all(len(v.moves) == STOP_HOLD + 1 for v in judged)
+    for v in judged:
+        assert v.stability == max(v.moves)
+        assert v.stop == (not v.blocking)
+        moved = any(b.startswith(("the last ", "the curve must hold")) for b in v.blocking)
+        assert moved == (not v.stability <= STOP_TOLERANCE)
+        assert set(v.blocking) <= set(v.reasons)
+    # the first fit has no earlier fits: every move infinite, and the verdict waits
+    first = min(v.n_measured for v in judged)
+    assert np.all(np.isinf(verdicts[first].moves))
+    assert any(v.stop for v in judged) and any(not v.stop for v in judged)
+    d = json.loads(json.dumps(judged[-1].to_dict(), allow_nan=False))
+    assert d["moves"] == pytest.approx(list(judged[-1].moves))
+    assert d["blocking"] == list(judged[-1].blocking)
+
+
+def test_stop_rules_replays_the_campaigns_own_stops_from_a_recording(tmp_path):
+    # experiments/stop_rules.py: the campaign's rule (the largest move) replayed on the
+    # recorded verdicts gives the recorded stops; a more lenient rule stops no later
+    import importlib.util
+
+    here = Path(__file__).resolve().parents[1] / "experiments" / "stop_rules.py"
+    spec = importlib.util.spec_from_file_location("stop_rules", here)
+    stop_rules = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(stop_rules)
+    dense = _material(GLOSSY, step=2.0, noise=0.005, name="gloss")
+    curve, verdicts, _ = replay_adaptive(DenseInstrument(dense), 16, seed=0)
+    rows = [{"n": n, "stop": v.stop, "moves": [None if not np.isfinite(m) else m
+                                                for m in v.moves],
+             "blocking": list(v.blocking), "r2rep": curve.r2.get(n)}
+            for n, v in sorted(verdicts.items())]
+    recorded = next(n for n, v in sorted(verdicts.items()) if v.stop)
+    largest = stop_rules.RULES["largest (the campaign's)"]
+    assert stop_rules.stop_at(rows, largest, 0.01) == recorded
+    assert stop_rules.stop_at(rows, stop_rules.RULES["mean"], 0.01) <= recorded
+    # a tolerance no move meets: never
+    assert stop_rules.stop_at(rows, largest, 1e-12) is None
+    # judged as bench_campaign judges: all points 0.99, within 0.01 from 9 readings on
+    r2 = {8: 0.95, 9: 0.985, 10: 0.983, 11: 0.99, 12: 0.99, 13: 0.99, 14: 0.99}
+    table = {"r2_all": 0.99, "rows": [{"n": n, "r2rep": v} for n, v in r2.items()]}
+    assert stop_rules.holds_from(table["rows"], 0.98) == 9
+    assert [stop_rules.judge(table, n) for n in (None, 8, 9, 12, 13)] == [
+        "never", "below", "ok", "ok", "late"]
+    path = tmp_path / "rec.json"
+    path.write_text(json.dumps([{"label": "gloss", "r2_all": 0.99, "rows": rows}]))
+    assert stop_rules.main([str(path)]) == 0
 
 
 def test_the_verdict_stops_within_three_readings_of_the_target_on_a_matte_material():

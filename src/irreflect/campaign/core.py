@@ -109,7 +109,13 @@ class Verdict:
     ill_determined, at_bound : the current fit's coefficients that the readings do not pin
         down / that sit on a bound of their range
     reasons : why it continues (or, when it stops, how little the last readings moved the
-        predicted curve)
+        predicted curve), and notes that do not keep it from stopping
+    moves : how far the fit without the last 1, 2, ... :data:`STOP_HOLD` + 1 readings lies
+        from the current one (as ``stability``, which is their largest; inf where a fit
+        does not exist)
+    blocking : the reasons that keep it from stopping (empty when it stops): a stop rule
+        that judges ``moves`` otherwise can be replayed from a recorded campaign
+        (experiments/stop_rules.py)
     """
 
     stop: bool
@@ -119,6 +125,8 @@ class Verdict:
     ill_determined: tuple[str, ...] = ()
     at_bound: tuple[str, ...] = ()
     reasons: tuple[str, ...] = ()
+    moves: tuple[float, ...] = ()
+    blocking: tuple[str, ...] = ()
 
     @property
     def text(self) -> str:
@@ -144,6 +152,7 @@ class Verdict:
                 "r2_high": self.r2_band[1], "stability": self.stability,
                 "ill_determined": list(self.ill_determined),
                 "at_bound": list(self.at_bound), "reasons": list(self.reasons),
+                "moves": list(self.moves), "blocking": list(self.blocking),
                 "text": self.text})
 
 
@@ -849,7 +858,7 @@ class Campaign:
             need = self.model.n_params + 1
             why = (f"the first fit needs {need} readings ({n} so far)" if n < need else
                    f"no usable fit yet ({state.error})")
-            v = Verdict(False, n, nan, float("nan"), reasons=(why,))
+            v = Verdict(False, n, nan, float("nan"), reasons=(why,), blocking=(why,))
         else:
             v = self._judge(state)
         state.verdict = v
@@ -932,9 +941,9 @@ class Campaign:
                     f"allows {'are' if limit != 1 else 'is'} set",)
         why += self._one_angle(stopping=not reasons)
         shown = state.estimate if state.estimate is not None else res  # what fit reports
-        state.extra["blocking"] = tuple(reasons)  # what keeps it from stopping
         return Verdict(not reasons, n, (float(r2_lo), float(r2_hi)), stability,
-                       tuple(shown.ill_determined), tuple(shown.at_bound), why)
+                       tuple(shown.ill_determined), tuple(shown.at_bound), why,
+                       moves=state.extra["moves"], blocking=tuple(reasons))
 
     def _one_angle(self, stopping: bool) -> tuple[str, ...]:
         """What a stop on an instrument of one angle of incidence leaves open (unseen_tables3
@@ -967,6 +976,7 @@ class Campaign:
                 moves.append(float("inf"))
             else:
                 moves.append(float(np.sum((before - f) ** 2)) / ss_pred)
+        state.extra["moves"] = tuple(moves)
         return max(moves)
 
     def _settled_gap(self, state: _State) -> tuple[float, float, float] | None:
@@ -981,8 +991,7 @@ class Campaign:
 
     def _blocking(self) -> tuple[str, ...]:
         """The verdict's reasons not to stop (its notes left out)."""
-        self.verdict()
-        return self._current().extra.get("blocking", ())
+        return self.verdict().blocking
 
     def _first_setting(self, state: _State, free: np.ndarray,
                        gains: np.ndarray) -> tuple[int | None, str]:
