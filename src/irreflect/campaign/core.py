@@ -870,7 +870,7 @@ class Campaign:
         n = meas.n_points
         limit = self.instrument.max_gamma_settings
         spent = bool(limit) and len({round(g, 6) for g in meas.gamma_deg}) >= limit
-        stability = self._stability(state, n, spent)
+        stability = max(moves := self._moves(n, spent))  # the largest move decides
         # the expected squared difference between the material and the fit over the range:
         # the design's posterior (its variance, and its mean's departure from the fit)
         s_ = self._settings
@@ -943,7 +943,7 @@ class Campaign:
         shown = state.estimate if state.estimate is not None else res  # what fit reports
         return Verdict(not reasons, n, (float(r2_lo), float(r2_hi)), stability,
                        tuple(shown.ill_determined), tuple(shown.at_bound), why,
-                       moves=state.extra["moves"], blocking=tuple(reasons))
+                       moves=moves, blocking=tuple(reasons))
 
     def _one_angle(self, stopping: bool) -> tuple[str, ...]:
         """What a stop on an instrument of one angle of incidence leaves open (unseen_tables3
@@ -954,9 +954,9 @@ class Campaign:
         return (f"one angle of incidence ({abs(self.instrument.gammas[0]):g} deg): the laws "
                 "in gamma stay ill-determined, and the fit describes that angle only",)
 
-    def _stability(self, state: _State, n: int, spent: bool) -> float:
+    def _moves(self, n: int, spent: bool) -> tuple[float, ...]:
         """How far the fits on the first n - 1, n - 2 and n - 3 readings lie from the current
-        one, as a share of its variance (inf while they do not exist), over the whole
+        one, each as a share of its variance (inf while they do not exist), over the whole
         range; or, once the instrument has set every angle of incidence it may (``spent``),
         at those angles only: elsewhere the fit extrapolates and no reading can pin it
         down, so it would move for ever."""
@@ -976,8 +976,7 @@ class Campaign:
                 moves.append(float("inf"))
             else:
                 moves.append(float(np.sum((before - f) ** 2)) / ss_pred)
-        state.extra["moves"] = tuple(moves)
-        return max(moves)
+        return tuple(moves)
 
     def _settled_gap(self, state: _State) -> tuple[float, float, float] | None:
         """The saturated gap (:meth:`_saturated_gap`) when it is all that keeps the verdict
