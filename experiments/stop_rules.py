@@ -95,7 +95,16 @@ def main(argv=None) -> int:
     totals = {name: {"ok": 0, "late": 0, "below": 0, "never": 0} for name in RULES}
     count = 0
     for path in args.records:
-        tables = [t for t in json.loads(Path(path).read_text()) if "rows" in t]
+        try:
+            data = json.loads(Path(path).read_text())
+        except (OSError, ValueError) as exc:
+            raise SystemExit(f"stop_rules.py: {path}: expected a JSON recording of "
+                             f"experiments/campaign_record.py; found {exc}") from None
+        tables = [t for t in (data if isinstance(data, list) else [])
+                  if isinstance(t, dict) and "rows" in t]
+        if not tables:
+            raise SystemExit(f"stop_rules.py: {path}: expected a list of recorded campaigns "
+                             "(experiments/campaign_record.py); found none: record them again")
         count += len(tables)
         same = sum(stop_at(t["rows"], RULES["largest (the campaign's)"], args.tolerance)
                    == next((int(r["n"]) for r in t["rows"] if r["stop"]), None)

@@ -513,6 +513,13 @@ def test_stop_rules_replays_the_campaigns_own_stops_from_a_recording(tmp_path):
     path = tmp_path / "rec.json"
     path.write_text(json.dumps([{"label": "gloss", "r2_all": 0.99, "rows": rows}]))
     assert stop_rules.main([str(path)]) == 0
+    # a file that is not a recording: one line, no traceback
+    bad = tmp_path / "bad.json"
+    bad.write_text('{"rows": 1}')
+    with pytest.raises(SystemExit, match="expected a list of recorded campaigns"):
+        stop_rules.main([str(bad)])
+    with pytest.raises(SystemExit, match="expected a JSON recording"):
+        stop_rules.main([str(tmp_path / "missing.json")])
 
 
 def test_the_verdict_stops_within_three_readings_of_the_target_on_a_matte_material():
