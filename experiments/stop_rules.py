@@ -29,6 +29,8 @@ from pathlib import Path
 
 import numpy as np
 
+sys.path.insert(0, str(Path(__file__).resolve().parent))  # bench_campaign's judgement
+
 #: the verdict's reasons that are about the moves (every other one blocks any rule)
 MOVE_REASONS = ("the last ", "the curve must hold")
 
@@ -73,17 +75,17 @@ def holds_from(rows, target: float) -> int | None:
 
 
 def judge(table, stop: int | None) -> str:
-    """``ok``, ``late``, ``below`` or ``never``, as bench_campaign.stop_ok judges."""
-    if stop is None:
-        return "never"
+    """``ok``, ``late``, ``below`` or ``never``: bench_campaign.stop_ok's judgement."""
+    from bench_campaign import stop_ok
+
     rows = {int(r["n"]): r for r in table["rows"]}
-    r2 = rows[stop].get("r2rep")
-    if r2 is None or r2 < table["r2_all"] - 0.02:
-        return "below"
-    n = holds_from(table["rows"], table["r2_all"] - 0.01)
-    if n is not None and stop > n + 3:
-        return "late"
-    return "ok"
+    r2 = rows[stop].get("r2rep") if stop is not None else None
+    good, why = stop_ok({"stop": stop, "N": holds_from(table["rows"], table["r2_all"] - 0.01),
+                         "stop_r2": -np.inf if r2 is None else r2,
+                         "r2_all": table["r2_all"]})
+    if good:
+        return "ok"
+    return "never" if stop is None else "late" if why.startswith("late") else "below"
 
 
 def main(argv=None) -> int:
