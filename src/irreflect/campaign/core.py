@@ -46,7 +46,6 @@ from .design import (
     opening_design,
     posterior,
     posterior_error,
-    posterior_mean,
     region,
     specular_half_width,
 )
@@ -54,6 +53,7 @@ from .instrument import MAX_SETTINGS, Instrument, thin_settings
 from .io import as_rows
 from .misfit import misfit_note
 from .quadrature import accepted_estimate
+from .quadrature import picture as _picture
 from .weights import (  # noqa: F401 - range_weights is documented here
     MAX_RANGE_POINTS,
     power_weights,
@@ -568,11 +568,12 @@ class Campaign:
 
     def _quadrature(self, state: _State) -> FitResult | None:
         """The quadrature estimate: the model fitted to the whole range as the design's
-        posterior pictures it (the weighted fit plus the posterior mean of the material's
-        departure from it, given the readings; never above both the fit's prediction and
-        the largest reading), each of the design's settings weighted by the share of the
-        range it stands for. That is the all-points fit's least squares with its integrand
-        taken from the posterior between the readings. None when that fit fails,
+        posterior pictures it (the weighted fit and the posterior mean of the material's
+        departure from it, given the readings, taken as a ratio: ``rule.picture_ratio``,
+        :func:`irreflect.campaign.quadrature.picture`; never above both the fit's
+        prediction and the largest reading), each of the design's settings weighted by the
+        share of the range it stands for. That is the all-points fit's least squares with
+        its integrand taken from the posterior between the readings. None when that fit fails,
         overshoots (:data:`OVERSHOOT`), explains the readings ``rule.quadrature_ratio``
         times worse than the fit it started from, or departs from that fit's curve over the
         range (``rule.quadrature_agree``). When every fit of the readings puts a
@@ -596,6 +597,7 @@ class Campaign:
             with np.errstate(all="ignore"):
                 center_range = own.predict_deg(center, s[:, 0], s[:, 1])
         cap = np.maximum(center_range, top)
+        floor = self.rule.picture_ratio * max(top, float(np.nanmax(center_range)))
         if (top > 0 and self._est_values is not None
                 and self._overshoot(center, top) > OVERSHOOT):
             # the fit puts a needle where nothing is measured (every fit of these readings
@@ -607,10 +609,12 @@ class Campaign:
                 center_range = own.predict_deg(center, s[:, 0], s[:, 1])
                 center_read = self.model.predict_deg(center, meas.gamma_deg, meas.theta_deg)
             cap = np.where(state.range_pred > top, center_range, np.maximum(center_range, top))
-        mean = posterior_mean(prior, n_set, np.maximum(noise_m, 1e-300),
-                              meas.power - center_read)
+            # by differences: a ratio would raise the needle's directions exponentially
+            # (a clear coat's picture at 15 readings reached 1e19 times its largest reading)
+            floor = 0.0
+        picture = _picture(prior, n_set, noise_m, meas.power, center_read, center_range, floor)
         # never above both the centre's prediction and the largest reading
-        surrogate = np.clip(center_range + mean, 0.0, cap)
+        surrogate = np.clip(picture, 0.0, cap)
         count = self._counts()
         keep = (count > 0) & np.isfinite(surrogate)
         table = Measurements(gamma_deg=s[keep, 0], theta_deg=s[keep, 1],
