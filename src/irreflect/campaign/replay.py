@@ -563,8 +563,8 @@ def _interpolation_limit(source: DenseInstrument, reference: FitResult, model, s
                          resolution: float = 0.0) -> str:
     """With ``method="interpolate"``: the warning when the model fitted to every setting the
     instrument answers (the interpolated table itself, without noise) scores below the
-    target against the table's own points: no strategy that reads between the table's
-    receivers can then be expected to reach it. On Cornell Krylon, every 2 deg, that fit
+    target against the table's own points: a strategy that reads between the table's
+    receivers may then fall short of it for that reason. On Cornell Krylon, every 2 deg, that fit
     scores R^2 0.9706 against the target 0.9716 (all points 0.9816), and the adaptive
     campaign, which reads the mirror directions between the 8-deg receivers, never held the
     target while the paper's protocol did; with ``nearest`` it holds from 11. Empty
