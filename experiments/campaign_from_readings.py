@@ -24,6 +24,9 @@ def run(path: str, given: int, seed: int, n_max: int) -> str:
 
     dense = read_measurements(path)
     source = DenseInstrument(dense)
+    if not 0 <= given <= dense.n_points:
+        raise ValueError(f"--given {given}: expected 0 to {dense.n_points} readings, the "
+                         "table's points; pass a smaller --given")
     target = fit(dense).r2 - 0.01
     pick = np.random.default_rng(seed).choice(dense.n_points, given, replace=False)
     rows = dense.to_frame().iloc[pick][["gamma_deg", "theta_deg", "power"]]
@@ -59,8 +62,15 @@ def main(argv=None) -> int:
         print("no tables: pass dense tables, or put ../shared/datasets/real beside the clone")
         return 2
     warnings.simplefilter("ignore")
+    from irreflect.errors import IrreflectError
+
     for path in tables:
-        print(run(path, args.given, args.seed, args.n_max), flush=True)
+        try:
+            print(run(path, args.given, args.seed, args.n_max), flush=True)
+        except (IrreflectError, ValueError) as exc:  # a missing table, --given too large
+            print(f"campaign_from_readings: {path}: {' '.join(str(exc).split())}",
+                  file=sys.stderr)
+            return 2
     return 0
 
 
