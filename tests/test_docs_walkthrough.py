@@ -40,12 +40,12 @@ def _documented_verdicts(path: Path) -> list[str]:
             if line.startswith("verdict:") and not line.endswith("...")]
 
 
-def _goniometer():
-    spec = importlib.util.spec_from_file_location("goniometer",
-                                                  ROOT / "experiments" / "goniometer.py")
+def _experiment(name: str):
+    """A script of experiments/, imported as a module."""
+    spec = importlib.util.spec_from_file_location(name, ROOT / "experiments" / f"{name}.py")
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)
-    return module.main
+    return module
 
 
 def _next(*args) -> str:
@@ -63,7 +63,7 @@ def test_the_documented_walkthrough_prints_what_the_docs_say(real_dir, tmp_path)
     dense = real_dir / "ptfe_nist" / "ptfe_sintered_1064nm.csv"
     measured, nxt = tmp_path / "measured.csv", tmp_path / "next.csv"
     measured.write_text("gamma_deg,theta_deg,power\n")
-    goniometer = _goniometer()
+    goniometer = _experiment("goniometer").main
     printed = _next(str(measured), "--n", "8", *INSTRUMENT, "--out", str(nxt))
     verdicts = [line for line in printed.splitlines() if line.startswith("verdict:")]
     while not verdicts[-1].startswith("verdict: stop") and len(verdicts) < 15:
@@ -82,11 +82,7 @@ def test_campaign_from_readings_prints_what_the_limits_section_measures(real_dir
     """experiments/campaign_from_readings.py, which docs/campaign.md's Limits quote for
     campaigns that start from readings of their own: on NIST PTFE at 1064 nm, 6 random
     readings (seed 1) then the proposals, the campaign holds within 0.01 from 10 readings."""
-    spec = importlib.util.spec_from_file_location(
-        "campaign_from_readings", ROOT / "experiments" / "campaign_from_readings.py")
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    line = module.run(str(real_dir / "ptfe_nist" / "ptfe_sintered_1064nm.csv"), 6, 1, 13)
+    line = _experiment("campaign_from_readings").run(str(real_dir / "ptfe_nist" / "ptfe_sintered_1064nm.csv"), 6, 1, 13)
     assert "given 6" in line and "holds from 10 " in line, line
     r2_12 = float(line.split("R2@12 ")[1].split()[0])
     target = float(line.split("target ")[1].split()[0])
